@@ -1,0 +1,84 @@
+"""Exploration shared by every agent, so the comparison is fair (section 5.1, Eq. 7).
+
+* :class:`RandomWalk`: keep the current direction; after a bump pick one of the other three
+  actions (probability 1); otherwise turn to one of the other three with probability
+  ``p_turn`` (0.3 in the paper).
+* :class:`EpsilonSchedule`: Eq. 7, ``eps = max(eps - decay, eps_min)`` each time the goal
+  is attained, starting from ``eps_start`` (1.0, 0.1, 0.1 in the paper).
+* :class:`EpsilonGreedy`: with probability ``eps`` the random walk acts, otherwise the
+  agent's greedy choice. Every agent draws from its own generator in the same order, so a
+  seed fixes the whole run.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+N_ACTIONS = 4
+
+
+class RandomWalk:
+    """The random-walk exploration policy of section 5.1."""
+
+    def __init__(self, rng: np.random.Generator, p_turn: float = 0.3):
+        if not 0.0 <= p_turn <= 1.0:
+            raise ValueError(f"p_turn must be in [0, 1], got {p_turn}")
+        self.rng = rng
+        self.p_turn = p_turn
+        self.direction = int(rng.integers(N_ACTIONS))
+        self.bumped = False
+
+    def _other(self) -> int:
+        return int((self.direction + 1 + self.rng.integers(N_ACTIONS - 1)) % N_ACTIONS)
+
+    def action(self) -> int:
+        if self.bumped or self.rng.random() < self.p_turn:
+            self.direction = self._other()
+        return self.direction
+
+    def observe(self, action: int, bumped: bool) -> None:
+        """Whatever chose the action, the walk continues from what actually happened."""
+        self.direction = int(action)
+        self.bumped = bool(bumped)
+
+
+class EpsilonSchedule:
+    """Eq. 7: decay epsilon each time the goal is attained, never below ``eps_min``."""
+
+    def __init__(self, eps_start: float = 1.0, decay: float = 0.1, eps_min: float = 0.1):
+        for name, v in (("eps_start", eps_start), ("decay", decay), ("eps_min", eps_min)):
+            if not 0.0 <= v <= 1.0:
+                raise ValueError(f"{name} must be in [0, 1], got {v}")
+        if eps_min > eps_start:
+            raise ValueError(f"eps_min ({eps_min}) must not exceed eps_start ({eps_start})")
+        self.eps = float(eps_start)
+        self.decay = float(decay)
+        self.eps_min = float(eps_min)
+
+    def goal_attained(self) -> float:
+        self.eps = max(self.eps - self.decay, self.eps_min)
+        return self.eps
+
+
+class EpsilonGreedy:
+    """Choose between the random walk and a greedy action (one draw per step)."""
+
+    def __init__(self, rng: np.random.Generator, p_turn: float = 0.3, eps_start: float = 1.0,
+                 eps_decay: float = 0.1, eps_min: float = 0.1):
+        self.rng = rng
+        self.walk = RandomWalk(rng, p_turn)
+        self.schedule = EpsilonSchedule(eps_start, eps_decay, eps_min)
+
+    @property
+    def epsilon(self) -> float:
+        return self.schedule.eps
+
+    def explores(self, explore: bool = True) -> bool:
+        """Draw whether this step explores (always draws when ``explore``, for determinism)."""
+        return explore and self.rng.random() < self.schedule.eps
+
+    def choose(self, greedy_action: int | None, explore: bool = True) -> tuple[int, bool]:
+        """(action, explored). ``greedy_action`` None means the agent has no opinion yet."""
+        if self.explores(explore) or greedy_action is None:
+            return self.walk.action(), True
+        return int(greedy_action), False
