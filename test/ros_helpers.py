@@ -279,6 +279,7 @@ def parse_json_line(output: str, prefix: str):
 def unexpected_errors(output: str) -> list[str]:
     """Output lines that look like DDS / rcl errors, minus the known harmless ones."""
     bad = []
+    output = re.sub(r'\x1b\[[0-9;]*m', '', output)     # Fast DDS colours its log lines
     for line in output.splitlines():
         if re.search(r'\b(Error|ERROR|XMLPARSER|Traceback)\b', line) and \
                 not any(h.search(line) for h in HARMLESS_OUTPUT):

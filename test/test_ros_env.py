@@ -58,7 +58,9 @@ def test_environment_variables():
     assert env['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
     assert env['RMW_IMPLEMENTATION'] == 'rmw_fastrtps_cpp'
     assert os.path.isfile(env['FASTRTPS_DEFAULT_PROFILES_FILE'])
-    assert str(ROOT / '.venv') in env['AMENT_PREFIX_PATH'].split(':')
+    prefixes = env['AMENT_PREFIX_PATH'].split(':')
+    # the workspace overlays the venv (the wheels' prefix)
+    assert prefixes.index(str(ROOT / 'install/tmgwr_agent')) < prefixes.index(str(ROOT / '.venv'))
     assert env['PYTHONPATH'].split(':')[:2] == [str(ROOT / 'src/maze_sim'),
                                                 str(ROOT / 'src/tmgwr_agent')]
 

@@ -51,8 +51,9 @@ VIRTUAL_ENV_DISABLE_PROMPT="${VIRTUAL_ENV_DISABLE_PROMPT:-}"
 # shellcheck disable=SC1091
 . "$TMGWR_ROOT/.venv/bin/activate"
 
-_tmgwr_prepend AMENT_PREFIX_PATH "$VIRTUAL_ENV"
-_tmgwr_prepend CMAKE_PREFIX_PATH "$VIRTUAL_ENV"
+# The venv is the underlay: added when missing, never moved ahead of the workspace overlay.
+[[ ":${AMENT_PREFIX_PATH:-}:" == *":$VIRTUAL_ENV:"* ]] || _tmgwr_prepend AMENT_PREFIX_PATH "$VIRTUAL_ENV"
+[[ ":${CMAKE_PREFIX_PATH:-}:" == *":$VIRTUAL_ENV:"* ]] || _tmgwr_prepend CMAKE_PREFIX_PATH "$VIRTUAL_ENV"
 
 # What the wheels' .pth bootstrapper would do by re-executing every python process.
 _tmgwr_libs=("$VIRTUAL_ENV/lib")
