@@ -211,6 +211,9 @@ if need_build; then
         "VIRTUAL_ENV=$VENV" "PATH=$VENV/bin:$PATH"
         "AMENT_PREFIX_PATH=$VENV" "CMAKE_PREFIX_PATH=$VENV"
         "PYTHONDONTWRITEBYTECODE=1"
+        # colcon-cmake would pass "-jN -lN": the load limit serialises the rosidl build as
+        # soon as anything else runs on a 2-core machine.
+        "MAKEFLAGS=-j$(nproc 2>/dev/null || echo 2)"
     )
     ( cd "$ROOT" && run_step colcon "${build_env[@]}" "$VENV/bin/colcon" --log-base "$ROOT/log" \
         build --base-paths "$ROOT/src" --build-base "$ROOT/build" --install-base "$ROOT/install" \
