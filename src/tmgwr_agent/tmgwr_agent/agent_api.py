@@ -3,7 +3,7 @@
 The loop is the same for all agents, in-process and over ROS::
 
     obs, _ = world.reset()
-    agent.begin_episode(obs, cell)             # no link/transition from the last episode
+    agent.begin_episode(obs, cell, learn=True)  # no link/transition from the last episode
     while True:
         action = agent.act(explore=True)        # epsilon-greedy, section 5.1 / Eq. 7
         obs, _, terminated, truncated, info = world.step(action)
@@ -11,8 +11,8 @@ The loop is the same for all agents, in-process and over ROS::
         if info.reached_goal: agent.goal_attained()   # Eq. 7 decay
         if terminated or truncated: break
 
-A greedy rollout (convergence checks) calls ``act(explore=False)`` and
-``observe(..., learn=False)``: epsilon 0 and no learning.
+A greedy rollout (convergence checks) calls ``begin_episode(..., learn=False)``,
+``act(explore=False)`` and ``observe(..., learn=False)``: epsilon 0 and no learning.
 
 What each agent may use is part of the comparison (Table 1): the TMGWR agent uses only the
 sensed ``obs`` vector, ``info.bumped`` (a touch sensor) and the goal *observation*; the
@@ -36,7 +36,7 @@ class Agent(Protocol):
     def set_goal(self, goal_cell: Cell, goal_obs: np.ndarray) -> None:
         """A new goal (cell for the tabular agents, observation for TMGWR)."""
 
-    def begin_episode(self, obs: np.ndarray, cell: Cell) -> None:
+    def begin_episode(self, obs: np.ndarray, cell: Cell, learn: bool = True) -> None:
         """The first observation of an episode (the agent was teleported here)."""
 
     def act(self, explore: bool = True) -> int:

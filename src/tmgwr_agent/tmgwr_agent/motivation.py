@@ -1,0 +1,136 @@
+"""Motivation estimator (section 3.3, Eq. 4-5, Algorithm 1): value iteration on the map.
+
+For the goal node ``g`` (the node nearest the goal state, Algorithm 1 line 2) every node
+gets the immediate reward ``R_i = sim(i, g)`` (Eq. 10), a Gaussian of the distance between
+the nodes' weights, and the motivation potentials are iterated to a fixed point::
+
+    V(i) <- V(i) + beta * Delta_V(i)                               (Eq. 4)
+    Delta_V(i) = sim(i, g) + gamma * max_k E[i, k] V(k) - V(i)     (Eq. 5)
+
+over the sensorimotor neighbourhood ``k`` of ``i`` (its outgoing links). The sweep is
+synchronous (all nodes from the previous V) and stops when every node's change
+``|beta Delta_V(i)|`` is below ``vi_tol * V(i)`` (a relative tolerance: potentials fall
+geometrically with the distance to the goal and the choice between two far neighbours
+needs the same relative precision as near the goal), or after ``vi_max_sweeps``. V is warm-started from the
+last solution, so a step that changed the map a little costs a few sweeps; a new goal
+restarts from V = 0 (Algorithm 1 line 5).
+
+The width of ``sim(i, g)`` is not in the paper. We take ``sigma_g = goal_sigma * L`` where
+``L`` is the median length of the map's links in feature space, i.e. the distance between
+consecutive sensations: the reward is then concentrated on the goal node and its
+sensorimotor neighbours whatever the map's scale, so a node that is near the goal in
+sensor space but far from it along the map (behind a wall) is not a rival attractor. The
+Gaussian is cut below ``goal_sim_floor`` (1e-3: beyond about 1.9 link lengths): a node gets
+a potential only through links that lead to the goal, so where the map knows no way to the
+goal every potential is exactly 0, the action selector has no opinion and the agent
+explores (instead of climbing the far tail of the Gaussian into a dead end).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .params import Param
+from .tmgwr_map import SensorimotorMap
+
+#: Potentials below this are 0: gamma**d for d > 10,000 steps, i.e. no path to the goal.
+#: Without it a potential that lost its path decays geometrically for ever (to denormals)
+#: and the agent follows that numerical dust instead of exploring.
+V_FLOOR = 1e-150
+
+SPECS = (
+    Param("gamma", 0.97, "Eq. 5: discount factor (Table 2)", low=0.0, high=1.0,
+          low_open=True, high_open=True),
+    Param("beta", 0.80, "Eq. 4: learning rate of the value iteration (Table 2)", low=0.0,
+          high=1.0, low_open=True),
+    Param("goal_sigma", 0.3, "width of sim(i, g) in units of the median link length",
+          low=0.0, low_open=True, high=100.0),
+    Param("goal_sim_floor", 1e-3, "sim(i, g) below this counts as 0 (compact support)",
+          low=0.0, high=1.0, high_open=True),
+    Param("vi_tol", 1e-4, "stop when |beta Delta_V(i)| <= vi_tol * V(i) for every node", low=0.0,
+          low_open=True, high=1.0),
+    Param("vi_max_sweeps", 5000, "upper bound on sweeps per call", low=1, high=1e9,
+          integer=True),
+)
+
+
+class MotivationEstimator:
+    """Holds the goal and the potentials V; :meth:`update` re-solves Eq. 4-5."""
+
+    def __init__(self, *, gamma=0.97, beta=0.80, goal_sigma=0.3, goal_sim_floor=1e-3,
+                 vi_tol=1e-4,
+                 vi_max_sweeps=5000):
+        self.gamma, self.beta = gamma, beta
+        self.goal_sigma, self.goal_sim_floor = goal_sigma, goal_sim_floor
+        self.vi_tol, self.vi_max_sweeps = vi_tol, vi_max_sweeps
+        self.goal_x: np.ndarray | None = None
+        self.goal_node = -1
+        self.V = np.zeros(1)          # V[:n]; V[n] stays 0 (target of empty link slots)
+        self.sweeps = 0               # sweeps of the last update
+        self._scale_version = -1      # map version the cached link scale belongs to
+        self._scale = 1.0
+
+    def set_goal(self, goal_x: np.ndarray) -> None:
+        self.goal_x = np.asarray(goal_x, dtype=float)
+        self.V[:] = 0.0
+
+    @staticmethod
+    def link_scale(m: SensorimotorMap) -> float:
+        """Median length of the map's links in feature space (0 if it has none)."""
+        src, tgt = np.nonzero(m.out[: m.n] >= 0)
+        if not len(src):
+            return 0.0
+        d = m.w[src] - m.w[m.out[src, tgt]]
+        return float(np.median(np.sqrt(np.einsum("ij,ij->i", d, d))))
+
+    def rewards(self, m: SensorimotorMap, g: int, scale: float) -> np.ndarray:
+        """Eq. 10: R_i = sim(i, g) = exp(-|w_i - w_g|^2 / (2 sigma_g^2)), 0 for dead slots."""
+        n = m.n
+        sigma = self.goal_sigma * scale
+        d = m.w[:n] - m.w[g]
+        R = np.exp(-np.einsum("ij,ij->i", d, d) / (2.0 * sigma * sigma))
+        R[~m.alive[:n] | (R < self.goal_sim_floor)] = 0.0
+        return R
+
+    def update(self, m: SensorimotorMap) -> np.ndarray:
+        """Solve Eq. 4-5 on the current map; returns V[:n]."""
+        n = m.n
+        if len(self.V) != n + 1:                      # the map grew: extend, keep values
+            V = np.zeros(n + 1)
+            k = min(n, len(self.V) - 1)
+            V[:k] = self.V[:k]
+            self.V = V
+        self.sweeps = 0
+        if self.goal_x is None or m.size == 0:
+            self.goal_node = -1
+            self.V[:] = 0.0
+            return self.V[:n]
+        g = m.nearest_by_weight(self.goal_x)
+        self.goal_node = g
+        if self._scale_version != m.version:          # links only change with the version
+            self._scale = self.link_scale(m) or 1.0
+            self._scale_version = m.version
+        R = self.rewards(m, g, self._scale)
+        out = m.out[:n]                               # -1 indexes V[n] == 0
+        E = m.E[:n]
+        V = self.V
+        Vn = V[:n]
+        Vn[~m.alive[:n]] = 0.0
+        beta, gamma, tol = self.beta, self.gamma, self.vi_tol
+        ev = np.empty(out.shape)
+        best = np.empty(n)
+        for sweep in range(1, self.vi_max_sweeps + 1):
+            np.multiply(E, V[out], out=ev)
+            ev.max(axis=1, out=best)
+            # beta * Delta_V(i) of Eq. 4-5, computed in place in ``best``
+            best *= gamma
+            best += R
+            best -= Vn
+            best *= beta
+            Vn += best
+            np.abs(best, out=best)
+            if (best <= tol * Vn + V_FLOOR).all():
+                break
+        Vn[Vn < V_FLOOR] = 0.0          # no path to the goal: exactly no motivation
+        self.sweeps = sweep
+        return Vn

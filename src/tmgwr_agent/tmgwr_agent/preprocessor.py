@@ -1,0 +1,46 @@
+"""Sensory preprocessor (section 3.2, Fig. 1a): raw observation -> feature vector.
+
+The agent senses the coordinates of its cell. The preprocessor scales them so that one
+sensor resolution step (one cell) is ``feature_scale`` apart in feature space, whatever the
+size of the maze: the map's thresholds (activity a_T, the goal similarity width) are then
+expressed per resolution step and transfer to mazes of any size. Optionally an exponential
+moving average filters noisy sensors (``filter_alpha`` < 1; 1 = no filtering); the filter
+restarts at every episode start because the agent is moved there, not walked.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .params import Param
+
+SPECS = (
+    Param("feature_scale", 0.1, "feature-space distance of one sensor resolution step "
+          "(one maze cell)", low=0.0, low_open=True, high=100.0),
+    Param("sensor_resolution", 1.0, "raw sensor units per resolution step (1 cell = 1.0 "
+          "for the maze simulator)", low=0.0, low_open=True, high=1e6),
+    Param("filter_alpha", 1.0, "EMA weight of the newest observation (1 = no filtering)",
+          low=0.0, low_open=True, high=1.0),
+)
+
+
+class SensoryPreprocessor:
+    """x = feature_scale * raw / sensor_resolution, optionally EMA-filtered."""
+
+    def __init__(self, feature_scale: float = 0.1, sensor_resolution: float = 1.0,
+                 filter_alpha: float = 1.0):
+        self.gain = feature_scale / sensor_resolution
+        self.feature_scale = feature_scale
+        self.filter_alpha = filter_alpha
+        self._state: np.ndarray | None = None
+
+    def __call__(self, raw: np.ndarray, episode_start: bool = False) -> np.ndarray:
+        x = self.gain * np.asarray(raw, dtype=float)
+        if self.filter_alpha < 1.0 and self._state is not None and not episode_start:
+            x = self.filter_alpha * x + (1.0 - self.filter_alpha) * self._state
+        self._state = x
+        return x
+
+    def goal_features(self, raw_goal: np.ndarray) -> np.ndarray:
+        """The goal state in feature space (no filtering: it is not a sensor stream)."""
+        return self.gain * np.asarray(raw_goal, dtype=float)

@@ -1,0 +1,364 @@
+"""The TMGWR sensorimotor map (section 3.1, Fig. 1b, Eq. 1-2).
+
+Growth and adaptation follow GWR (Marsland et al. 2002) with the temporal context of
+Merge-GNG (Strickert & Hammer 2005), as DESIGN.md section 3 fixes (the 2019 TMGWR paper is
+not public):
+
+* context of the input    ``C_t = (1 - beta_c) w_{prev} + beta_c c_{prev}``
+* distance                ``d_n = (1 - alpha_c) |x - w_n|^2 + alpha_c |C_t - c_n|^2``
+* activity                ``a = exp(-sqrt(d_b))`` of the winner ``b``
+* insertion               when ``a < a_T`` and ``h_b < h_T``: a node halfway between the
+                          winner and the input (weight and context), habituation 1
+* adaptation otherwise    ``w_b += eps_b h_b (x - w_b)``, ``w_n += eps_n h_n (x - w_n)``
+                          (same for the contexts) for the winner and its neighbours
+* habituation             ``h += tau (kappa (1 - h) - 1)`` (tau_b winner, tau_n neighbours)
+
+Links are the *sensorimotor links* of Fig. 1b: directed ``i -> j`` between consecutive
+winners, labelled with the action vector ``a_ij`` that was active, and carrying the
+reliability ``E[i, j]`` updated by Eq. 1-2::
+
+    E[i, j] <- E[i, j] + alpha * Delta_E,   Delta_E = sim(a_ij, a) I{i != j} - E[i, j]
+
+with ``sim`` a Gaussian of width ``sigma_a``. A new link starts at ``E_init`` (1: the
+binary link of the original TMGWR, "E[i, j] = 1 if a possible transition"; with 0 a
+shortcut seen once is worth half a known detour and is ignored until explored again by
+chance). After the update the link's action vector
+moves towards the action that traversed it, ``a_ij += eta_a (a - a_ij)`` (the map "learns
+the possible action vectors linking" nodes, section 3.1): a node that drifted while the map
+formed would otherwise keep a link labelled with an action that no longer leads there.
+Link rules (DESIGN.md section 3, open
+question):
+
+* ``literal``: Eq. 1-2 as written; only the traversed link ``i -> j`` is updated (a self
+  transition ``i -> i``, a bump, drives ``E[i, i]`` to 0 and is not stored).
+* ``credit``: additionally every other link ``i -> k`` is blamed in proportion to how well
+  its action matches the action just taken, since that action did not lead to ``k``:
+  ``E[i, k] <- E[i, k] + alpha sim(a_ik, a) (0 - E[i, k])``.
+
+As in GWR, every link incident to the previous winner (in or out) ages by one per step
+and the traversed link's age restarts at 0; links older than ``max_age``, and links whose
+reliability fell below ``E_min``, are deleted; nodes left with no link (in or out) are
+removed, which clears nodes that stopped winning. Neighbours for adaptation are the nodes linked to the winner in either direction.
+
+Storage is fixed-width adjacency (``out[i, :K]`` target ids, -1 = empty slot) so that value
+iteration over the map is a few vectorised numpy operations. Node ids are slot indices; a
+freed slot is reused by the next insertion (lowest first) and ``version`` counts structural
+changes (insertion, deletion) so consumers know when ids were reassigned.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .params import Param
+
+SPECS = (
+    Param("a_T", 0.95, "GWR activity threshold: insert a node when exp(-sqrt(d_b)) < a_T",
+          low=0.0, high=1.0, low_open=True, high_open=True),
+    Param("h_T", 0.75, "GWR habituation threshold: only a habituated winner spawns a node",
+          low=0.0, high=1.0, low_open=True),
+    Param("tau_b", 0.3, "habituation rate of the winner", low=0.0, high=1.0, low_open=True),
+    Param("tau_n", 0.1, "habituation rate of the winner's neighbours", low=0.0, high=1.0,
+          low_open=True),
+    Param("kappa_h", 1.05, "GWR habituation constant kappa (h tends to 1 - 1/kappa)",
+          low=1.0, high=10.0, low_open=True),
+    Param("eps_b", 0.2, "learning rate of the winner", low=0.0, high=1.0),
+    Param("eps_n", 0.006, "learning rate of the winner's neighbours", low=0.0, high=1.0),
+    Param("insert_at", 1.0, "where a new node goes between the winner (0) and the input "
+          "(1); GWR uses 0.5", low=0.0, high=1.0, low_open=True),
+    Param("max_age", 100, "links older than this are deleted", low=1, high=1e9, integer=True),
+    Param("alpha_c", 0.01, "Merge-GNG weight of the temporal context in the distance",
+          low=0.0, high=1.0, high_open=True),
+    Param("beta_c", 0.5, "Merge-GNG context blend: C_t = (1-beta_c) w_prev + beta_c c_prev",
+          low=0.0, high=1.0),
+    Param("alpha", 0.52, "Eq. 1: learning rate of the sensorimotor-link reliability E "
+          "(Table 2)", low=0.0, high=1.0, low_open=True),
+    Param("sigma_a", 0.5, "Eq. 2: width of the Gaussian sim(a_ij, a) between action vectors",
+          low=0.0, low_open=True, high=100.0),
+    Param("E_init", 1.0, "reliability of a newly created link before Eq. 1-2 adapts it "
+          "(1 = the binary link of the original TMGWR)", low=0.0, high=1.0),
+    Param("E_min", 0.01, "a link whose reliability falls below this is deleted (it is no "
+          "longer a possible transition: E = 0 in the original TMGWR)", low=0.0, high=1.0),
+    Param("eta_a", 1.0, "rate at which a link's action vector a_ij follows the action that "
+          "traversed it (0 = fixed at creation)", low=0.0, high=1.0),
+    Param("link_rule", "credit", "Eq. 1-2 reading: 'literal' or 'credit' (DESIGN.md 3)",
+          choices=("literal", "credit")),
+)
+
+_INITIAL_CAPACITY = 64
+_INITIAL_DEGREE = 4
+
+
+class SensorimotorMap:
+    """A growing map of (weight, context) nodes joined by directed, action-labelled links."""
+
+    def __init__(self, dim: int, action_dim: int = 2, *, a_T=0.95, h_T=0.75, tau_b=0.3,
+                 tau_n=0.1, kappa_h=1.05, eps_b=0.2, eps_n=0.006, insert_at=1.0, max_age=100, alpha_c=0.01,
+                 beta_c=0.5, alpha=0.52, sigma_a=0.5, E_init=1.0, E_min=0.01, eta_a=1.0,
+                 link_rule="credit"):
+        self.dim, self.action_dim = dim, action_dim
+        self.a_T, self.h_T = a_T, h_T
+        self.tau_b, self.tau_n, self.kappa_h = tau_b, tau_n, kappa_h
+        self.eps_b, self.eps_n = eps_b, eps_n
+        self.insert_at = insert_at
+        self.max_age = max_age
+        self.alpha_c, self.beta_c = alpha_c, beta_c
+        self.alpha, self.sigma_a, self.eta_a = alpha, sigma_a, eta_a
+        self.E_init, self.E_min = E_init, E_min
+        if link_rule not in ("literal", "credit"):
+            raise ValueError(f"link_rule must be 'literal' or 'credit', got {link_rule!r}")
+        self.link_rule = link_rule
+        self._alloc(_INITIAL_CAPACITY, _INITIAL_DEGREE)
+        self.n = 0                 # slots in use are [0, n); dead slots have alive False
+        self.version = 0           # bumped on every structural change
+        self.prev: int = -1        # previous winner (-1: start of an episode)
+        self.winner: int = -1
+        self.inserted = False      # whether the last update inserted a node
+
+    # ------------------------------------------------------------------ storage
+    def _alloc(self, cap: int, degree: int) -> None:
+        self.w = np.zeros((cap, self.dim))          # sensory weight w_n
+        self.c = np.zeros((cap, self.dim))          # temporal context c_n
+        self.h = np.ones(cap)                       # habituation h_n
+        self.alive = np.zeros(cap, dtype=bool)
+        self.out = np.full((cap, degree), -1, dtype=np.int64)   # link targets
+        self.E = np.zeros((cap, degree))            # reliability E[i, j]
+        self.a = np.zeros((cap, degree, self.action_dim))       # action vectors a_ij
+        self.age = np.zeros((cap, degree), dtype=np.int64)
+
+    def _grow_nodes(self) -> None:
+        old = (self.w, self.c, self.h, self.alive, self.out, self.E, self.a, self.age)
+        cap = 2 * len(self.w)
+        self._alloc(cap, self.out.shape[1])
+        for new, arr in zip((self.w, self.c, self.h, self.alive, self.out, self.E, self.a,
+                             self.age), old):
+            new[: len(arr)] = arr
+
+    def _grow_degree(self) -> None:
+        cap, k = self.out.shape
+        pad = k
+        self.out = np.concatenate([self.out, np.full((cap, pad), -1, np.int64)], axis=1)
+        self.E = np.concatenate([self.E, np.zeros((cap, pad))], axis=1)
+        self.a = np.concatenate([self.a, np.zeros((cap, pad, self.action_dim))], axis=1)
+        self.age = np.concatenate([self.age, np.zeros((cap, pad), np.int64)], axis=1)
+
+    @property
+    def size(self) -> int:
+        return int(self.alive[: self.n].sum())
+
+    def node_ids(self) -> np.ndarray:
+        return np.flatnonzero(self.alive[: self.n])
+
+    def links(self):
+        """(source, target, action vector, E, age) of every link, sorted by source."""
+        src, slot = np.nonzero(self.out[: self.n] >= 0)
+        return (src, self.out[src, slot], self.a[src, slot], self.E[src, slot],
+                self.age[src, slot])
+
+    def link_count(self) -> int:
+        return int((self.out[: self.n] >= 0).sum())
+
+    # ------------------------------------------------------------------ matching
+    def context(self) -> np.ndarray | None:
+        """Merge-GNG context C_t of the current input (None at an episode start)."""
+        if self.prev < 0:
+            return None
+        return (1.0 - self.beta_c) * self.w[self.prev] + self.beta_c * self.c[self.prev]
+
+    def distances(self, x: np.ndarray, C: np.ndarray) -> np.ndarray:
+        """d_n = (1 - alpha_c)|x - w_n|^2 + alpha_c |C_t - c_n|^2 (inf for dead slots)."""
+        n = self.n
+        dx = self.w[:n] - x
+        d = (1.0 - self.alpha_c) * np.einsum("ij,ij->i", dx, dx)
+        if self.alpha_c > 0.0:
+            dc = self.c[:n] - C
+            d += self.alpha_c * np.einsum("ij,ij->i", dc, dc)
+        d[~self.alive[:n]] = np.inf
+        return d
+
+    def best_matching(self, x: np.ndarray) -> int:
+        """The winner for x in the current context, without learning (-1 if empty)."""
+        if self.size == 0:
+            return -1
+        C = self.context()
+        return int(np.argmin(self.distances(x, x if C is None else C)))
+
+    def nearest_by_weight(self, x: np.ndarray) -> int:
+        """The node whose sensory weight is nearest x (Algorithm 1, line 2: SM.Map(x_g))."""
+        n = self.n
+        dx = self.w[:n] - x
+        d = np.einsum("ij,ij->i", dx, dx)
+        d[~self.alive[:n]] = np.inf
+        return int(np.argmin(d)) if self.size else -1
+
+    # ------------------------------------------------------------------ learning
+    def begin_episode(self) -> None:
+        """The agent was moved, not walked: no link from the last winner."""
+        self.prev = -1
+
+    def step(self, x: np.ndarray, action: np.ndarray | None, learn: bool = True) -> int:
+        """Present input x reached by motor vector ``action``; returns the winner.
+
+        With ``learn`` False only the winner is found (greedy rollouts).
+        """
+        x = np.asarray(x, dtype=float)
+        C = self.context()
+        if C is None:
+            C = x                       # no history at an episode start: neutral context
+        self.inserted = False
+        if not learn:
+            winner = int(np.argmin(self.distances(x, C))) if self.size else -1
+        elif self.size == 0:
+            winner = self._insert(x, C)
+        else:
+            d = self.distances(x, C)
+            b = int(np.argmin(d))
+            if np.exp(-np.sqrt(d[b])) < self.a_T and self.h[b] < self.h_T:
+                lam = self.insert_at
+                winner = self._insert(self.w[b] + lam * (x - self.w[b]),
+                                      self.c[b] + lam * (C - self.c[b]))
+                self._habituate(b, self.tau_b)
+            else:
+                winner = b
+                self._adapt(b, x, C)
+        if learn and self.prev >= 0 and action is not None:
+            self._update_links(self.prev, winner, np.asarray(action, dtype=float))
+        self.prev = self.winner = winner
+        return winner
+
+    def _insert(self, w: np.ndarray, c: np.ndarray) -> int:
+        free = np.flatnonzero(~self.alive[: self.n])
+        if len(free):
+            r = int(free[0])
+        else:
+            if self.n == len(self.w):
+                self._grow_nodes()
+            r = self.n
+            self.n += 1
+        self.w[r], self.c[r], self.h[r], self.alive[r] = w, c, 1.0, True
+        self.out[r] = -1
+        self.E[r] = 0.0
+        self.age[r] = 0
+        self.version += 1
+        self.inserted = True
+        return r
+
+    def _neighbours(self, b: int) -> np.ndarray:
+        outs = self.out[b][self.out[b] >= 0]
+        ins = np.flatnonzero((self.out[: self.n] == b).any(axis=1))
+        return np.union1d(outs, ins)
+
+    def _habituate(self, i, tau: float) -> None:
+        self.h[i] += tau * (self.kappa_h * (1.0 - self.h[i]) - 1.0)
+
+    def _adapt(self, b: int, x: np.ndarray, C: np.ndarray) -> None:
+        rate = self.eps_b * self.h[b]
+        self.w[b] += rate * (x - self.w[b])
+        self.c[b] += rate * (C - self.c[b])
+        self._habituate(b, self.tau_b)
+        nb = self._neighbours(b)
+        if len(nb):
+            rate_n = (self.eps_n * self.h[nb])[:, None]
+            self.w[nb] += rate_n * (x - self.w[nb])
+            self.c[nb] += rate_n * (C - self.c[nb])
+            self._habituate(nb, self.tau_n)
+
+    def sim_action(self, a_links: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """Eq. 2: Gaussian similarity sim(a_ij, a) between action vectors."""
+        diff = a_links - a
+        return np.exp(-np.einsum("...j,...j->...", diff, diff) / (2.0 * self.sigma_a ** 2))
+
+    def _update_links(self, i: int, j: int, a: np.ndarray) -> None:
+        """Eq. 1-2 for the transition i -> j under action a, then ageing."""
+        row = self.out[i]
+        used = row >= 0
+        slot = -1
+        if i != j:
+            hit = np.flatnonzero(row == j)
+            if len(hit):
+                slot = int(hit[0])
+            else:
+                empty = np.flatnonzero(~used)
+                if not len(empty):
+                    self._grow_degree()
+                    row = self.out[i]
+                    empty = np.flatnonzero(row < 0)
+                slot = int(empty[0])
+                row[slot] = j
+                self.a[i, slot] = a
+                self.E[i, slot] = self.E_init
+                self.age[i, slot] = 0
+                self.version += 1
+                used = row >= 0
+            # Eq. 1-2 on the traversed link (I{i != j} = 1)
+            self.E[i, slot] += self.alpha * (self.sim_action(self.a[i, slot], a)
+                                             - self.E[i, slot])
+            self.a[i, slot] += self.eta_a * (a - self.a[i, slot])
+        if self.link_rule == "credit":
+            others = used.copy()
+            if slot >= 0:
+                others[slot] = False
+            if others.any():
+                s = self.sim_action(self.a[i, others], a)
+                self.E[i, others] -= self.alpha * s * self.E[i, others]
+        # GWR ageing: every link incident to i ages, the traversed one restarts at 0
+        incident = self.out[: self.n] == i
+        incident[i] = used
+        self.age[: self.n][incident] += 1
+        if slot >= 0:
+            self.age[i, slot] = 0
+        stale = incident & (self.age[: self.n] > self.max_age)
+        stale[i] |= used & (self.E[i] < self.E_min)
+        if stale.any():
+            src, sl = np.nonzero(stale)
+            ends = np.concatenate([src, self.out[src, sl]])
+            self.out[src, sl] = -1
+            self.E[src, sl] = 0.0
+            self.version += 1
+            for k in np.unique(ends):
+                self._remove_if_isolated(int(k))
+
+    def _remove_if_isolated(self, k: int) -> None:
+        if k in (self.prev, self.winner) or not self.alive[k]:
+            return
+        if (self.out[k] >= 0).any() or (self.out[: self.n] == k).any():
+            return
+        self.alive[k] = False
+        self.version += 1
+
+    # ------------------------------------------------------------------ persistence
+    def state_dict(self) -> dict[str, np.ndarray]:
+        n = self.n
+        return {"w": self.w[:n].copy(), "c": self.c[:n].copy(), "h": self.h[:n].copy(),
+                "alive": self.alive[:n].copy(), "out": self.out[:n].copy(),
+                "E": self.E[:n].copy(), "a": self.a[:n].copy(), "age": self.age[:n].copy(),
+                "meta": np.array([self.version, self.prev, self.winner], dtype=np.int64)}
+
+    def load_state_dict(self, s: dict[str, np.ndarray]) -> None:
+        n, k = s["out"].shape
+        if s["w"].shape[1] != self.dim or s["a"].shape[2] != self.action_dim:
+            raise ValueError(f"saved map has dim {s['w'].shape[1]}/action dim "
+                             f"{s['a'].shape[2]}, expected {self.dim}/{self.action_dim}")
+        self._alloc(max(_INITIAL_CAPACITY, 1 << max(n - 1, 1).bit_length()), k)
+        for name in ("w", "c", "h", "alive", "out", "E", "a", "age"):
+            getattr(self, name)[:n] = s[name]
+        self.n = n
+        self.version, self.prev, self.winner = (int(v) for v in s["meta"])
+
+    def save(self, path: str | Path) -> Path:
+        """Write the whole map to a .npz file (atomic: a crash never leaves half a file)."""
+        path = Path(path)
+        tmp = path.with_name(path.name + ".tmp")
+        with open(tmp, "wb") as f:
+            np.savez(f, **self.state_dict())
+        tmp.replace(path)
+        return path
+
+    def load(self, path: str | Path) -> None:
+        try:
+            with np.load(Path(path)) as data:
+                self.load_state_dict({k: data[k] for k in data.files})
+        except (OSError, KeyError, ValueError) as exc:
+            raise ValueError(f"{path}: not a saved sensorimotor map ({exc})") from exc
