@@ -18,6 +18,7 @@ import numpy as np
 
 from maze_sim.maze import ACTION_VECTORS
 
+from . import kernels
 from .exploration import EpsilonGreedy
 from .tmgwr_map import SensorimotorMap
 
@@ -32,15 +33,9 @@ class ActionSelector:
         """Eq. 6 at node i: the discrete action of a_{i k_max}, or None without opinion."""
         if i < 0:
             return None
-        row = m.out[i]
-        used = np.flatnonzero(row >= 0)
-        if not len(used):
+        best = kernels.best_links(m.out[i], m.E[i], V)
+        if not len(best):
             return None
-        score = m.E[i, used] * V[row[used]]
-        top = score.max()
-        if top <= 0.0:
-            return None
-        best = used[score == top]
         slot = best[0] if len(best) == 1 else best[self.rng.integers(len(best))]
         return self.action_index(m.a[i, slot])
 

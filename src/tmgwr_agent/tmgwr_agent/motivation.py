@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import kernels
 from .params import Param
 from .tmgwr_map import SensorimotorMap
 
@@ -85,11 +86,9 @@ class MotivationEstimator:
 
     def rewards(self, m: SensorimotorMap, g: int, scale: float) -> np.ndarray:
         """Eq. 10: R_i = sim(i, g) = exp(-|w_i - w_g|^2 / (2 sigma_g^2)), 0 for dead slots."""
-        n = m.n
-        sigma = self.goal_sigma * scale
-        d = m.w[:n] - m.w[g]
-        R = np.exp(-np.einsum("ij,ij->i", d, d) / (2.0 * sigma * sigma))
-        R[~m.alive[:n] | (R < self.goal_sim_floor)] = 0.0
+        R = np.empty(m.n)
+        kernels.goal_rewards(m.w, m.alive, m.n, g, self.goal_sigma * scale,
+                             self.goal_sim_floor, R)
         return R
 
     def update(self, m: SensorimotorMap) -> np.ndarray:
@@ -111,26 +110,8 @@ class MotivationEstimator:
             self._scale = self.link_scale(m) or 1.0
             self._scale_version = m.version
         R = self.rewards(m, g, self._scale)
-        out = m.out[:n]                               # -1 indexes V[n] == 0
-        E = m.E[:n]
-        V = self.V
-        Vn = V[:n]
-        Vn[~m.alive[:n]] = 0.0
-        beta, gamma, tol = self.beta, self.gamma, self.vi_tol
-        ev = np.empty(out.shape)
-        best = np.empty(n)
-        for sweep in range(1, self.vi_max_sweeps + 1):
-            np.multiply(E, V[out], out=ev)
-            ev.max(axis=1, out=best)
-            # beta * Delta_V(i) of Eq. 4-5, computed in place in ``best``
-            best *= gamma
-            best += R
-            best -= Vn
-            best *= beta
-            Vn += best
-            np.abs(best, out=best)
-            if (best <= tol * Vn + V_FLOOR).all():
-                break
-        Vn[Vn < V_FLOOR] = 0.0          # no path to the goal: exactly no motivation
-        self.sweeps = sweep
-        return Vn
+        self.V[:n][~m.alive[:n]] = 0.0
+        self.sweeps = kernels.value_iteration(m.out, m.E, R, self.V, n, self.beta,
+                                              self.gamma, self.vi_tol, V_FLOOR,
+                                              self.vi_max_sweeps)
+        return self.V[:n]

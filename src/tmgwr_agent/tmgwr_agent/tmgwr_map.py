@@ -7,8 +7,9 @@ not public):
 * context of the input    ``C_t = (1 - beta_c) w_{prev} + beta_c c_{prev}``
 * distance                ``d_n = (1 - alpha_c) |x - w_n|^2 + alpha_c |C_t - c_n|^2``
 * activity                ``a = exp(-sqrt(d_b))`` of the winner ``b``
-* insertion               when ``a < a_T`` and ``h_b < h_T``: a node halfway between the
-                          winner and the input (weight and context), habituation 1
+* insertion               when ``a < a_T`` and ``h_b <= h_T``: a node at ``insert_at`` of
+                          the way from the winner to the input (weight and context; GWR:
+                          halfway), habituation 1
 * adaptation otherwise    ``w_b += eps_b h_b (x - w_b)``, ``w_n += eps_n h_n (x - w_n)``
                           (same for the contexts) for the winner and its neighbours
 * habituation             ``h += tau (kappa (1 - h) - 1)`` (tau_b winner, tau_n neighbours)
@@ -52,13 +53,15 @@ from pathlib import Path
 
 import numpy as np
 
+from . import kernels
 from .params import Param
 
 SPECS = (
     Param("a_T", 0.95, "GWR activity threshold: insert a node when exp(-sqrt(d_b)) < a_T",
           low=0.0, high=1.0, low_open=True, high_open=True),
-    Param("h_T", 0.75, "GWR habituation threshold: only a habituated winner spawns a node",
-          low=0.0, high=1.0, low_open=True),
+    Param("h_T", 1.0, "GWR habituation threshold: only a winner with h_b <= h_T spawns a "
+          "node (1: any winner; lower it for noisy sensors)", low=0.0, high=1.0,
+          low_open=True),
     Param("tau_b", 0.3, "habituation rate of the winner", low=0.0, high=1.0, low_open=True),
     Param("tau_n", 0.1, "habituation rate of the winner's neighbours", low=0.0, high=1.0,
           low_open=True),
@@ -94,7 +97,7 @@ _INITIAL_DEGREE = 4
 class SensorimotorMap:
     """A growing map of (weight, context) nodes joined by directed, action-labelled links."""
 
-    def __init__(self, dim: int, action_dim: int = 2, *, a_T=0.95, h_T=0.75, tau_b=0.3,
+    def __init__(self, dim: int, action_dim: int = 2, *, a_T=0.95, h_T=1.0, tau_b=0.3,
                  tau_n=0.1, kappa_h=1.05, eps_b=0.2, eps_n=0.006, insert_at=1.0, max_age=100, alpha_c=0.01,
                  beta_c=0.5, alpha=0.52, sigma_a=0.5, E_init=1.0, E_min=0.01, eta_a=1.0,
                  link_rule="credit"):
@@ -178,20 +181,20 @@ class SensorimotorMap:
         d[~self.alive[:n]] = np.inf
         return d
 
+    def winner_of(self, x: np.ndarray, C: np.ndarray) -> tuple[int, float]:
+        """(b, d_b): the node minimising d_n (``distances``), -1 when the map is empty."""
+        b, d = kernels.merge_distance_argmin(self.w, self.c, self.alive, self.n, x, C,
+                                             self.alpha_c)
+        return int(b), float(d)
+
     def best_matching(self, x: np.ndarray) -> int:
         """The winner for x in the current context, without learning (-1 if empty)."""
-        if self.size == 0:
-            return -1
         C = self.context()
-        return int(np.argmin(self.distances(x, x if C is None else C)))
+        return self.winner_of(x, x if C is None else C)[0]
 
     def nearest_by_weight(self, x: np.ndarray) -> int:
         """The node whose sensory weight is nearest x (Algorithm 1, line 2: SM.Map(x_g))."""
-        n = self.n
-        dx = self.w[:n] - x
-        d = np.einsum("ij,ij->i", dx, dx)
-        d[~self.alive[:n]] = np.inf
-        return int(np.argmin(d)) if self.size else -1
+        return int(kernels.nearest_weight(self.w, self.alive, self.n, x))
 
     # ------------------------------------------------------------------ learning
     def begin_episode(self) -> None:
@@ -208,14 +211,13 @@ class SensorimotorMap:
         if C is None:
             C = x                       # no history at an episode start: neutral context
         self.inserted = False
+        b, d_b = self.winner_of(x, C)
         if not learn:
-            winner = int(np.argmin(self.distances(x, C))) if self.size else -1
-        elif self.size == 0:
+            winner = b
+        elif b < 0:
             winner = self._insert(x, C)
         else:
-            d = self.distances(x, C)
-            b = int(np.argmin(d))
-            if np.exp(-np.sqrt(d[b])) < self.a_T and self.h[b] < self.h_T:
+            if np.exp(-np.sqrt(d_b)) < self.a_T and self.h[b] <= self.h_T:
                 lam = self.insert_at
                 winner = self._insert(self.w[b] + lam * (x - self.w[b]),
                                       self.c[b] + lam * (C - self.c[b]))
@@ -246,24 +248,15 @@ class SensorimotorMap:
         return r
 
     def _neighbours(self, b: int) -> np.ndarray:
-        outs = self.out[b][self.out[b] >= 0]
-        ins = np.flatnonzero((self.out[: self.n] == b).any(axis=1))
-        return np.union1d(outs, ins)
+        """Nodes linked to b in either direction."""
+        return kernels.incident_neighbours(self.out, self.n, b)
 
-    def _habituate(self, i, tau: float) -> None:
-        self.h[i] += tau * (self.kappa_h * (1.0 - self.h[i]) - 1.0)
+    def _habituate(self, i: int, tau: float) -> None:
+        kernels.habituate(self.h, i, tau, self.kappa_h)
 
     def _adapt(self, b: int, x: np.ndarray, C: np.ndarray) -> None:
-        rate = self.eps_b * self.h[b]
-        self.w[b] += rate * (x - self.w[b])
-        self.c[b] += rate * (C - self.c[b])
-        self._habituate(b, self.tau_b)
-        nb = self._neighbours(b)
-        if len(nb):
-            rate_n = (self.eps_n * self.h[nb])[:, None]
-            self.w[nb] += rate_n * (x - self.w[nb])
-            self.c[nb] += rate_n * (C - self.c[nb])
-            self._habituate(nb, self.tau_n)
+        kernels.adapt(self.w, self.c, self.h, self.out, self.n, b, x, C, self.eps_b,
+                      self.eps_n, self.tau_b, self.tau_n, self.kappa_h)
 
     def sim_action(self, a_links: np.ndarray, a: np.ndarray) -> np.ndarray:
         """Eq. 2: Gaussian similarity sim(a_ij, a) between action vectors."""
@@ -271,54 +264,16 @@ class SensorimotorMap:
         return np.exp(-np.einsum("...j,...j->...", diff, diff) / (2.0 * self.sigma_a ** 2))
 
     def _update_links(self, i: int, j: int, a: np.ndarray) -> None:
-        """Eq. 1-2 for the transition i -> j under action a, then ageing."""
-        row = self.out[i]
-        used = row >= 0
-        slot = -1
-        if i != j:
-            hit = np.flatnonzero(row == j)
-            if len(hit):
-                slot = int(hit[0])
-            else:
-                empty = np.flatnonzero(~used)
-                if not len(empty):
-                    self._grow_degree()
-                    row = self.out[i]
-                    empty = np.flatnonzero(row < 0)
-                slot = int(empty[0])
-                row[slot] = j
-                self.a[i, slot] = a
-                self.E[i, slot] = self.E_init
-                self.age[i, slot] = 0
-                self.version += 1
-                used = row >= 0
-            # Eq. 1-2 on the traversed link (I{i != j} = 1)
-            self.E[i, slot] += self.alpha * (self.sim_action(self.a[i, slot], a)
-                                             - self.E[i, slot])
-            self.a[i, slot] += self.eta_a * (a - self.a[i, slot])
-        if self.link_rule == "credit":
-            others = used.copy()
-            if slot >= 0:
-                others[slot] = False
-            if others.any():
-                s = self.sim_action(self.a[i, others], a)
-                self.E[i, others] -= self.alpha * s * self.E[i, others]
-        # GWR ageing: every link incident to i ages, the traversed one restarts at 0
-        incident = self.out[: self.n] == i
-        incident[i] = used
-        self.age[: self.n][incident] += 1
-        if slot >= 0:
-            self.age[i, slot] = 0
-        stale = incident & (self.age[: self.n] > self.max_age)
-        stale[i] |= used & (self.E[i] < self.E_min)
-        if stale.any():
-            src, sl = np.nonzero(stale)
-            ends = np.concatenate([src, self.out[src, sl]])
-            self.out[src, sl] = -1
-            self.E[src, sl] = 0.0
+        """Eq. 1-2 for the transition i -> j under action a, then ageing (kernels)."""
+        if i != j and not (self.out[i] == j).any() and not (self.out[i] < 0).any():
+            self._grow_degree()
+        created, ends = kernels.update_links(
+            self.out, self.E, self.a, self.age, self.n, i, j, a, self.alpha, self.sigma_a,
+            self.eta_a, self.E_init, self.E_min, self.max_age, self.link_rule == "credit")
+        if created or len(ends):
             self.version += 1
-            for k in np.unique(ends):
-                self._remove_if_isolated(int(k))
+        for k in np.unique(ends):
+            self._remove_if_isolated(int(k))
 
     def _remove_if_isolated(self, k: int) -> None:
         if k in (self.prev, self.winner) or not self.alive[k]:

@@ -1,0 +1,340 @@
+"""The TMGWR core against hand-computed cases of its equations, and its behaviour on small
+mazes (learn a path, adapt to a goal change at once, find a detour after a block)."""
+
+import numpy as np
+import pytest
+
+from maze_sim import GridWorld, Maze
+from maze_sim.maze import ACTION_VECTORS
+from tmgwr_agent.agent import TMGWRAgent, tmgwr_params
+from tmgwr_agent.exploration import EpsilonSchedule, RandomWalk
+from tmgwr_agent.motivation import MotivationEstimator
+from tmgwr_agent.params import CONFIG_DIR, ParamError
+from tmgwr_agent.tmgwr_map import SensorimotorMap
+from tmgwr_agent.action_selector import ActionSelector
+
+UP, DOWN, LEFT, RIGHT = range(4)
+
+
+def chain_map(**kw):
+    """Three nodes on a line, 0.1 apart, visited 0 -> 1 -> 2 with action 'right'
+    (each winner habituated at once, so every new input gets its own node)."""
+    m = SensorimotorMap(dim=2, a_T=0.95, h_T=0.75, alpha_c=0.0, insert_at=1.0, **kw)
+    for k in range(3):
+        m.step(np.array([0.0, 0.1 * k]), ACTION_VECTORS[RIGHT] if k else None)
+        m.h[m.winner] = 0.5
+    assert m.size == 3
+    return m
+
+
+# ---------------------------------------------------------------- Eq. 1-2: link rule
+def test_new_link_and_eq1_same_action_keeps_full_reliability():
+    m = chain_map(alpha=0.52, E_init=1.0)
+    src, tgt, act, E, _ = m.links()
+    assert list(zip(src, tgt)) == [(0, 1), (1, 2)]
+    np.testing.assert_allclose(act, [ACTION_VECTORS[RIGHT]] * 2)
+    # E = E_init + alpha (sim(a, a) * 1 - E_init) = 1
+    np.testing.assert_allclose(E, [1.0, 1.0])
+
+
+def test_eq1_different_action_lowers_reliability_by_alpha():
+    m = chain_map(alpha=0.52, E_init=1.0, sigma_a=0.5, eta_a=0.0)
+    m.begin_episode()
+    m.step(np.array([0.0, 0.1]), None)           # winner node 1
+    m.step(np.array([0.0, 0.2]), ACTION_VECTORS[UP])  # 1 -> 2 again, but with 'up'
+    sim = np.exp(-np.sum((ACTION_VECTORS[RIGHT] - ACTION_VECTORS[UP]) ** 2) / (2 * 0.25))
+    expected = 1.0 + 0.52 * (sim - 1.0)
+    assert m.E[1, 0] == pytest.approx(expected)
+
+
+def test_literal_rule_leaves_links_alone_on_a_bump_credit_rule_blames_matching_action():
+    for rule, expected in (("literal", 1.0), ("credit", 1.0 - 0.52 * 1.0)):
+        m = chain_map(alpha=0.52, E_init=1.0, link_rule=rule)
+        m.begin_episode()
+        m.step(np.array([0.0, 0.1]), None)       # at node 1
+        m.step(np.array([0.0, 0.1]), ACTION_VECTORS[RIGHT])  # bumped: stays at node 1
+        assert m.E[1, 0] == pytest.approx(expected), rule
+        assert (m.out[1] == 1).sum() == 0        # no self link is stored
+
+
+def test_credit_rule_does_not_blame_links_of_other_actions():
+    m = chain_map(link_rule="credit", sigma_a=0.5)
+    m.begin_episode()
+    m.step(np.array([0.0, 0.1]), None)
+    m.step(np.array([0.0, 0.1]), ACTION_VECTORS[LEFT])   # bump with 'left'
+    sim = np.exp(-4.0 / (2 * 0.25))                      # |right - left|^2 = 4
+    assert m.E[1, 0] == pytest.approx(1.0 - 0.52 * sim)
+    assert m.E[1, 0] > 0.99
+
+
+def test_links_age_and_stale_links_are_deleted():
+    m = chain_map(max_age=3)
+    m.begin_episode()
+    m.step(np.array([0.0, 0.1]), None)
+    for _ in range(4):                                   # four bumps at node 1
+        m.step(np.array([0.0, 0.1]), ACTION_VECTORS[UP])
+    assert not (m.out[1] >= 0).any()                     # 1 -> 2 aged out
+    assert not (m.out[0] == 1).any()                     # 0 -> 1 (incident) aged out
+    assert not m.alive[2] and not m.alive[0]             # left without links: removed
+    assert m.alive[1]                                    # the current winner stays
+
+
+# ---------------------------------------------------------------- GWR + Merge-GNG
+def test_context_is_merge_gng_blend_of_previous_winner():
+    m = SensorimotorMap(dim=2, beta_c=0.25, alpha_c=0.5)
+    m.step(np.array([1.0, 2.0]), None)
+    m.c[0] = [3.0, 5.0]
+    np.testing.assert_allclose(m.context(), 0.75 * np.array([1.0, 2.0]) + 0.25 * np.array([3.0, 5.0]))
+    C = m.context()
+    x = np.array([1.5, 2.0])
+    d = m.distances(x, C)
+    assert d[0] == pytest.approx(0.5 * 0.25 + 0.5 * np.sum((C - m.c[0]) ** 2))
+
+
+def test_insertion_needs_low_activity_and_habituated_winner():
+    m = SensorimotorMap(dim=2, a_T=0.95, h_T=0.75, tau_b=0.3, kappa_h=1.05, alpha_c=0.0,
+                        insert_at=0.5, eps_b=0.2)
+    m.step(np.array([0.0, 0.0]), None)                   # node 0, h = 1
+    # far input, but node 0 not habituated (h = 1 >= h_T): adapt instead of insert
+    m.step(np.array([0.0, 0.2]), ACTION_VECTORS[RIGHT])
+    assert m.size == 1
+    np.testing.assert_allclose(m.w[0], [0.0, 0.2 * 1.0 * 0.2])   # eps_b * h_b * (x - w)
+    assert m.h[0] == pytest.approx(1.0 + 0.3 * (1.05 * 0.0 - 1.0))  # 0.7 after one win
+    # now h = 0.7 < h_T and activity exp(-0.16) < 0.95: insert halfway
+    m.step(np.array([0.0, 0.2]), ACTION_VECTORS[RIGHT])
+    assert m.size == 2
+    np.testing.assert_allclose(m.w[1], 0.5 * (np.array([0.0, 0.04]) + [0.0, 0.2]))
+    assert m.h[1] == 1.0 and m.winner == 1
+
+
+def test_near_input_adapts_winner_and_neighbours():
+    m = chain_map(eps_b=0.2, eps_n=0.01)
+    h1, h2 = m.h[1], m.h[2]
+    w2_before = m.w[2].copy()
+    m.begin_episode()
+    x = np.array([0.0, 0.11])                            # near node 1
+    m.step(x, None)
+    assert m.winner == 1
+    assert m.w[1][1] == pytest.approx(0.1 + 0.2 * h1 * 0.01)
+    assert m.w[2][1] == pytest.approx(w2_before[1] + 0.01 * h2 * (0.11 - w2_before[1]))
+
+
+# ---------------------------------------------------------------- Eq. 4-5: motivation
+def test_value_iteration_matches_fixed_point_on_a_chain():
+    m = chain_map()
+    mo = MotivationEstimator(gamma=0.97, beta=0.8, goal_sigma=0.3, goal_sim_floor=1e-3,
+                             vi_tol=1e-10, vi_max_sweeps=100000)
+    mo.set_goal(np.array([0.0, 0.2]))
+    V = mo.update(m)
+    assert mo.goal_node == 2
+    # sigma_g = 0.3 * L with L = 0.1 (link length): R_1 = exp(-0.01 / (2 * 0.03^2)),
+    # R_0 = exp(-0.04 / 0.0018) < floor -> 0, R_2 = 1.
+    # Fixed point of Eq. 4-5 with E = 1: V(2) = 1 (no links out of the goal node),
+    # V(1) = R_1 + gamma V(2), V(0) = gamma V(1).
+    R1 = np.exp(-0.01 / (2 * 0.03 ** 2))
+    np.testing.assert_allclose(V, [0.97 * (R1 + 0.97), R1 + 0.97, 1.0], rtol=1e-8)
+
+
+def test_value_iteration_without_a_path_gives_no_motivation():
+    m = chain_map()
+    mo = MotivationEstimator()
+    mo.set_goal(np.array([0.0, 0.0]))                    # goal at node 0: nothing leads there
+    V = mo.update(m)
+    R1 = np.exp(-0.01 / (2 * 0.03 ** 2))
+    # node 2 has no way to the goal and R_2 is cut by the floor: exactly no motivation
+    assert V[2] == 0.0
+    assert V[1] == pytest.approx(R1, rel=1e-3)        # to the tolerance vi_tol
+    assert V[0] == pytest.approx(1.0 + 0.97 * R1, rel=1e-4)
+
+
+def test_eq6_picks_link_with_highest_E_times_V_and_breaks_ties_by_rng():
+    m = SensorimotorMap(dim=2, alpha_c=0.0, insert_at=1.0)
+    m.step(np.array([0.0, 0.0]), None)
+    for a, x in ((RIGHT, [0.0, 0.1]), (DOWN, [0.1, 0.0])):
+        m.begin_episode()
+        m.step(np.array([0.0, 0.0]), None)
+        m.h[:m.n] = 0.5
+        m.step(np.array(x), ACTION_VECTORS[a])
+    assert m.size == 3
+    V = np.zeros(m.n + 1)
+    V[1], V[2] = 0.5, 0.9
+    sel = ActionSelector(np.random.default_rng(0))
+    assert sel.greedy(m, 0, V) == DOWN
+    m.E[0, 1] = 0.5                                      # 0.5 * 0.9 < 1.0 * 0.5? no: 0.45
+    assert sel.greedy(m, 0, V) == RIGHT
+    V[1] = V[2] = 0.7
+    m.E[0, :2] = 1.0
+    picks = {sel.greedy(m, 0, V) for _ in range(50)}
+    assert picks == {RIGHT, DOWN}
+    assert sel.greedy(m, 0, np.zeros(m.n + 1)) is None   # no motivation: no opinion
+
+
+# ---------------------------------------------------------------- Eq. 7 and section 5.1
+def test_epsilon_schedule():
+    s = EpsilonSchedule(1.0, 0.1, 0.1)
+    seen = [s.goal_attained() for _ in range(12)]
+    np.testing.assert_allclose(seen[:9], [0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.3, 0.2, 0.1])
+    assert seen[9:] == [0.1, 0.1, 0.1]
+
+
+def test_random_walk_keeps_direction_and_turns_after_bump():
+    rng = np.random.default_rng(1)
+    walk = RandomWalk(rng, p_turn=0.0)
+    d = walk.action()
+    assert all(walk.action() == d for _ in range(20))
+    for _ in range(50):
+        a = walk.action()
+        walk.observe(a, bumped=True)
+        assert walk.action() != a
+        walk.observe(walk.direction, bumped=False)
+
+
+# ---------------------------------------------------------------- parameters
+def test_invalid_parameters_are_refused_with_their_name():
+    with pytest.raises(ParamError, match="a_T"):
+        tmgwr_params({"a_T": 1.5})
+    with pytest.raises(ParamError, match="link_rule"):
+        tmgwr_params({"link_rule": "sometimes"})
+    with pytest.raises(ParamError, match="gamma"):
+        tmgwr_params({"gamma": float("nan")})
+    with pytest.raises(ParamError, match="unknown parameter"):
+        tmgwr_params({"gama": 0.9})
+
+
+# ---------------------------------------------------------------- behaviour on mazes
+SMALL = """\
+#########
+#S..#...#
+#.#.#.#.#
+#.#...#.#
+#.#####.#
+#...a..G#
+#########
+"""
+
+
+def run_episode(world, agent, learn=True, cap=20000, seen=None):
+    """One episode; ``seen`` (a set) collects the transitions (cell, next cell) made."""
+    obs, info = world.reset()
+    agent.begin_episode(obs, info["cell"], learn=learn)
+    cells = []
+    prev = info["cell"]
+    for _ in range(cap):
+        a = agent.act(explore=learn)
+        obs, _, term, trunc, info = world.step(a)
+        agent.observe(obs, info, learn=learn)
+        cells.append(info.cell)
+        if seen is not None:
+            seen.add((prev, info.cell))
+        prev = info.cell
+        if learn and info.reached_goal:
+            agent.goal_attained()
+        if term or trunc:
+            return cells, info.reached_goal
+    return cells, False
+
+
+def trained(maze, goal="G", seed=0, episodes=30, seen=None, **params):
+    agent = TMGWRAgent(maze, np.random.default_rng(seed), params)
+    world = GridWorld(maze, goal)
+    agent.set_goal(world.goal, world.goal_observation())
+    for _ in range(episodes):
+        run_episode(world, agent, seen=seen)
+    return agent, world
+
+
+def bfs_over(transitions, start, goal):
+    """Shortest path length over the transitions the agent actually experienced."""
+    from collections import deque
+    nxt = {}
+    for a, b in transitions:
+        if a != b:
+            nxt.setdefault(a, set()).add(b)
+    dist, queue = {start: 0}, deque([start])
+    while queue:
+        c = queue.popleft()
+        for d in nxt.get(c, ()):
+            if d not in dist:
+                dist[d] = dist[c] + 1
+                queue.append(d)
+    return dist.get(goal)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_learns_shortest_known_path_and_one_node_per_visited_cell(seed):
+    """The greedy path is a shortest path over what the agent experienced (the planner is
+    optimal on its learnt model), and the map holds one node per visited cell."""
+    maze = Maze.from_text(SMALL)
+    seen = set()
+    agent, world = trained(maze, seed=seed, seen=seen)
+    cells, reached = run_episode(world, agent, learn=False, cap=100)
+    assert reached
+    assert len(cells) == bfs_over(seen, maze.start, world.goal)
+    visited = {c for pair in seen for c in pair}
+    assert agent.map.size == len(visited)
+    # each visited cell's own sensation wins on a node sitting on that cell
+    for cell in visited:
+        x = agent.preprocessor.goal_features(np.array(cell, dtype=float))
+        g = agent.map.nearest_by_weight(x)
+        assert np.linalg.norm(agent.map.w[g] - x) < 0.25 * agent.preprocessor.feature_scale
+
+
+def test_adapts_to_a_new_goal_without_further_learning():
+    """Once a goal's cell is in the map, the very first greedy episode takes a shortest
+    path to it (Table 4: 100 % visits to the current goal right after the change)."""
+    maze = Maze.from_file(CONFIG_DIR / "mazes" / "paper_13x17.txt")
+    agent, world = trained(maze, goal="G", episodes=15)
+    checked = 0
+    for goal in ("1", "2", "3", "4", "G"):
+        cell = world.set_goal(goal)
+        x_g = agent.preprocessor.goal_features(world.goal_observation())
+        g = agent.map.nearest_by_weight(x_g)
+        if np.linalg.norm(agent.map.w[g] - x_g) > 0.5 * agent.preprocessor.feature_scale:
+            continue                                     # never visited: nothing to plan on
+        agent.set_goal(cell, world.goal_observation())
+        cells, reached = run_episode(world, agent, learn=False, cap=500)
+        assert reached and len(cells) == world.shortest_path_length(), goal
+        checked += 1
+    assert checked >= 3
+
+
+@pytest.mark.parametrize("rule", ["credit", "literal"])
+def test_finds_detour_after_a_block(rule):
+    maze = Maze.from_text(SMALL)
+    agent, world = trained(maze, episodes=30, link_rule=rule)
+    world.fire_event("a")
+    cells, reached = run_episode(world, agent, learn=True, cap=5000)
+    assert reached
+    new_len = world.shortest_path_length()
+    for _ in range(20):
+        run_episode(world, agent)
+    cells, reached = run_episode(world, agent, learn=False, cap=200)
+    assert reached and len(cells) == new_len
+
+
+def test_save_and_load_restore_the_same_map_and_decisions(tmp_path):
+    maze = Maze.from_text(SMALL)
+    agent, world = trained(maze, episodes=10)
+    path = agent.map.save(tmp_path / "map.npz")
+    other = TMGWRAgent(maze, np.random.default_rng(99))
+    other.map.load(path)
+    for name in ("w", "c", "h", "alive", "out", "E", "a", "age"):
+        np.testing.assert_array_equal(getattr(other.map, name)[: other.map.n],
+                                      getattr(agent.map, name)[: agent.map.n])
+    other.set_goal(world.goal, world.goal_observation())
+    cells, reached = run_episode(world, other, learn=False, cap=100)
+    assert reached and len(cells) == world.shortest_path_length()
+    (tmp_path / "bad.npz").write_bytes(b"not a map")
+    with pytest.raises(ValueError, match="not a saved sensorimotor map"):
+        other.map.load(tmp_path / "bad.npz")
+
+
+def test_same_seed_same_trajectory():
+    maze = Maze.from_text(SMALL)
+    runs = []
+    for _ in range(2):
+        agent = TMGWRAgent(maze, np.random.default_rng(7))
+        world = GridWorld(maze, "G")
+        agent.set_goal(world.goal, world.goal_observation())
+        runs.append([run_episode(world, agent)[0] for _ in range(5)])
+    assert runs[0] == runs[1]
