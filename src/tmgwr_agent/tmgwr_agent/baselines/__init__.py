@@ -1,0 +1,36 @@
+"""The three baseline agents the TMGWR agent is compared with (DESIGN.md section 5).
+
+* :mod:`.q_learning` -- tabular Q-learning, the paper's model-free agent (Eq. 8, Table 2);
+* :mod:`.model_based` -- value iteration with the transition model T(s, a, s') of the
+  original maze hard-coded, the paper's model-based agent (Eq. 9, 11, Table 2);
+* :mod:`.dyna_q_plus` -- Dyna-Q+ (Sutton & Barto 2018, section 8.3), a model-learning
+  agent the paper does not have: Q-learning plus a learnt model and an exploration bonus.
+
+All of them are tabular over maze cells (the state is the cell the world reports) and
+explore exactly like the TMGWR agent: :class:`~tmgwr_agent.exploration.EpsilonGreedy` with
+one ``explores()`` draw per ``act``, the random walk of section 5.1 when exploring or when
+the agent has no greedy opinion, and ``walk.observe(action, bumped)`` after every step.
+Defaults live in ``config/baselines.yaml`` (sections ``q_learning``, ``model_based``,
+``dyna_q_plus``).
+"""
+
+from __future__ import annotations
+
+from ..params import Param
+
+#: Exploration parameters shared by every agent (section 5.1, Eq. 7); the same names,
+#: defaults and ranges as the TMGWR agent's.
+EXPLORATION_SPECS = (
+    Param("p_turn", 0.3, "random walk: probability of turning when not blocked (5.1)",
+          low=0.0, high=1.0),
+    Param("eps_start", 1.0, "Eq. 7: initial exploration probability", low=0.0, high=1.0),
+    Param("eps_decay", 0.1, "Eq. 7: decrease of epsilon per goal attained", low=0.0,
+          high=1.0),
+    Param("eps_min", 0.1, "Eq. 7: floor of epsilon", low=0.0, high=1.0),
+)
+
+
+def exploration_kwargs(p) -> dict:
+    """The EpsilonGreedy keyword arguments from a resolved parameter dict."""
+    return {"p_turn": p["p_turn"], "eps_start": p["eps_start"],
+            "eps_decay": p["eps_decay"], "eps_min": p["eps_min"]}

@@ -1,0 +1,122 @@
+"""Dyna-Q+ (Sutton & Barto 2018, section 8.3): Q-learning plus a learnt model.
+
+Not in the paper: a model-*learning* reinforcement-learning agent, the fair rival of the
+TMGWR agent in a changing maze. Real steps are exactly those of
+:class:`~.q_learning.QLearningAgent` (rewards r(s, a) of Eq. 8: +88 goal, -131 wall, -29
+empty; gamma = 0.86 and learning rate beta = 0.39 of Table 2; terminal transitions
+bootstrap 0). In addition, after every real step (tabular Dyna-Q, steps (e)-(f)):
+
+* the deterministic model remembers the latest outcome ``Model(s, a) = (r, s', terminal)``
+  and the global time ``t`` (real steps taken while learning) at which (s, a) was tried;
+* ``n`` planning updates follow, each on a pair drawn uniformly from the visited states x
+  the four actions, with the exploration bonus of Dyna-Q+ added to the modelled reward::
+
+      Q(s, a) <- Q(s, a) + beta * (r + kappa * sqrt(tau) + gamma * max_a' Q(s', a') - Q(s, a))
+
+  where ``tau`` is the number of real time steps since (s, a) was last tried (bootstrap 0
+  for a terminal model transition). As in the book, an action never tried from a visited
+  state may be drawn: its model leads back to the same state with reward 0, and its tau
+  counts from the first visit of the state.
+
+Default kappa = 0.1 (the book's 0.001 is for a reward of 1 at the goal and 0 elsewhere).
+Scaled to rewards of tens to hundreds: a pair untried for tau = 10^4 real steps gets
+``kappa sqrt(tau) = 10``, a third of one step's cost (29), so an old detour is worth
+re-testing in planning once it is stale by thousands of steps, while the bonus of a pair
+tried in the last hundred steps (<= 1) stays small against the reward differences that
+decide the route near the goal. Larger kappa (>= 1) makes the planned values so
+optimistic about every stale pair that the greedy policy wanders and converges later; the
+measured effect of kappa on the paper's maze is in the README / report (kappa in {0,
+0.03, 0.1, 0.3, 1}: detour after event 'a' and episodes to an optimal greedy path).
+
+Default n = 10 planning steps per real step: enough to propagate a changed value along a
+corridor within a few real steps (the book's maze examples use n between 5 and 50) while
+keeping a step at about ten times the cost of a Q-learning step. Planning draws its n
+uniforms with one generator call per real step and works on Python lists, so a step is
+O(n) with a small constant.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+import numpy as np
+
+from maze_sim.maze import Maze
+
+from ..params import Param
+from .q_learning import N_ACTIONS, RL_SPECS, QLearningAgent
+from . import EXPLORATION_SPECS
+
+SPECS = RL_SPECS + (
+    Param("n_planning", 10, "planning updates per real step (Dyna-Q step f)", low=0,
+          high=10000, integer=True),
+    Param("kappa", 0.1, "exploration bonus kappa * sqrt(tau) added in planning", low=0.0,
+          high=1e6),
+) + EXPLORATION_SPECS
+
+
+class DynaQPlusAgent(QLearningAgent):
+    """Dyna-Q+ with the rewards and learning rate of the paper's Q-learning agent."""
+
+    name = "dyna_q_plus"
+    config_section = "dyna_q_plus"
+    specs = SPECS
+
+    def __init__(self, maze: Maze, rng: np.random.Generator,
+                 overrides: Mapping[str, Any] | None = None):
+        super().__init__(maze, rng, overrides)
+        self.n_planning = self.params["n_planning"]
+        self.kappa = self.params["kappa"]
+        n = self.rows * self.cols * N_ACTIONS
+        # Model(s, a), indexed by s * 4 + a; next -1 = never tried.
+        self.m_next = [-1] * n
+        self.m_reward = [0.0] * n
+        self.m_terminal = [False] * n
+        self.m_time = [0] * n          # real time step at which (s, a) was last tried
+        self.visited: list[int] = []   # states in order of first visit
+        self.is_visited = [False] * (self.rows * self.cols)
+        self.t = 0                     # global clock: real learning steps
+
+    def learn(self, s: int, a: int, r: float, s2: int, terminal: bool) -> None:
+        self.t += 1
+        t = self.t
+        if not self.is_visited[s]:
+            self.is_visited[s] = True
+            self.visited.append(s)
+            base = s * N_ACTIONS
+            for b in range(N_ACTIONS):       # untried actions: tau counts from here
+                self.m_time[base + b] = t
+        # (d) direct RL
+        self.q_update(s, a, r, s2, terminal)
+        # (e) model learning
+        sa = s * N_ACTIONS + a
+        self.m_next[sa] = s2
+        self.m_reward[sa] = r
+        self.m_terminal[sa] = terminal
+        self.m_time[sa] = t
+        # (f) planning
+        if self.n_planning:
+            self.plan(self.n_planning)
+
+    def plan(self, n: int) -> None:
+        Q, visited = self.Q, self.visited
+        m_next, m_reward, m_terminal, m_time = (self.m_next, self.m_reward,
+                                                self.m_terminal, self.m_time)
+        gamma, beta, kappa, t = self.gamma, self.beta, self.kappa, self.t
+        scale = len(visited) * N_ACTIONS
+        sqrt = math.sqrt
+        for u in self.rng.random(n).tolist():
+            k = int(u * scale)
+            s = visited[k >> 2]
+            a = k & 3
+            sa = s * N_ACTIONS + a
+            s2 = m_next[sa]
+            if s2 < 0:                        # never tried: back to s with reward 0
+                s2, r, terminal = s, 0.0, False
+            else:
+                r, terminal = m_reward[sa], m_terminal[sa]
+            r += kappa * sqrt(t - m_time[sa])
+            q = Q[s]
+            target = r if terminal else r + gamma * max(Q[s2])
+            q[a] += beta * (target - q[a])

@@ -1,0 +1,151 @@
+"""The model-free baseline: tabular Q-learning (section 5.1, Eq. 8, Table 2).
+
+The state ``s`` is the agent's cell (``info.cell``, or the cell given to
+``begin_episode``); the four actions are those of ``maze.ACTIONS``. The reward of Eq. 8
+depends on the state-action pair through where it led::
+
+    r(s, a) = +88   if a in s leads to the goal
+              -131  if a in s leads to a wall (the move bumped)
+              -29   if a in s leads to an empty cell
+
+and the one-step Q-learning update (the paper's beta is the learning rate, Table 2)::
+
+    Q(s, a) <- Q(s, a) + beta * (r(s, a) + gamma * max_a' Q(s', a') - Q(s, a))
+
+with gamma = 0.86 and beta = 0.39. A transition that ends the episode (the current goal,
+or the previous goal in the goal-change scenario, which counts as an empty cell with
+reward -29 but is terminal, section 5.2.1) bootstraps 0. A truncated episode is not a
+terminal transition. Q starts at 0 everywhere.
+
+Acting: the greedy action is ``argmax_a Q(s, a)`` with ties broken by the agent's
+generator; a state from which no action has been tried yet gives no greedy opinion and the
+random walk acts (as for the TMGWR agent on a node without links). Per step the work is
+O(1): Q is a list of 4-float lists indexed by ``row * cols + col``.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+import numpy as np
+
+from maze_sim.maze import Cell, Maze
+from maze_sim.world import StepInfo
+
+from ..exploration import EpsilonGreedy
+from ..params import Param, config_params
+from . import EXPLORATION_SPECS, exploration_kwargs
+
+N_ACTIONS = 4
+
+#: Eq. 8 and the Q-learning column of Table 2 (shared with Dyna-Q+).
+RL_SPECS = (
+    Param("gamma", 0.86, "discount factor (Table 2)", low=0.0, high=1.0, high_open=True),
+    Param("beta", 0.39, "learning rate of the Q update (Table 2)", low=0.0, high=1.0,
+          low_open=True),
+    Param("r_goal", 88.0, "Eq. 8: reward of an action that leads to the goal",
+          low=-1e6, high=1e6),
+    Param("r_wall", -131.0, "Eq. 8: reward of an action that leads into a wall (bump)",
+          low=-1e6, high=1e6),
+    Param("r_empty", -29.0, "Eq. 8: reward of an action that leads to an empty cell",
+          low=-1e6, high=1e6),
+)
+
+SPECS = RL_SPECS + EXPLORATION_SPECS
+
+
+class QLearningAgent:
+    """Tabular Q-learning with the rewards of Eq. 8 and the exploration of section 5.1."""
+
+    name = "q_learning"
+    config_section = "q_learning"
+    specs = SPECS
+
+    def __init__(self, maze: Maze, rng: np.random.Generator,
+                 overrides: Mapping[str, Any] | None = None):
+        self.params = config_params(self.specs, "baselines.yaml", self.config_section,
+                                    overrides)
+        p = self.params
+        self.gamma, self.beta = p["gamma"], p["beta"]
+        self.r_goal, self.r_wall, self.r_empty = p["r_goal"], p["r_wall"], p["r_empty"]
+        self.rng = rng
+        self.policy = EpsilonGreedy(rng, **exploration_kwargs(p))
+        self.rows, self.cols = maze.shape
+        n = self.rows * self.cols
+        self.Q: list[list[float]] = [[0.0] * N_ACTIONS for _ in range(n)]
+        self.tried = [False] * n       # some action has been tried from the state
+        self.goal: Cell | None = None
+        self.state = -1                # index of the current cell, -1 before an episode
+        self.last_explored = False
+
+    # -------------------------------------------------------------- helpers
+    def index(self, cell: Cell) -> int:
+        return int(cell[0]) * self.cols + int(cell[1])
+
+    def q_table(self) -> np.ndarray:
+        """Q as an array of shape (rows, cols, 4) (a copy)."""
+        return np.array(self.Q).reshape(self.rows, self.cols, N_ACTIONS)
+
+    def reward(self, info: StepInfo) -> float:
+        """Eq. 8 for the step just taken (the previous goal is an empty cell)."""
+        reached = info.reached_goal if self.goal is None else info.cell == self.goal
+        if reached:
+            return self.r_goal
+        if info.bumped:
+            return self.r_wall
+        return self.r_empty
+
+    def greedy(self, s: int) -> int | None:
+        """argmax_a Q(s, a), ties broken by the generator; None for an untried state."""
+        if s < 0 or not self.tried[s]:
+            return None
+        q = self.Q[s]
+        top = max(q)
+        best = [a for a in range(N_ACTIONS) if q[a] == top]
+        if len(best) == 1:
+            return best[0]
+        return best[int(self.rng.integers(len(best)))]
+
+    def q_update(self, s: int, a: int, r: float, s2: int, terminal: bool) -> None:
+        """The Q-learning update (one-step, off-policy)."""
+        q = self.Q[s]
+        target = r if terminal else r + self.gamma * max(self.Q[s2])
+        q[a] += self.beta * (target - q[a])
+        self.tried[s] = True
+
+    # -------------------------------------------------------------- Agent protocol
+    @property
+    def epsilon(self) -> float:
+        return self.policy.epsilon
+
+    def set_goal(self, goal_cell: Cell, goal_obs: np.ndarray | None = None) -> None:
+        self.goal = (int(goal_cell[0]), int(goal_cell[1]))
+
+    def begin_episode(self, obs: np.ndarray, cell: Cell, learn: bool = True) -> None:
+        self.state = self.index(cell)
+
+    def act(self, explore: bool = True) -> int:
+        policy = self.policy
+        if policy.explores(explore):
+            self.last_explored = True
+            return policy.walk.action()
+        a = self.greedy(self.state)
+        if a is None:
+            self.last_explored = True
+            return policy.walk.action()
+        self.last_explored = False
+        return a
+
+    def observe(self, obs: np.ndarray, info: StepInfo, learn: bool = True) -> None:
+        s2 = self.index(info.cell)
+        if learn and self.state >= 0:
+            self.learn(self.state, info.action, self.reward(info), s2, info.terminated)
+        self.state = s2
+        self.policy.walk.observe(info.action, info.bumped)
+
+    def learn(self, s: int, a: int, r: float, s2: int, terminal: bool) -> None:
+        """What a real transition teaches (overridden by Dyna-Q+)."""
+        self.q_update(s, a, r, s2, terminal)
+
+    def goal_attained(self) -> None:
+        self.policy.schedule.goal_attained()
