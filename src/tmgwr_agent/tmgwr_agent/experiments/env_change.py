@@ -1,0 +1,129 @@
+"""Scenario: changing environment (section 5.2.2, Table 6, Fig. 5).
+
+Protocol, per agent and trial (a fresh agent, its generator from the trial's seed):
+
+1. goal ``--goal`` (default ``G``); train to convergence (:func:`.runner.train_until_converged`:
+   ten consecutive optimal greedy rollouts). An agent that does not converge within the
+   caps still goes on to step 2 (it is as trained as the budget allows); its
+   ``train_episodes`` value is ``null``;
+2. fire the event (``--event``, default ``a``): its cells become walls. Nobody tells the
+   agent; the model-based agent keeps its hard-coded model (Eq. 11);
+3. ``steps``: one episode from S with learning and exploration on (epsilon as left by
+   training, i.e. at its floor), counting the steps until the goal is first reached;
+   ``null`` when the episode step cap (200 x free cells) runs out first;
+4. ``episodes_to_optimal``: the number of episodes after the event (the episode of step 3
+   is episode 1) until a greedy rollout (epsilon 0, no learning) takes a shortest path of
+   the *new* maze; more training episodes run until then, up to the caps. ``null`` when the
+   caps run out, and also when step 3 failed (an agent stuck at the block would only burn
+   the budget).
+
+``oracle_steps`` (top level): the lower bound of an agent that knows the old maze
+perfectly: it walks a shortest path of the old maze, bumps once into the first blocked
+cell on it, then walks a shortest path of the new maze from where it stands. Over all
+shortest paths of the old maze that run into a blocked cell, the smallest such total
+(:func:`oracle_steps`). When some old shortest path avoids every blocked cell the bound is
+the (unchanged) shortest path length.
+
+Link rules: the TMGWR agent is run under both readings of Eq. 1-2 (DESIGN.md section 3):
+the default agent list of this scenario is ``tmgwr,tmgwr:literal,tmgwr:credit,q_learning,
+model_based,dyna_q_plus`` (plain ``tmgwr`` is whichever rule config/tmgwr_agent.yaml
+selects; with the same seeds it repeats one of the two named runs exactly).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from maze_sim.maze import Maze, bfs_distances
+
+from ..agents import make_agent
+from .parallel import agent_trials
+from .runner import Caps, greedy_optimal, make_world, run_episode, set_goal, \
+    train_until_converged
+from .stats import stat
+
+DEFAULT_AGENTS = ("tmgwr", "tmgwr:literal", "tmgwr:credit", "q_learning", "model_based",
+                  "dyna_q_plus")
+
+
+def oracle_steps(maze: Maze, event: str, goal: str = "G") -> int:
+    """Old optimal path up to the first blocked cell, one bump, new shortest path."""
+    start, target = maze.start, maze.goal_cell(goal)
+    old = maze.walls
+    new = maze.walls_after([event])
+    ds, dg = bfs_distances(old, start), bfs_distances(old, target)
+    dnew = bfs_distances(new, target)
+    d = int(ds[target])
+    blocked = new & ~old
+
+    def on_path(c):
+        return ds[c] >= 0 and dg[c] >= 0 and ds[c] + dg[c] == d
+
+    # Cells reachable from S along old shortest paths through unblocked cells only,
+    # layer by layer (ds increases by one along a shortest path).
+    frontier = {start}
+    best = None
+    rows, cols = old.shape
+    for _ in range(d + 1):
+        nxt = set()
+        for c in frontier:
+            if c == target:                      # an old shortest path avoids the block
+                return d
+            for dr, dc in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+                n = (c[0] + dr, c[1] + dc)
+                if not (0 <= n[0] < rows and 0 <= n[1] < cols) or not on_path(n) \
+                        or ds[n] != ds[c] + 1:
+                    continue
+                if blocked[n]:
+                    if dnew[c] >= 0:
+                        total = int(ds[c]) + 1 + int(dnew[c])
+                        best = total if best is None else min(best, total)
+                else:
+                    nxt.add(n)
+        frontier = nxt
+    if best is None:
+        raise ValueError(f"event {event!r}: the goal cannot be reached after it")
+    return best
+
+
+def trial(spec: str, t: int, seed: np.random.SeedSequence, maze_path: str, event: str,
+          goal: str) -> dict:
+    maze = Maze.from_file(maze_path)
+    caps = Caps.for_maze(maze)
+    world = make_world(maze, goal, caps)
+    agent = make_agent(spec, maze, np.random.default_rng(seed))
+    set_goal(world, agent, goal)
+    conv = train_until_converged(world, agent, caps)
+    world.fire_event(event)
+    d_new = world.shortest_path_length()
+    ep = run_episode(world, agent)
+    steps = ep.steps if ep.reached_goal else None
+    episodes = None
+    if steps is not None:
+        n, used = 1, ep.steps
+        while True:
+            if greedy_optimal(world, agent, d_new):
+                episodes = n
+                break
+            if n >= caps.max_episodes or used >= caps.budget_steps:
+                break
+            e = run_episode(world, agent)
+            n += 1
+            used += e.steps
+    return {"steps": steps, "episodes_to_optimal": episodes,
+            "train_episodes": conv.episodes}
+
+
+def run(maze_path: str, agents: list[str], trials: int, seed: int, event: str = "a",
+        goal: str = "G", jobs: int | None = None, progress: bool = True) -> dict:
+    maze = Maze.from_file(maze_path)
+    res = agent_trials(trial, agents, seed, trials, (maze_path, event, goal), jobs,
+                       f"env-change {event}", progress)
+    out = {a: {k: stat(r[k] for r in rs)
+               for k in ("steps", "episodes_to_optimal", "train_episodes")}
+           for a, rs in res.items()}
+    return {"event": event, "goal": goal, "oracle_steps": oracle_steps(maze, event, goal),
+            "shortest_before": maze.shortest_path_length(maze.start, maze.goal_cell(goal)),
+            "shortest_after": maze.shortest_path_length(
+                maze.start, maze.goal_cell(goal), walls=maze.walls_after([event])),
+            "agents": out}

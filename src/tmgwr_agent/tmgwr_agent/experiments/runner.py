@@ -1,0 +1,146 @@
+"""Episodes, greedy rollouts and the convergence test shared by every scenario.
+
+The loop is the one of :mod:`tmgwr_agent.agent_api`: a *training episode* starts at S
+(``world.reset()``), the agent acts epsilon-greedily and learns from every step, and the
+episode ends at the current goal, at the previous goal while one is set (goal-change
+scenario), or when the episode step cap truncates it. ``goal_attained()`` (the Eq. 7
+epsilon decay) is called only when the *current* goal is reached.
+
+A *greedy rollout* is the convergence probe: from S, ``learn=False`` and
+``explore=False`` (epsilon 0, nothing learnt), at most ``D`` steps where ``D`` is the BFS
+shortest-path length of the current layout. The path is *optimal* when it reaches the
+goal within those ``D`` steps (it cannot be shorter). The rollout draws from the agent's
+generator only to break ties and moves the random walk's direction, so it is part of the
+seeded run; it teaches nothing.
+
+*Convergence* (section 5.2.5, "follows the optimal path ten consecutive times"): after
+every training episode one greedy rollout is made; the agent has converged once
+``streak`` (10) consecutive rollouts were optimal. ``episodes_to_converge`` is the number
+of training episodes after which the streak *started* (so an agent whose very first
+rollout is optimal and stays so scores 1). We probe with greedy rollouts rather than
+counting optimal training episodes because at the epsilon floor of 0.1 a 44-step
+epsilon-greedy episode is rarely optimal however well the agent knows the way.
+
+Caps (nothing runs forever). With ``F`` the number of free cells of the maze (99 on the
+default maze):
+
+* ``episode_steps = 200 F`` steps per episode (19 800 on the default maze): a random walk
+  finds the goal of the default maze in a few thousand steps, so the cap only truncates an
+  agent that is stuck (the model-based agent after a block);
+* ``max_episodes = max(200, 20 F)`` training episodes per convergence run (1980);
+* ``budget_steps = 5000 F`` steps in all per convergence run (495 000).
+
+A run that hits a cap is a failed trial (``None`` -> ``null`` in the JSON).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+from maze_sim.maze import Maze
+from maze_sim.world import GridWorld
+
+from ..agent_api import Agent
+
+#: Consecutive optimal greedy rollouts that count as convergence (section 5.2.5).
+STREAK = 10
+
+
+@dataclass(frozen=True)
+class Caps:
+    episode_steps: int
+    max_episodes: int
+    budget_steps: int
+
+    @classmethod
+    def for_maze(cls, maze: Maze, episode_factor: int = 200, episodes_factor: int = 20,
+                 budget_factor: int = 5000) -> "Caps":
+        free = len(maze.free_cells())
+        return cls(episode_steps=episode_factor * free,
+                   max_episodes=max(200, episodes_factor * free),
+                   budget_steps=budget_factor * free)
+
+
+@dataclass
+class Episode:
+    steps: int
+    reached_goal: bool
+    reached_previous_goal: bool
+
+
+def make_world(maze: Maze, goal: str, caps: Caps) -> GridWorld:
+    return GridWorld(maze, goal=goal, max_episode_steps=caps.episode_steps)
+
+
+def set_goal(world: GridWorld, agent: Agent, goal: str, keep_previous: bool = False) -> None:
+    """Move the goal in the world and tell the agent (cell for the tabular agents, the
+    goal *observation* for TMGWR, which never sees cells)."""
+    world.set_goal(goal, keep_previous=keep_previous)
+    agent.set_goal(world.goal, world.goal_observation())
+
+
+def run_episode(world: GridWorld, agent: Agent, learn: bool = True, explore: bool = True,
+                max_steps: int | None = None) -> Episode:
+    """One episode from S; ``max_steps`` (default: the world's episode cap) truncates."""
+    obs, _ = world.reset()
+    agent.begin_episode(obs, world.cell, learn=learn)
+    cap = max_steps if max_steps is not None else world.max_episode_steps
+    steps = 0
+    while True:
+        action = agent.act(explore=explore)
+        obs, _, terminated, truncated, info = world.step(action)
+        agent.observe(obs, info, learn=learn)
+        steps += 1
+        if info.reached_goal and learn:
+            agent.goal_attained()
+        if terminated:
+            return Episode(steps, info.reached_goal, info.reached_previous_goal)
+        if truncated or (cap is not None and steps >= cap):
+            return Episode(steps, False, False)
+
+
+def greedy_optimal(world: GridWorld, agent: Agent, optimal: int | None = None) -> bool:
+    """Does a greedy rollout (epsilon 0, no learning) take a shortest path to the goal?"""
+    d = world.shortest_path_length() if optimal is None else optimal
+    if d < 0:
+        return False
+    ep = run_episode(world, agent, learn=False, explore=False, max_steps=d)
+    return ep.reached_goal and ep.steps == d
+
+
+@dataclass
+class Convergence:
+    episodes: int | None        # training episodes to the start of the streak; None = cap
+    trained: int                # training episodes run
+    steps: int                  # training steps run
+    cpu_s: float                # process CPU seconds of the training episodes only
+    curve: list[int]            # steps of every training episode
+
+
+def train_until_converged(world: GridWorld, agent: Agent, caps: Caps, streak: int = STREAK,
+                          min_episodes: int = 0) -> Convergence:
+    """Train episode after episode, probing with a greedy rollout after each, until
+    ``streak`` consecutive rollouts are optimal (and at least ``min_episodes`` episodes
+    ran, for the sample-complexity curves). CPU time counts the training episodes only,
+    not the probes (they are the experimenter's measurement, not the agent's work)."""
+    d = world.shortest_path_length()
+    run = 0
+    converged_at: int | None = None
+    curve: list[int] = []
+    steps = 0
+    cpu = 0.0
+    while len(curve) < caps.max_episodes and steps < caps.budget_steps:
+        t0 = time.process_time()
+        ep = run_episode(world, agent, max_steps=min(caps.episode_steps,
+                                                     caps.budget_steps - steps))
+        cpu += time.process_time() - t0
+        curve.append(ep.steps)
+        steps += ep.steps
+        if converged_at is None:
+            run = run + 1 if greedy_optimal(world, agent, d) else 0
+            if run >= streak:
+                converged_at = len(curve) - streak + 1
+        if converged_at is not None and len(curve) >= min_episodes:
+            break
+    return Convergence(converged_at, len(curve), steps, cpu, curve)
