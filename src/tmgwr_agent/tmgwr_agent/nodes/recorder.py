@@ -1,0 +1,231 @@
+"""``ros2 run tmgwr_agent recorder``: record the graph's topics to a rosbag2/MCAP bag.
+
+rosbag2 is not installable from the registries here, so the project records itself
+(notes/mcap-recording.md). The node subscribes to every topic (or the ``topics`` list) with
+*raw* subscriptions, which hand over the CDR bytes as they came off the wire, and writes
+those bytes unchanged with :class:`tmgwr_agent.bag.writer.BagWriter` (no second
+serialization). New topics are discovered every ``discovery_period`` seconds.
+
+QoS: each topic is subscribed with a profile compatible with all its publishers
+(:func:`tmgwr_agent.bag.qos.subscription_qos`): reliable when they all are, transient local
+when they all are (so latched messages published before the recorder joined are recorded),
+and a history of at least ``queue_depth`` so a momentarily busy recorder loses nothing.
+
+Shutdown: SIGINT and SIGTERM shut the context down; the bag is then finished (summary,
+indexes, metadata.yaml) and the received and written counts are logged per topic. A
+recorder killed outright leaves at most ``flush_period`` seconds unflushed; ``./tmgwr
+recover`` makes such a file valid again.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+from datetime import datetime, timezone
+from pathlib import Path
+
+import rclpy
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                ParameterType)
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+
+from tmgwr_agent.bag import definitions
+from tmgwr_agent.bag import qos as bag_qos
+from tmgwr_agent.bag.writer import COMPRESSIONS, BagWriter, TopicInfo
+
+_BIG = 2 ** 62
+
+
+def default_output_dir(now: datetime | None = None) -> Path:
+    """``runs/<UTC timestamp>/`` relative to the working directory."""
+    now = now or datetime.now(timezone.utc)
+    return Path('runs') / now.strftime('%Y%m%dT%H%M%SZ')
+
+
+class Recorder(Node):
+    """Raw-bytes recorder: discovery timer, one raw subscription per topic, a BagWriter."""
+
+    def __init__(self):
+        # No /rosout publisher: the recorder would otherwise record its own log lines, and
+        # its final counts are logged after the context has shut down (on SIGINT/SIGTERM).
+        super().__init__('recorder', enable_rosout=False)
+        p = self._declare_parameters()
+        self.topic_list: list[str] = [t if t.startswith('/') else '/' + t for t in p['topics']]
+        self.exclude = re.compile(p['exclude']) if p['exclude'] else None
+        self.queue_depth = p['queue_depth']
+        out = Path(p['output_dir']) if p['output_dir'] else default_output_dir()
+        self.writer = BagWriter(
+            out, compression=p['compression'], chunk_size=p['chunk_size'],
+            max_file_size=p['max_bag_size'],
+            max_file_duration_ns=int(p['max_bag_duration'] * 1e9),
+            library='tmgwr_agent recorder (mcap-python)',
+            custom_data={'recorder': 'tmgwr_agent recorder'})
+        self.received: dict[str, int] = {}
+        self.failed: dict[str, int] = {}
+        self.subscriptions_by_topic: dict[str, object] = {}
+        self._warned: set[str] = set()
+        self.get_logger().info(
+            f'recording {"all topics" if not self.topic_list else ", ".join(self.topic_list)} '
+            f'to {self.writer.directory.resolve()} (compression {p["compression"]})')
+        self.discover()
+        # Discovery and flushing run on timers in the same single-threaded executor as the
+        # subscriptions, so the writer is never used by two threads at once.
+        self.create_timer(p['discovery_period'], self.discover)
+        if p['flush_period'] > 0:
+            self.create_timer(p['flush_period'], self.writer.flush)
+
+    # ------------------------------------------------------------------ parameters
+    def _declare_parameters(self) -> dict:
+        def desc(text, ptype, lo=None, hi=None, constraints=''):
+            d = ParameterDescriptor(description=text, type=ptype, read_only=True,
+                                    additional_constraints=constraints)
+            if ptype == ParameterType.PARAMETER_INTEGER and lo is not None:
+                d.integer_range = [IntegerRange(from_value=lo, to_value=hi, step=0)]
+            if ptype == ParameterType.PARAMETER_DOUBLE and lo is not None:
+                d.floating_point_range = [FloatingPointRange(from_value=lo, to_value=hi,
+                                                             step=0.0)]
+            return d
+
+        S, I, D, SA = (ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_INTEGER,
+                       ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING_ARRAY)
+        specs = {
+            'output_dir': ('', desc('bag directory; empty: runs/<UTC timestamp>/', S)),
+            'topics': ([''], desc('topics to record; empty: all (discovered periodically)', SA)),
+            'exclude': ('', desc('regular expression of topics not to record', S)),
+            'compression': ('zstd', desc('chunk compression', S,
+                                         constraints='one of: ' + ', '.join(COMPRESSIONS))),
+            'chunk_size': (1 << 20, desc('uncompressed chunk size in bytes', I, 1024, 1 << 30)),
+            'max_bag_size': (0, desc('split into a new file at this size in bytes (0: never)',
+                                     I, 0, _BIG)),
+            'max_bag_duration': (0.0, desc('split into a new file after this many seconds '
+                                           '(0: never)', D, 0.0, 1e9)),
+            'discovery_period': (0.5, desc('seconds between topic discoveries', D, 0.05, 60.0)),
+            'flush_period': (0.5, desc('seconds between flushes of the open chunk to disk '
+                                       '(bounds what a kill -9 loses; 0: only full chunks)',
+                                       D, 0.0, 3600.0)),
+            'queue_depth': (1000, desc('minimum subscription history depth', I, 1, 1000000)),
+        }
+        values = {}
+        for name, (default, d) in specs.items():
+            d.name = name
+            # A value outside the descriptor's range makes declare_parameter raise
+            # InvalidParameterValueException, which names the parameter.
+            values[name] = self.declare_parameter(name, default, d).value
+        values['topics'] = [t for t in values['topics'] if t]
+        if values['compression'] not in COMPRESSIONS:
+            raise ValueError(f"parameter 'compression': {values['compression']!r} is not one "
+                             f"of {', '.join(COMPRESSIONS)}")
+        if values['exclude']:
+            try:
+                re.compile(values['exclude'])
+            except re.error as exc:
+                raise ValueError(f"parameter 'exclude': invalid regular expression "
+                                 f"{values['exclude']!r}: {exc}") from None
+        for t in values['topics']:
+            if not re.fullmatch(r'/?[A-Za-z~][\w/~{}]*', t):
+                raise ValueError(f"parameter 'topics': {t!r} is not a valid topic name")
+        return values
+
+    # ------------------------------------------------------------------ discovery
+    def _wanted(self, topic: str) -> bool:
+        if self.topic_list:
+            return topic in self.topic_list
+        if any(part.startswith('_') for part in topic.split('/')):   # hidden topics
+            return False
+        return not (self.exclude and self.exclude.search(topic))
+
+    def discover(self) -> None:
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self.subscriptions_by_topic or not self._wanted(topic):
+                continue
+            if len(types) != 1:
+                self._warn_once(topic, f'{topic} has several types {types}: not recorded')
+                continue
+            infos = self.get_publishers_info_by_topic(topic)
+            if not infos:           # only subscribers so far: wait for a publisher's QoS
+                continue
+            try:
+                self._subscribe(topic, types[0], infos)
+            except definitions.DefinitionError as exc:
+                self._warn_once(topic, f'{topic} not recorded: {exc}')
+
+    def _warn_once(self, topic: str, text: str) -> None:
+        if topic not in self._warned:
+            self._warned.add(topic)
+            self.get_logger().warning(text)
+
+    def _subscribe(self, topic: str, type_name: str, infos) -> None:
+        msg_class = definitions.import_message(type_name)
+        offered = [bag_qos.profile_to_dict(i.qos_profile) for i in infos]
+        hashes = {str(i.topic_type_hash) for i in infos}
+        type_hash = sorted(hashes)[0] if len(hashes) == 1 else definitions.type_hash(type_name)
+        if not type_hash.startswith('RIHS'):
+            type_hash = definitions.type_hash(type_name)
+        info = TopicInfo(name=topic, type=type_name,
+                         definition=definitions.ros2msg_definition(type_name),
+                         offered_qos=offered, type_hash=type_hash)
+        self.writer.add_topic(info)
+        self.received[topic] = 0
+        sub_qos = bag_qos.subscription_qos(offered, self.queue_depth)
+        write = self.writer.write
+        received = self.received
+
+        def on_message(data: bytes, msg_info: dict) -> None:
+            received[topic] += 1
+            try:
+                write(topic, data, msg_info['received_timestamp'],
+                      msg_info['source_timestamp'], msg_info['publication_sequence_number'])
+            except Exception as exc:  # noqa: BLE001 -- count it, keep recording the rest
+                self.failed[topic] = self.failed.get(topic, 0) + 1
+                self._warn_once('write:' + topic, f'writing a message of {topic} failed: {exc}')
+
+        self.subscriptions_by_topic[topic] = self.create_subscription(
+            msg_class, topic, on_message, sub_qos, raw=True)
+        self.get_logger().info(
+            f'subscribed to {topic} [{type_name}] ({sub_qos.reliability.name.lower()}, '
+            f'{sub_qos.durability.name.lower()}, depth {sub_qos.depth})')
+
+    # ------------------------------------------------------------------ end
+    def finish(self) -> None:
+        meta = self.writer.close()
+        written = {t['topic_metadata']['name']: t['message_count']
+                   for t in meta['topics_with_message_count']}
+        total_r, total_w = sum(self.received.values()), sum(written.values())
+        for topic in sorted(self.received):
+            self.get_logger().info(f'  {topic}: received {self.received[topic]}, written '
+                                   f'{written.get(topic, 0)}')
+        files = ', '.join(str(p) for p in self.writer.file_paths())
+        self.get_logger().info(
+            f'recorded: received {total_r}, written {total_w} messages on '
+            f'{len(self.received)} topics'
+            f'{"" if total_r == total_w else " (MESSAGES LOST IN WRITING)"} -> {files}')
+
+
+def main(args=None) -> int:
+    rclpy.init(args=args)
+    node = None
+    try:
+        try:
+            node = Recorder()
+        except Exception as exc:  # noqa: BLE001 -- a bad parameter: say which, exit 2
+            print(f'recorder: cannot start: {exc}', file=sys.stderr)
+            return 2
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        try:
+            executor.spin()
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        finally:
+            executor.shutdown()
+    finally:
+        if node is not None:
+            node.finish()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
