@@ -1,0 +1,194 @@
+"""``./tmgwr up | goal | cell | event | reset``: run the node graph and talk to it.
+
+* ``up`` starts the five nodes (and the recorder, to ``runs/<UTC timestamp>/`` unless
+  ``--no-record``) as separate processes and keeps them running until Ctrl-C, printing
+  each episode (steps, outcome) as the Observation topic shows it.
+* ``goal X Y`` calls ``/set_goal`` (x = column, y = row); ``cell R C --block|--open`` and
+  ``event NAME`` change the maze; ``reset`` restarts the episode. Each waits a bounded
+  time for its service and says so when no graph is running.
+
+Exit codes: 0 done / accepted, 1 refused or a node died, 2 no graph running or bad usage.
+rclpy is imported inside the commands, so ``./tmgwr --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "up", help="start the ROS 2 node graph and keep it running (Ctrl-C stops it)",
+        description="Start maze_sim and the four agent nodes as separate processes (what "
+                    "`ros2 run` starts), wait until each is ready, record the run to MCAP "
+                    "and print episodes until Ctrl-C; then stop the nodes in reverse order.")
+    p.add_argument("--maze", metavar="FILE", help="maze file (default: the simulator's "
+                   "parameter, config/mazes/paper_13x17.txt)")
+    p.add_argument("--seed", type=int, metavar="S", help="seed of the simulator and the "
+                   "exploration policy")
+    p.add_argument("--goal", metavar="NAME", help="initial goal name in the maze (G, 1-9)")
+    p.add_argument("--no-record", action="store_true", help="do not start the recorder")
+    p.add_argument("--record-dir", metavar="DIR", help="record here instead of "
+                   "runs/<UTC timestamp>/")
+    p.add_argument("--quiet", action="store_true", help="do not forward the nodes' output "
+                   "(it is still shown when a node fails)")
+    p.add_argument("--max-steps", type=int, metavar="N", help="stop by itself after N steps")
+    _domain_arg(p)
+    p.set_defaults(func=cmd_up)
+
+    p = subparsers.add_parser("goal", help="change the goal of a running graph (/set_goal)",
+                              description="Call /set_goal with the cell at column X, row Y "
+                                          "(x = column, y = row, from the top left).")
+    p.add_argument("x", type=float, metavar="X", help="column")
+    p.add_argument("y", type=float, metavar="Y", help="row")
+    _client_args(p)
+    p.set_defaults(func=cmd_goal)
+
+    p = subparsers.add_parser("cell", help="block or open a maze cell of a running graph")
+    p.add_argument("row", type=int, metavar="R")
+    p.add_argument("col", type=int, metavar="C")
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--block", dest="blocked", action="store_true", help="make it a wall")
+    g.add_argument("--open", dest="blocked", action="store_false", help="make it free")
+    _client_args(p)
+    p.set_defaults(func=cmd_cell)
+
+    p = subparsers.add_parser("event", help="fire a maze event (a-z) in a running graph")
+    p.add_argument("name", metavar="NAME", help="event letter, e.g. a")
+    _client_args(p)
+    p.set_defaults(func=cmd_event)
+
+    p = subparsers.add_parser("reset", help="reset the simulator of a running graph "
+                                            "(the agent goes back to the start)")
+    _client_args(p)
+    p.set_defaults(func=cmd_reset)
+
+
+def _domain_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--domain-id", type=int, metavar="N", help="ROS_DOMAIN_ID (default: the "
+                   "environment's, else 0)")
+
+
+def _client_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--timeout", type=float, default=10.0, metavar="SEC",
+                   help="how long to wait for the service (default 10 s)")
+    _domain_arg(p)
+
+
+def _apply_domain(args) -> None:
+    if getattr(args, "domain_id", None) is not None:
+        if not 0 <= args.domain_id <= 232:
+            raise SystemExit(f"--domain-id must be in 0..232, got {args.domain_id}")
+        os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
+
+
+# --------------------------------------------------------------------------- clients
+def _service(args, make, name: str, what: str) -> int:
+    from .clients import NoGraph, call_once
+    _apply_domain(args)
+    srv_type, request = make()
+    try:
+        response = call_once(srv_type, name, request, timeout=args.timeout)
+    except NoGraph as exc:
+        print(f"{what}: {exc}", file=sys.stderr)
+        return 2
+    except (TimeoutError, RuntimeError) as exc:
+        print(f"{what}: {exc}", file=sys.stderr)
+        return 1
+    ok = bool(getattr(response, "accepted", getattr(response, "success", False)))
+    print(f"{what}: {'accepted' if ok else 'refused'}: {response.message}")
+    return 0 if ok else 1
+
+
+def cmd_goal(args) -> int:
+    from .. import topics
+    from .clients import set_goal_request
+    return _service(args, lambda: set_goal_request(args.x, args.y), topics.SET_GOAL,
+                    f"goal (x={args.x:g}, y={args.y:g})")
+
+
+def cmd_cell(args) -> int:
+    from .. import topics
+    from .clients import set_cell_request
+    what = f"cell (row {args.row}, col {args.col}) {'block' if args.blocked else 'open'}"
+    return _service(args, lambda: set_cell_request(args.row, args.col, args.blocked),
+                    topics.SET_CELL, what)
+
+
+def cmd_event(args) -> int:
+    from .. import topics
+    from .clients import fire_event_request
+    return _service(args, lambda: fire_event_request(args.name), topics.FIRE_EVENT,
+                    f"event {args.name!r}")
+
+
+def cmd_reset(args) -> int:
+    from .. import topics
+    from .clients import reset_request
+    return _service(args, reset_request, topics.RESET, "reset")
+
+
+# --------------------------------------------------------------------------- up
+def cmd_up(args) -> int:
+    _apply_domain(args)
+    from .run import GraphRun, describe_exit
+    from .supervisor import GraphError
+
+    run = GraphRun(maze=args.maze, seed=args.seed, goal=args.goal,
+                   record=not args.no_record, record_dir=args.record_dir,
+                   echo=not args.quiet)
+    outcomes = {"goal": "reached the goal", "previous_goal": "ended at the previous goal",
+                "cut": "cut short"}
+
+    def episode_line(rec) -> None:
+        print(f"episode {rec.episode}: {rec.steps} steps, {outcomes[rec.outcome]} "
+              f"(step {rec.end_step}, {run.monitor.rate():.0f} steps/s)", flush=True)
+
+    run.monitor.on_episode = episode_line
+    stop = {"now": False}
+    if run.record_note:
+        print(f"up: {run.record_note}", flush=True)
+    try:
+        run.start(on_stop_signal=lambda: stop.update(now=True))
+    except GraphError as exc:
+        print(f"up: the graph did not start: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("up: interrupted during start-up; nodes stopped", file=sys.stderr)
+        return 130
+    domain = os.environ.get("ROS_DOMAIN_ID", "0")
+    print(f"graph up in ROS_DOMAIN_ID={domain}: "
+          + ", ".join(f"{k} (pid {v})" for k, v in run.supervisor.pids().items()), flush=True)
+    if run.record_dir:
+        print(f"recording to {run.record_dir}", flush=True)
+    print("Ctrl-C stops the graph; from another shell: ./tmgwr goal X Y | cell R C --block "
+          "| event a | reset" + (f" --domain-id {domain}" if domain != "0" else ""), flush=True)
+
+    code = 0
+    last_note = time.monotonic()
+    try:
+        while not stop["now"]:
+            run.spin_once(0.2)
+            dead = run.supervisor.dead()
+            if dead:
+                for p in dead:
+                    print(f"up: {describe_exit(p)}", file=sys.stderr, flush=True)
+                code = 1
+                break
+            if args.max_steps is not None and run.monitor.last_step_id >= args.max_steps:
+                print(f"up: {args.max_steps} steps done", flush=True)
+                break
+            if time.monotonic() - last_note > 10.0:
+                last_note = time.monotonic()
+                m = run.monitor
+                print(f"... step {m.last_step_id}, {len(m.episodes)} episodes ended, "
+                      f"{m.rate():.0f} steps/s", flush=True)
+    finally:
+        codes = run.stop()
+    print("graph stopped: " + ", ".join(f"{k} exit {v}" for k, v in codes.items()), flush=True)
+    if run.record_dir:
+        print(f"recording: {run.record_dir}", flush=True)
+    return code

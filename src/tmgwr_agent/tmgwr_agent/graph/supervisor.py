@@ -1,0 +1,342 @@
+"""Start the node graph as separate processes, watch it, stop it cleanly.
+
+What ``ros2 launch`` would do on a real install, for the pip-only environment (no
+``launch`` package on PyPI): each node is the installed console script that ``ros2 run``
+starts (``install/<pkg>/lib/<pkg>/<exe>``), given ``--ros-args --params-file
+config/<file>.yaml`` and ``-p name:=value`` overrides.
+
+* :meth:`GraphSupervisor.start` starts the processes in order (the recorder first, so it
+  sees everything), waits for each to print a line containing ``ready``, and raises
+  :class:`GraphError` with the process's output when one exits or stays silent.
+* Each process's stdout and stderr are read by a thread, kept (the last lines, for error
+  reports) and, with ``echo``, forwarded line by line prefixed with ``[name]``.
+* :meth:`GraphSupervisor.dead` reports processes that exited while the graph runs.
+* :meth:`GraphSupervisor.stop` stops them in reverse order: SIGINT (rclpy shuts down
+  cleanly: the learner saves its map, the recorder closes its file), then SIGTERM, then
+  SIGKILL after timeouts.
+
+Children run in their own session (a terminal's Ctrl-C reaches only the supervisor, which
+then stops them in order) and get SIGTERM from the kernel if the supervisor itself dies
+(``PR_SET_PDEATHSIG``), so no node outlives it.
+"""
+
+from __future__ import annotations
+
+import collections
+import ctypes
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Callable, Mapping, Sequence
+
+READY = re.compile(r"\bready\b", re.IGNORECASE)
+
+#: The five nodes of Fig. 1a in data-flow order (DESIGN.md section 2: contract names).
+GRAPH_NODES: tuple[tuple[str, str], ...] = (
+    ("maze_sim", "maze_sim"),
+    ("tmgwr_agent", "sensory_preprocessor"),
+    ("tmgwr_agent", "map_learner"),
+    ("tmgwr_agent", "motivation_estimator"),
+    ("tmgwr_agent", "action_selector"),
+)
+
+
+class GraphError(RuntimeError):
+    """A node could not be started or died; the message names it and shows its output."""
+
+
+@dataclass
+class NodeSpec:
+    """One process of the graph: ``ros2 run <package> <executable> --ros-args ...``."""
+
+    package: str
+    executable: str
+    params_files: Sequence[str | Path] = ()
+    params: Mapping[str, object] = field(default_factory=dict)
+    name: str = ""                       # label for output; default: the executable
+    ready: re.Pattern = READY
+
+    @property
+    def label(self) -> str:
+        return self.name or self.executable
+
+    def command(self) -> list[str]:
+        cmd = [str(executable_path(self.package, self.executable))]
+        ros_args: list[str] = []
+        for f in self.params_files:
+            ros_args += ["--params-file", str(f)]
+        for key, value in self.params.items():
+            ros_args += ["-p", f"{key}:={format_param(value)}"]
+        return cmd + (["--ros-args", *ros_args] if ros_args else [])
+
+
+def format_param(value: object) -> str:
+    """A value as the ``-p name:=value`` syntax reads it (YAML)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        # quoted so that e.g. "1" or "true" stay strings and paths with ':' survive
+        return "'" + value.replace("'", "''") + "'"
+    return str(value)
+
+
+def executable_path(package: str, executable: str) -> Path:
+    """What ``ros2 run`` resolves: ``<prefix of package>/lib/<package>/<executable>``."""
+    from ament_index_python.packages import PackageNotFoundError, get_package_prefix
+    try:
+        prefix = Path(get_package_prefix(package))
+    except PackageNotFoundError:
+        raise GraphError(f"package '{package}' is not installed (AMENT_PREFIX_PATH="
+                         f"{os.environ.get('AMENT_PREFIX_PATH', '')!r}); run tools/bootstrap.sh "
+                         "and source tools/env.sh (./tmgwr does both)") from None
+    path = prefix / "lib" / package / executable
+    if not os.access(path, os.X_OK):
+        raise GraphError(f"{path} missing: '{package} {executable}' is not built "
+                         "(tools/bootstrap.sh --rebuild after adding a console script)")
+    return path
+
+
+def config_dir() -> Path:
+    """The parameter files: the repository's config/ in a checkout, else the installed
+    share/tmgwr_agent/config (what the nodes themselves read)."""
+    root = os.environ.get("TMGWR_ROOT")
+    candidates = [Path(root) / "config"] if root else []
+    candidates.append(Path(__file__).resolve().parents[4] / "config")
+    for c in candidates:
+        if (c / "tmgwr_agent.yaml").is_file():
+            return c
+    from ament_index_python.packages import get_package_share_directory
+    return Path(get_package_share_directory("tmgwr_agent")) / "config"
+
+
+def params_files_for(package: str) -> list[Path]:
+    """``config/<package>.yaml`` when it exists (ROS 2 parameter-file format)."""
+    f = config_dir() / f"{package}.yaml"
+    return [f] if f.is_file() else []
+
+
+def recorder_available() -> bool:
+    """True when the recorder node is part of this checkout (``tmgwr_agent.nodes.recorder``)."""
+    import importlib.util
+    try:
+        return importlib.util.find_spec("tmgwr_agent.nodes.recorder") is not None
+    except ImportError:
+        return False
+
+
+def default_run_dir(root: str | Path | None = None) -> Path:
+    """``runs/<UTC timestamp>/`` under the repository (or the current directory)."""
+    base = Path(root) if root else Path(os.environ.get("TMGWR_ROOT", Path.cwd()))
+    stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    path = base / "runs" / stamp
+    n = 1
+    while path.exists():                  # two runs in the same second
+        n += 1
+        path = base / "runs" / f"{stamp}-{n}"
+    return path
+
+
+try:   # resolved here, in the parent: the child only calls it between fork and exec
+    _prctl = ctypes.CDLL("libc.so.6", use_errno=True).prctl
+except (OSError, AttributeError):
+    _prctl = None
+
+
+def _die_with_parent() -> None:
+    """In the child before exec: SIGTERM when the supervisor dies (PR_SET_PDEATHSIG)."""
+    if _prctl is not None:
+        _prctl(1, int(signal.SIGTERM))
+
+
+class ManagedProcess:
+    """A started node: its Popen, output reader thread, readiness and recent output."""
+
+    def __init__(self, spec: NodeSpec, env: Mapping[str, str],
+                 sink: Callable[[str], None] | None, keep: int = 200):
+        self.spec = spec
+        self.label = spec.label
+        self.cmd = spec.command()
+        self.ready = threading.Event()
+        self.tail: collections.deque[str] = collections.deque(maxlen=keep)
+        self._sink = sink
+        self.proc = subprocess.Popen(
+            self.cmd, env=dict(env), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT, text=True, errors="replace", bufsize=1,
+            start_new_session=True, preexec_fn=_die_with_parent)
+        self.pid = self.proc.pid
+        self._reader = threading.Thread(target=self._read, name=f"out-{self.label}",
+                                        daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            line = line.rstrip("\n")
+            self.tail.append(line)
+            if not self.ready.is_set() and self.spec.ready.search(line):
+                self.ready.set()
+            if self._sink is not None:
+                self._sink(f"[{self.label}] {line}")
+
+    def returncode(self) -> int | None:
+        return self.proc.poll()
+
+    def output(self) -> str:
+        return "\n".join(self.tail)
+
+    def describe(self, why: str) -> str:
+        return (f"{why}\n  command: {' '.join(self.cmd)}\n  exit code: {self.proc.poll()}\n"
+                f"  last output:\n    " + "\n    ".join(list(self.tail)[-30:] or ["(none)"]))
+
+    def stop(self, sigint_timeout: float = 8.0, sigterm_timeout: float = 4.0) -> int | None:
+        """SIGINT, then SIGTERM, then SIGKILL (to the process group) after the timeouts."""
+        for sig, timeout in ((signal.SIGINT, sigint_timeout), (signal.SIGTERM, sigterm_timeout),
+                             (signal.SIGKILL, 5.0)):
+            if self.proc.poll() is not None:
+                break
+            try:
+                os.killpg(self.proc.pid, sig)
+            except ProcessLookupError:
+                break
+            try:
+                self.proc.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                continue
+        self._reader.join(timeout=2.0)
+        return self.proc.poll()
+
+
+class GraphSupervisor:
+    """Start, watch and stop a list of node processes (see the module docstring)."""
+
+    def __init__(self, specs: Sequence[NodeSpec], env: Mapping[str, str] | None = None,
+                 echo: bool | Callable[[str], None] = True):
+        self.specs = list(specs)
+        self.env = dict(os.environ if env is None else env)
+        self.env.setdefault("PYTHONUNBUFFERED", "1")
+        if echo is True:
+            self._sink: Callable[[str], None] | None = _print_line
+        elif echo is False:
+            self._sink = None
+        else:
+            self._sink = echo
+        self.processes: list[ManagedProcess] = []
+        self.stopped: dict[str, int | None] = {}
+
+    # ------------------------------------------------------------------ start
+    def start(self, ready_timeout: float = 60.0, parallel: bool = True) -> None:
+        """Start every process and wait until each printed its ``ready`` line.
+
+        With ``parallel`` all are started at once (discovery overlaps) and then awaited in
+        order; otherwise each is awaited before the next starts. On failure everything
+        started so far is stopped and GraphError raised.
+        """
+        try:
+            for spec in self.specs:
+                p = ManagedProcess(spec, self.env, self._sink)
+                self.processes.append(p)
+                if not parallel:
+                    self._await_ready(p, ready_timeout)
+            if parallel:
+                deadline = time.monotonic() + ready_timeout
+                for p in self.processes:
+                    self._await_ready(p, max(0.1, deadline - time.monotonic()))
+        except BaseException:
+            self.stop()
+            raise
+
+    def _await_ready(self, p: ManagedProcess, timeout: float) -> None:
+        deadline = time.monotonic() + timeout
+        while not p.ready.wait(0.1):
+            for q in self.processes:           # any process dying fails the start
+                if q.returncode() is not None:
+                    q._reader.join(timeout=2.0)
+                    raise GraphError(q.describe(f"node '{q.label}' exited during start-up"))
+            if time.monotonic() > deadline:
+                raise GraphError(p.describe(f"node '{p.label}' printed no 'ready' line "
+                                            f"within {timeout:.0f} s"))
+
+    # ------------------------------------------------------------------ watch
+    def dead(self) -> list[ManagedProcess]:
+        """Processes that have exited (while they should run)."""
+        return [p for p in self.processes if p.returncode() is not None]
+
+    def pids(self) -> dict[str, int]:
+        return {p.label: p.pid for p in self.processes}
+
+    def process(self, label: str) -> ManagedProcess:
+        for p in self.processes:
+            if p.label == label:
+                return p
+        raise KeyError(label)
+
+    # ------------------------------------------------------------------ stop
+    def stop(self, sigint_timeout: float = 8.0) -> dict[str, int | None]:
+        """Stop in reverse start order; returns each process's exit code."""
+        for p in reversed(self.processes):
+            if p.label not in self.stopped:
+                self.stopped[p.label] = p.stop(sigint_timeout=sigint_timeout)
+        return dict(self.stopped)
+
+    def __enter__(self) -> "GraphSupervisor":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+def _print_line(line: str) -> None:
+    print(line, flush=True)
+
+
+# ---------------------------------------------------------------------- the graph itself
+def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | None = None,
+                record_dir: str | Path | None = None,
+                node_params: Mapping[str, Mapping[str, object]] | None = None) -> list[NodeSpec]:
+    """The recorder (when ``record_dir``) and the five nodes, with config files and
+    overrides. ``maze``, ``seed`` and ``goal`` are the simulator's (and, for the seed, the
+    action selector's) parameters; ``node_params`` adds overrides per executable."""
+    node_params = node_params or {}
+    specs: list[NodeSpec] = []
+    if record_dir is not None:
+        specs.append(NodeSpec("tmgwr_agent", "recorder", params_files_for("tmgwr_agent"),
+                              {"output": str(record_dir), **node_params.get("recorder", {})}))
+    for package, exe in GRAPH_NODES:
+        params: dict[str, object] = {}
+        if exe == "maze_sim":
+            if maze is not None:
+                params["maze"] = str(Path(maze).expanduser().resolve())
+            if goal is not None:
+                params["goal"] = str(goal)
+        if seed is not None and exe in ("maze_sim", "action_selector"):
+            params["seed"] = int(seed)
+        params.update(node_params.get(exe, {}))
+        files = params_files_for(package)
+        if package != "tmgwr_agent":          # the agent file also holds shared values
+            files += params_files_for("tmgwr_agent")
+        specs.append(NodeSpec(package, exe, files, params))
+    return specs
+
+
+def install_stop_handlers(callback: Callable[[], None]) -> None:
+    """Turn SIGINT and SIGTERM into ``callback()`` (once; a second signal is ignored
+    while the graph stops, so stopping in order is not cut short)."""
+    fired = {"n": 0}
+
+    def handler(signum, frame):           # noqa: ARG001
+        fired["n"] += 1
+        if fired["n"] == 1:
+            callback()
+        else:
+            print("graph: stopping, please wait (nodes get SIGTERM/SIGKILL after timeouts)",
+                  file=sys.stderr, flush=True)
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
