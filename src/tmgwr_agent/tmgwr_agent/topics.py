@@ -26,6 +26,8 @@ EVENTS = "/maze_events"               # std_msgs/msg/String: goal changes, cell/
 
 # Services
 SET_GOAL = "/set_goal"                # tmgwr_interfaces/srv/SetGoal, motivation_estimator
+SIM_SET_GOAL = "/maze_sim/set_goal"  # tmgwr_interfaces/srv/SetGoal, maze_sim (validates the cell,
+                                      # moves the terminal cell; called by /set_goal)
 SET_CELL = "/maze_sim/set_cell"       # tmgwr_interfaces/srv/SetCell
 FIRE_EVENT = "/maze_sim/fire_event"   # tmgwr_interfaces/srv/FireEvent
 RESET = "/maze_sim/reset"             # std_srvs/srv/Trigger

@@ -1,0 +1,343 @@
+"""``ros2 run maze_sim maze_sim``: the grid world as a ROS 2 node (DESIGN.md section 2).
+
+Owns a :class:`~maze_sim.world.GridWorld` and drives the lockstep ring: it publishes one
+``Observation`` per step and steps the world only when the ``Action`` carrying that
+observation's ``step_id`` arrives. The answer to a terminal observation is
+``Action.NONE``; the simulator then starts the next episode. While it waits it resends the
+current observation every ``resend_period`` seconds, so the ring recovers from a node
+that started late or was restarted (every node answers a repeated step id with its cached
+output, so a resend never changes what is learnt).
+
+Goal changes (``/maze_sim/set_goal``, called by the motivation estimator's ``/set_goal``)
+are validated at once and applied at the next observation the simulator publishes: that
+observation already carries the new goal sensation, which is how the goal reaches the
+agent (the agent never receives the goal's cell). Cell and event changes apply at once.
+
+Also published: the maze as ``nav_msgs/OccupancyGrid`` (latched, republished on change;
+cell (row, col) is centred at x = col, y = row, resolution 1), the current goal as
+``geometry_msgs/PointStamped`` (latched, x = col, y = row), the agent pose at
+``pose_rate`` Hz, and a line per goal/cell/event change on ``/maze_events``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.node import Node
+
+from geometry_msgs.msg import PointStamped, PoseStamped
+from nav_msgs.msg import OccupancyGrid
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+from tmgwr_interfaces.msg import Action, Observation
+from tmgwr_interfaces.srv import FireEvent, SetCell, SetGoal
+
+from tmgwr_agent import topics
+from tmgwr_agent.nodes.common import (LATCHED_QOS, SENSOR_QOS, STEP_QOS, CallbackTimer,
+                                      declare_specs, f64, resolve_data_file, run)
+from tmgwr_agent.params import Param, ParamError
+
+from .maze import N_ACTIONS, Maze, MazeError
+from .world import GridWorld
+
+FRAME = "maze"
+
+SPECS = (
+    Param("maze", "config/mazes/paper_13x17.txt", "maze file (DESIGN.md section 4): "
+          "absolute, relative to the working directory or the repository, or a file name "
+          "shipped in share/maze_sim/mazes"),
+    Param("goal", "G", "initial goal: a goal name of the maze ('G', '1'..'9') or 'row,col'"),
+    Param("seed", 0, "seed of the world's sensor-noise generator", low=0, high=2 ** 63 - 1,
+          integer=True),
+    Param("sensor_noise", 0.0, "std of the Gaussian noise on the sensed coordinates (cells)",
+          low=0.0, high=100.0),
+    Param("max_episode_steps", 0, "truncate an episode after this many steps (0 = never)",
+          low=0, high=2 ** 62, integer=True),
+    Param("max_steps", 0, "stop after this many observations (0 = run until shut down)",
+          low=0, high=2 ** 62, integer=True),
+    Param("exit_when_done", False, "exit (code 0) after max_steps, printing a SUMMARY line"),
+    Param("resend_period", 1.0, "resend the current observation after this many seconds "
+          "without its action (recovers from late or restarted nodes)", low=0.01,
+          high=3600.0),
+    Param("pose_rate", 10.0, "agent pose publication rate (Hz)", low=0.1, high=1000.0),
+    Param("trajectory_path", "", "write 'step_id episode row col' per observation and the "
+          "goal changes to this file at exit (empty = do not write)"),
+    Param("start_delay", 0.0, "seconds to wait after start before the first observation",
+          low=0.0, high=3600.0),
+)
+
+
+def parse_goal(maze: Maze, goal: str):
+    goal = goal.strip()
+    if "," in goal:
+        try:
+            r, c = (int(v) for v in goal.split(","))
+        except ValueError:
+            raise ParamError(f"parameter 'goal' = {goal!r}: expected a goal name or "
+                             "'row,col'") from None
+        return (r, c)
+    return goal
+
+
+class MazeSimNode(Node):
+    def __init__(self):
+        super().__init__("maze_sim")
+        p = declare_specs(self, SPECS)
+        self.p = p
+        path = resolve_data_file(p["maze"], ("maze_sim", "mazes"),
+                                 ("tmgwr_agent", "config/mazes"))
+        maze = Maze.from_file(path)
+        try:
+            self.world = GridWorld(maze, parse_goal(maze, p["goal"]), p["sensor_noise"],
+                                   p["max_episode_steps"] or None, seed=p["seed"])
+        except MazeError as exc:
+            raise ParamError(f"parameter 'goal' = {p['goal']!r}: {exc}") from None
+        self.maze_path = path
+
+        self.obs_pub = self.create_publisher(Observation, topics.OBSERVATION, STEP_QOS)
+        self.grid_pub = self.create_publisher(OccupancyGrid, topics.GRID, LATCHED_QOS)
+        self.goal_pub = self.create_publisher(PointStamped, topics.GOAL, LATCHED_QOS)
+        self.pose_pub = self.create_publisher(PoseStamped, topics.AGENT_POSE, SENSOR_QOS)
+        self.event_pub = self.create_publisher(String, topics.EVENTS, LATCHED_QOS)
+        self.create_subscription(Action, topics.ACTION, self.on_action, STEP_QOS)
+        services = MutuallyExclusiveCallbackGroup()
+        self.create_service(SetGoal, topics.SIM_SET_GOAL, self.on_set_goal,
+                            callback_group=services)
+        self.create_service(SetCell, topics.SET_CELL, self.on_set_cell, callback_group=services)
+        self.create_service(FireEvent, topics.FIRE_EVENT, self.on_fire_event,
+                            callback_group=services)
+        self.create_service(Trigger, topics.RESET, self.on_reset, callback_group=services)
+
+        self.step_id = -1                  # id of the observation awaiting its action
+        self.current: Observation | None = None
+        self.sent_at = 0.0
+        self.pending_goal = None           # (row, col) applied at the next observation
+        self.pending_reset = False
+        self.finished = False
+        self.exit_code = 0
+        self.trajectory: list[tuple[int, int, int, int]] = []
+        self.goal_changes: list[tuple[int, tuple[int, int]]] = []
+        self.goals_reached = 0
+        self.episode_len = 0
+        self.t_start = None
+        self.timer = CallbackTimer()
+
+        self.publish_grid()
+        self.publish_goal()
+        self.create_timer(1.0 / p["pose_rate"], self.publish_pose)
+        self.create_timer(min(0.1, p["resend_period"]), self.check_resend)
+        self._start_timer = self.create_timer(max(p["start_delay"], 0.01), self.start)
+        self.get_logger().info(
+            f"maze_sim ready: maze {path} ({maze.walls.shape[0]}x{maze.walls.shape[1]}), goal "
+            f"{self.world.goal}, seed {p['seed']}, max_steps {p['max_steps'] or 'none'}")
+
+    # ------------------------------------------------------------------ the ring
+    def start(self):
+        self._start_timer.cancel()
+        self.t_start = time.perf_counter()
+        self.start_episode(first=True)
+
+    def start_episode(self, first: bool = False):
+        obs, _ = self.world.reset()
+        if not first:
+            self.pending_reset = False
+        self.episode_len = 0
+        self.publish_observation(obs, episode_start=True)
+
+    def on_action(self, msg: Action):
+        if msg.step_id != self.step_id or self.current is None or self.finished:
+            return                          # a duplicate answer to a resent observation
+        with self.timer:
+            if self.pending_reset or msg.action == Action.NONE:
+                self.start_episode()
+                return
+            if msg.action >= N_ACTIONS:
+                self.get_logger().error(f"step {msg.step_id}: invalid action {msg.action}")
+                return
+            obs, _, terminated, truncated, info = self.world.step(msg.action)
+            self.episode_len += 1
+            if info.reached_goal:
+                self.goals_reached += 1
+                self.get_logger().info(
+                    f"episode {info.episode}: goal {self.world.goal} reached in "
+                    f"{self.episode_len} steps (step {self.step_id + 1})")
+            self.publish_observation(obs, action=msg.action, motor=msg.motor,
+                                     bumped=info.bumped, goal_reached=info.reached_goal,
+                                     previous_goal_reached=info.reached_previous_goal,
+                                     terminal=terminated or truncated)
+
+    def publish_observation(self, obs, episode_start=False, action=Action.NONE, motor=(),
+                            bumped=False, goal_reached=False, previous_goal_reached=False,
+                            terminal=False):
+        if self.p["max_steps"] and self.step_id + 1 >= self.p["max_steps"]:
+            self.finish()
+            return
+        self.step_id += 1
+        if self.pending_goal is not None:   # a goal change lands on this observation
+            self.apply_goal(self.pending_goal)
+            self.pending_goal = None
+        m = Observation()
+        m.header.stamp = self.get_clock().now().to_msg()
+        m.header.frame_id = FRAME
+        m.step_id = self.step_id
+        m.episode = self.world.episode
+        m.sensors = f64(obs)
+        m.goal_sensors = f64(self.world.goal_observation())
+        m.episode_start = episode_start
+        m.action = int(action)
+        m.motor = motor if not len(motor) else f64(np.asarray(motor))
+        m.bumped = bool(bumped)
+        m.goal_reached = bool(goal_reached)
+        m.previous_goal_reached = bool(previous_goal_reached)
+        m.terminal = bool(terminal)
+        m.row, m.col = (int(v) for v in self.world.cell)
+        self.current = m
+        self.trajectory.append((self.step_id, self.world.episode, m.row, m.col))
+        self.obs_pub.publish(m)
+        self.sent_at = time.monotonic()
+
+    def check_resend(self):
+        if self.current is not None and not self.finished and \
+                time.monotonic() - self.sent_at > self.p["resend_period"]:
+            self.get_logger().info(f"no action for step {self.step_id} within "
+                                   f"{self.p['resend_period']} s: resending the observation")
+            self.obs_pub.publish(self.current)
+            self.sent_at = time.monotonic()
+
+    def finish(self):
+        self.finished = True
+        elapsed = time.perf_counter() - (self.t_start or time.perf_counter())
+        steps = self.step_id + 1
+        summary = {"steps": steps, "seconds": round(elapsed, 3),
+                   "steps_per_s": round(steps / elapsed, 1) if elapsed > 0 else None,
+                   "goals_reached": self.goals_reached, "episode": self.world.episode,
+                   "goal_changes": [[s, list(c)] for s, c in self.goal_changes],
+                   "sim_callback": self.timer.summary()}
+        self.get_logger().info(f"finished {steps} steps in {elapsed:.2f} s")
+        print("SUMMARY " + json.dumps(summary), flush=True)
+        self.write_trajectory()
+        if not self.p["exit_when_done"]:
+            self.finished = False           # keep serving topics/services, stop stepping
+            self.current = None
+
+    def write_trajectory(self):
+        path = self.p["trajectory_path"]
+        if not path:
+            return
+        lines = [f"# maze {self.maze_path}"]
+        lines += [f"goal {s} {c[0]} {c[1]}" for s, c in self.goal_changes]
+        lines += [f"{s} {e} {r} {c}" for s, e, r, c in self.trajectory]
+        Path(path).write_text("\n".join(lines) + "\n")
+
+    def on_shutdown(self):
+        if self.p["trajectory_path"] and self.current is not None:
+            self.write_trajectory()
+        print(f"maze_sim: {self.timer.summary()}", flush=True)
+
+    # ------------------------------------------------------------------ goal and layout
+    def apply_goal(self, cell):
+        try:
+            self.world.set_goal(cell)
+        except MazeError as exc:            # the cell became a wall since the request
+            self.get_logger().error(f"goal change to {cell} dropped: {exc}")
+            return
+        self.goal_changes.append((self.step_id, self.world.goal))
+        self.publish_goal()
+        self.event(f"step {self.step_id}: goal -> row {cell[0]}, col {cell[1]}")
+
+    def on_set_goal(self, req, resp):
+        x, y = req.goal.x, req.goal.y
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(req.goal.z)):
+            resp.accepted, resp.message = False, f"goal (x={x}, y={y}) is not finite"
+            return resp
+        col, row = int(math.floor(x + 0.5)), int(math.floor(y + 0.5))
+        try:
+            self.world.maze.check_free(row, col, walls=self.world.walls)
+        except MazeError as exc:
+            resp.accepted, resp.message = False, f"goal (x={x}, y={y}) refused: {exc}"
+            return resp
+        self.pending_goal = (row, col)
+        resp.accepted = True
+        resp.message = (f"goal set to row {row}, col {col} (x={col}, y={row}); it applies "
+                        f"from step {self.step_id + 1}")
+        self.get_logger().info(resp.message)
+        return resp
+
+    def on_set_cell(self, req, resp):
+        try:
+            self.world.set_cell(req.row, req.col, req.blocked)
+        except MazeError as exc:
+            resp.accepted, resp.message = False, str(exc)
+            return resp
+        what = "blocked" if req.blocked else "opened"
+        resp.accepted, resp.message = True, f"cell (row {req.row}, col {req.col}) {what}"
+        self.publish_grid()
+        self.event(f"step {self.step_id}: {resp.message}")
+        return resp
+
+    def on_fire_event(self, req, resp):
+        name = req.event.strip()
+        if len(name) != 1 or not name.islower():
+            resp.accepted = False
+            resp.message = f"event {req.event!r}: expected one lowercase letter a-z"
+            return resp
+        try:
+            self.world.fire_event(name)
+        except MazeError as exc:
+            resp.accepted, resp.message = False, str(exc)
+            return resp
+        resp.accepted, resp.message = True, f"event {name!r} fired"
+        self.publish_grid()
+        self.event(f"step {self.step_id}: {resp.message}")
+        return resp
+
+    def on_reset(self, req, resp):
+        self.pending_reset = True
+        resp.success = True
+        resp.message = f"a new episode starts after step {self.step_id}"
+        return resp
+
+    # ------------------------------------------------------------------ inspection
+    def event(self, text: str):
+        self.get_logger().info(text)
+        self.event_pub.publish(String(data=text))
+
+    def publish_grid(self):
+        rows, cols = self.world.walls.shape
+        g = OccupancyGrid()
+        g.header.stamp = self.get_clock().now().to_msg()
+        g.header.frame_id = FRAME
+        g.info.resolution = 1.0
+        g.info.width, g.info.height = cols, rows
+        g.info.origin.position.x = g.info.origin.position.y = -0.5
+        g.info.origin.orientation.w = 1.0
+        g.data = (self.world.walls.astype(np.int8) * 100).ravel().tolist()
+        self.grid_pub.publish(g)
+
+    def publish_goal(self):
+        m = PointStamped()
+        m.header.stamp = self.get_clock().now().to_msg()
+        m.header.frame_id = FRAME
+        m.point.x, m.point.y = float(self.world.goal[1]), float(self.world.goal[0])
+        self.goal_pub.publish(m)
+
+    def publish_pose(self):
+        m = PoseStamped()
+        m.header.stamp = self.get_clock().now().to_msg()
+        m.header.frame_id = FRAME
+        m.pose.position.x, m.pose.position.y = float(self.world.cell[1]), float(self.world.cell[0])
+        m.pose.orientation.w = 1.0
+        self.pose_pub.publish(m)
+
+
+def main(args=None):
+    raise SystemExit(run(MazeSimNode, "maze_sim", args))
+
+
+if __name__ == "__main__":
+    main()

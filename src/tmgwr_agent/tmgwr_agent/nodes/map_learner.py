@@ -1,0 +1,252 @@
+"""``ros2 run tmgwr_agent map_learner``: the TMGWR sensorimotor map (section 3.1, Eq. 1-2).
+
+Per step (lockstep): ``Features`` in, :meth:`SensorimotorMap.step` with the motor vector of
+the action that was executed (``None`` at an episode start, after
+:meth:`~SensorimotorMap.begin_episode`), exactly as :class:`~tmgwr_agent.agent.TMGWRAgent`
+does in-process; ``SensorimotorState`` out. The state carries this step's map as flat
+arrays (alive mask, weights, link targets and reliabilities E, the winner's link action
+vectors): what the motivation estimator needs to run Eq. 4-5 on the map of *this* step
+without building a nested message per step.
+
+At ``publish_rate`` Hz (when the map changed) the whole map is published latched, as
+``tmgwr_interfaces/SensorimotorMap`` and as ``visualization_msgs/MarkerArray`` (nodes at
+their sensed position, coloured by the motivation potential of the last
+``MotivationField``; links coloured by reliability E).
+
+Persistence: ``save_map`` / ``load_map`` services; the map is saved to ``map_path`` on
+shutdown (SIGINT/SIGTERM) and ``initial_map`` starts the learner from a saved map, so a
+restarted learner continues with the same map (the file also records the last step it
+learnt, so a resent step is answered, not learnt twice).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from rclpy.node import Node
+
+from geometry_msgs.msg import Point
+from std_msgs.msg import ColorRGBA
+from tmgwr_interfaces.msg import (Features, MapLink, MapNode, MotivationField,
+                                  SensorimotorMap as MapMsg, SensorimotorState)
+from tmgwr_interfaces.srv import LoadMap, SaveMap
+from visualization_msgs.msg import Marker, MarkerArray
+
+from maze_sim.maze import ACTION_VECTORS
+
+from .. import tmgwr_map, topics
+from ..params import Param
+from ..tmgwr_map import SensorimotorMap
+from .common import (LATCHED_QOS, SENSOR_QOS, STEP_QOS, CallbackTimer, config_defaults,
+                     declare_specs, f64, i32, np_f64, run, u8)
+
+NODE_SPECS = (
+    Param("map_path", "~/.ros/tmgwr_map.npz", "where the map is saved on shutdown and by "
+          "save_map with an empty path (empty = do not save on shutdown)"),
+    Param("initial_map", "", "start from this saved map (empty = an empty map)"),
+    Param("publish_rate", 2.0, "rate (Hz) of the latched map and marker publications",
+          low=0.01, high=100.0),
+)
+
+
+def save_map(m: SensorimotorMap, path: Path, step_id: int) -> Path:
+    """The map's state_dict plus the last learnt step id, written atomically (.npz)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as f:
+        np.savez(f, **m.state_dict(), step_id=np.array(step_id, dtype=np.int64))
+    tmp.replace(path)
+    return path
+
+
+def load_map(m: SensorimotorMap | None, path: Path, params: dict) -> tuple[SensorimotorMap, int]:
+    """A map loaded from ``path`` (its dimensions from the file) and its last step id."""
+    try:
+        with np.load(path) as data:
+            dim = int(data["w"].shape[1])
+            action_dim = int(data["a"].shape[2])
+            step_id = int(data["step_id"]) if "step_id" in data.files else -1
+    except (OSError, KeyError, ValueError, IndexError) as exc:
+        raise ValueError(f"{path}: not a saved sensorimotor map ({exc})") from exc
+    if m is None or m.dim != dim or m.action_dim != action_dim:
+        m = SensorimotorMap(dim=dim, action_dim=action_dim, **params)
+    m.load(path)
+    return m, step_id
+
+
+class MapLearnerNode(Node):
+    def __init__(self):
+        super().__init__("map_learner")
+        self.params = declare_specs(self, tmgwr_map.SPECS, config_defaults())
+        self.p = declare_specs(self, NODE_SPECS)
+        self.map: SensorimotorMap | None = None
+        self.last_step = -1
+        self.last_out: SensorimotorState | None = None
+        self.gain = 1.0
+        self.prev_winner = -1
+        if self.p["initial_map"]:
+            path = Path(self.p["initial_map"]).expanduser()
+            self.map, self.last_step = load_map(None, path, self.params)
+            self.get_logger().info(f"started from {path}: {self.map.size} nodes, "
+                                   f"{self.map.link_count()} links, step {self.last_step}")
+        self.V = np.zeros(0)
+        self.published = (-1, -1)        # (step, version) of the last latched snapshot
+
+        self.state_pub = self.create_publisher(SensorimotorState, topics.SENSORIMOTOR_STATE,
+                                               STEP_QOS)
+        self.map_pub = self.create_publisher(MapMsg, topics.MAP, LATCHED_QOS)
+        self.marker_pub = self.create_publisher(MarkerArray, topics.MAP_MARKERS, LATCHED_QOS)
+        self.create_subscription(Features, topics.FEATURES, self.on_features, STEP_QOS)
+        # Marker colours only: the newest field is enough, never stall its publisher.
+        self.create_subscription(MotivationField, topics.MOTIVATION, self.on_motivation,
+                                 SENSOR_QOS)
+        self.create_service(SaveMap, topics.SAVE_MAP, self.on_save)
+        self.create_service(LoadMap, topics.LOAD_MAP, self.on_load)
+        self.create_timer(1.0 / self.p["publish_rate"], self.publish_map)
+        self.timer = CallbackTimer()
+        if self.map is not None:
+            self.publish_map()
+        self.get_logger().info(f"map_learner ready: {self.params}")
+
+    # ------------------------------------------------------------------ per step
+    def on_features(self, f: Features):
+        if f.step_id <= self.last_step:      # a resent step: answer again, learn nothing
+            if f.step_id == self.last_step:
+                self.state_pub.publish(self.last_out or self.make_state(f))
+            return
+        with self.timer:
+            x = np_f64(f.features)
+            if self.map is None:
+                self.map = SensorimotorMap(dim=len(x), action_dim=ACTION_VECTORS.shape[1],
+                                           **self.params)
+            self.gain = f.gain or 1.0
+            if f.episode_start:
+                self.map.begin_episode()
+            self.prev_winner = int(self.map.prev)
+            self.map.step(x, None if f.episode_start else np_f64(f.motor), learn=True)
+            self.last_step = f.step_id
+            self.last_out = self.make_state(f)
+            self.state_pub.publish(self.last_out)
+
+    def make_state(self, f: Features) -> SensorimotorState:
+        m = self.map
+        n, K = m.n, m.out.shape[1]
+        s = SensorimotorState()
+        s.header = f.header
+        s.step_id = f.step_id
+        s.winner = int(m.winner)
+        s.previous_winner = self.prev_winner
+        s.map_version = int(m.version)
+        goal_x = np_f64(f.goal_features)
+        s.goal_node = int(m.nearest_by_weight(goal_x)) if len(goal_x) == m.dim else -1
+        s.inserted = bool(m.inserted)
+        s.n_slots, s.degree, s.dim = n, K, m.dim
+        s.alive = u8(m.alive[:n])
+        s.weights = f64(m.w[:n])
+        s.link_targets = i32(m.out[:n])
+        s.link_reliability = f64(m.E[:n])
+        s.action_dim = m.action_dim
+        if m.winner >= 0:
+            s.winner_link_actions = f64(m.a[m.winner])
+        s.goal_features = f.goal_features
+        s.episode_start = f.episode_start
+        s.action = f.action
+        s.bumped = f.bumped
+        s.goal_reached = f.goal_reached
+        s.terminal = f.terminal
+        return s
+
+    def on_motivation(self, msg: MotivationField):
+        self.V = np_f64(msg.potentials)
+
+    # ------------------------------------------------------------------ latched map
+    def publish_map(self):
+        m = self.map
+        if m is None or self.published == (self.last_step, m.version) and self.last_step >= 0:
+            return
+        self.published = (self.last_step, m.version)
+        stamp = self.get_clock().now().to_msg()
+        msg = MapMsg()
+        msg.header.stamp, msg.header.frame_id = stamp, "maze"
+        msg.map_version, msg.step_id = int(m.version), max(self.last_step, 0)
+        ids = m.node_ids()
+        msg.nodes = [MapNode(id=int(i), weight=f64(m.w[i]), context=f64(m.c[i]),
+                             habituation=float(m.h[i])) for i in ids]
+        src, tgt, act, E, age = m.links()
+        msg.links = [MapLink(source=int(s), target=int(t), action=f64(a), reliability=float(e),
+                             age=int(g)) for s, t, a, e, g in zip(src, tgt, act, E, age)]
+        self.map_pub.publish(msg)
+        self.marker_pub.publish(self.markers(stamp, ids, src, tgt, E))
+
+    def position(self, i: int) -> Point:
+        """A node drawn where it is sensed: weight / gain = (row, col) -> x = col, y = row."""
+        w = self.map.w[i] / self.gain
+        return Point(x=float(w[1] if len(w) > 1 else 0.0), y=float(w[0]), z=0.0)
+
+    def markers(self, stamp, ids, src, tgt, E) -> MarkerArray:
+        nodes = Marker(ns="nodes", id=0, type=Marker.SPHERE_LIST, action=Marker.ADD)
+        nodes.header.stamp, nodes.header.frame_id = stamp, "maze"
+        nodes.pose.orientation.w = 1.0
+        nodes.scale.x = nodes.scale.y = nodes.scale.z = 0.35
+        V = self.V if len(self.V) >= self.map.n else np.zeros(self.map.n)
+        vmax = float(V[ids].max()) if len(ids) and V[ids].max() > 0 else 1.0
+        for i in ids:
+            nodes.points.append(self.position(i))
+            v = float(V[i]) / vmax          # blue (no motivation) -> red (the goal)
+            nodes.colors.append(ColorRGBA(r=v, g=0.2, b=1.0 - v, a=1.0))
+        links = Marker(ns="links", id=1, type=Marker.LINE_LIST, action=Marker.ADD)
+        links.header.stamp, links.header.frame_id = stamp, "maze"
+        links.pose.orientation.w = 1.0
+        links.scale.x = 0.05
+        for s, t, e in zip(src, tgt, E):
+            c = ColorRGBA(r=1.0 - float(e), g=float(e), b=0.0, a=0.8)   # red -> green with E
+            links.points += [self.position(s), self.position(t)]
+            links.colors += [c, c]
+        return MarkerArray(markers=[nodes, links])
+
+    # ------------------------------------------------------------------ persistence
+    def on_save(self, req, resp):
+        path = Path(req.path or self.p["map_path"]).expanduser()
+        if self.map is None:
+            resp.success, resp.message = False, "the map is empty: nothing learnt yet"
+            return resp
+        try:
+            save_map(self.map, path, self.last_step)
+        except OSError as exc:
+            resp.success, resp.message = False, f"cannot write {path}: {exc}"
+            return resp
+        resp.success, resp.path = True, str(path)
+        resp.message = (f"saved {self.map.size} nodes, {self.map.link_count()} links "
+                        f"(step {self.last_step}) to {path}")
+        self.get_logger().info(resp.message)
+        return resp
+
+    def on_load(self, req, resp):
+        path = Path(req.path or self.p["map_path"]).expanduser()
+        try:
+            self.map, step = load_map(self.map, path, self.params)
+        except ValueError as exc:
+            resp.success, resp.message = False, str(exc)
+            return resp
+        self.last_out = None
+        resp.success = True
+        resp.message = f"loaded {self.map.size} nodes, {self.map.link_count()} links from {path}"
+        self.get_logger().info(resp.message)
+        self.publish_map()
+        return resp
+
+    def on_shutdown(self):
+        print(f"map_learner: {self.timer.summary()}", flush=True)
+        if self.map is not None and self.p["map_path"]:
+            path = save_map(self.map, Path(self.p["map_path"]).expanduser(), self.last_step)
+            print(f"map_learner: saved {self.map.size} nodes, {self.map.link_count()} links "
+                  f"(step {self.last_step}) to {path}", flush=True)
+
+
+def main(args=None):
+    raise SystemExit(run(MapLearnerNode, "map_learner", args))
+
+
+if __name__ == "__main__":
+    main()

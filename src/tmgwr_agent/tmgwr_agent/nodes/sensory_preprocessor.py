@@ -1,0 +1,64 @@
+"""``ros2 run tmgwr_agent sensory_preprocessor``: raw Observation -> Features (section 3.2).
+
+Wraps :class:`~tmgwr_agent.preprocessor.SensoryPreprocessor`: ``x = preprocessor(sensors,
+episode_start)`` and the goal sensation in feature space; passes the lockstep context
+(executed action, bump, terminal flags) on to the map learner.
+"""
+
+from __future__ import annotations
+
+from rclpy.node import Node
+
+from tmgwr_interfaces.msg import Features, Observation
+
+from .. import preprocessor, topics
+from ..preprocessor import SensoryPreprocessor
+from .common import STEP_QOS, CallbackTimer, config_defaults, declare_specs, f64, np_f64, run
+
+
+class SensoryPreprocessorNode(Node):
+    def __init__(self):
+        super().__init__("sensory_preprocessor")
+        p = declare_specs(self, preprocessor.SPECS, config_defaults())
+        self.core = SensoryPreprocessor(**p)
+        self.pub = self.create_publisher(Features, topics.FEATURES, STEP_QOS)
+        self.create_subscription(Observation, topics.OBSERVATION, self.on_observation,
+                                 STEP_QOS)
+        self.last_step = -1
+        self.last_out: Features | None = None
+        self.timer = CallbackTimer()
+        self.get_logger().info(f"sensory_preprocessor ready: {p}")
+
+    def on_observation(self, m: Observation):
+        if m.step_id <= self.last_step:     # a resent step: answer it again, learn nothing
+            if m.step_id == self.last_step and self.last_out is not None:
+                self.pub.publish(self.last_out)
+            return
+        with self.timer:
+            x = self.core(np_f64(m.sensors), episode_start=m.episode_start)
+            f = Features()
+            f.header = m.header
+            f.step_id = m.step_id
+            f.episode = m.episode
+            f.features = f64(x)
+            f.goal_features = f64(self.core.goal_features(np_f64(m.goal_sensors)))
+            f.gain = float(self.core.gain)
+            f.episode_start = m.episode_start
+            f.action = m.action
+            f.motor = m.motor
+            f.bumped = m.bumped
+            f.goal_reached = m.goal_reached
+            f.terminal = m.terminal
+            self.last_step, self.last_out = m.step_id, f
+            self.pub.publish(f)
+
+    def on_shutdown(self):
+        print(f"sensory_preprocessor: {self.timer.summary()}", flush=True)
+
+
+def main(args=None):
+    raise SystemExit(run(SensoryPreprocessorNode, "sensory_preprocessor", args))
+
+
+if __name__ == "__main__":
+    main()
