@@ -28,7 +28,8 @@ default maze):
   finds the goal of the default maze in a few thousand steps, so the cap only truncates an
   agent that is stuck (the model-based agent after a block);
 * ``max_episodes = max(200, 20 F)`` training episodes per convergence run (1980);
-* ``budget_steps = 5000 F`` steps in all per convergence run (495 000).
+* ``budget_steps = 1000 F`` steps in all per convergence run (99 000; Q-learning, the
+  slowest learner that converges, needs some 10 000 - 30 000 on the default maze).
 
 A run that hits a cap is a failed trial (``None`` -> ``null`` in the JSON).
 """
@@ -55,7 +56,7 @@ class Caps:
 
     @classmethod
     def for_maze(cls, maze: Maze, episode_factor: int = 200, episodes_factor: int = 20,
-                 budget_factor: int = 5000) -> "Caps":
+                 budget_factor: int = 1000) -> "Caps":
         free = len(maze.free_cells())
         return cls(episode_steps=episode_factor * free,
                    max_episodes=max(200, episodes_factor * free),

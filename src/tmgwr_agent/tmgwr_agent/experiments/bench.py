@@ -1,0 +1,162 @@
+"""``./tmgwr bench``: how fast the TMGWR core is, and CPU seconds to convergence.
+
+* ``step_default`` / ``step_large``: wall-clock time of one core step of the TMGWR agent,
+  ``act()`` + ``observe()`` (Eq. 6 selection, the map update with Eq. 1-2, Eq. 4-5
+  re-planning warm-started), measured with ``time.perf_counter_ns`` around those two calls
+  only (the simulator's ``step`` is not counted), over ``--steps`` consecutive steps of
+  ordinary training episodes (learning and epsilon-greedy exploration on, epsilon at its
+  floor) *after* training: on the default maze the agent is first trained to convergence
+  (ten consecutive optimal greedy paths); on the large maze (``generate_maze(51, 51)``,
+  about 1300 free cells) training runs until one greedy rollout is optimal (at most 20
+  episodes; the first episode, a random walk over the whole maze, takes about a minute).
+  Reported: median (the target: <= 100 us on the default maze, <= 1 ms on the large one),
+  mean, p10, p90, p99, max, and the map's node count.
+* ``cpu_to_convergence``: per agent, CPU seconds (``time.process_time``) of the training
+  episodes from scratch to convergence on goal G of the default maze, STAT over
+  ``--trials`` trials with the seeds of :mod:`.parallel` (the same for every agent), run
+  in one process by default (``--jobs 1``) so the agents are measured under the same load.
+* the graph and bag benchmarks (``tmgwr_agent.graph.bench.run(args)``,
+  ``tmgwr_agent.bag.bench.run(args)``, written by their own packages) are called when
+  present and their dicts merged under ``graph`` and ``bag``, so every figure comes from
+  one run. Output: ``results/bench.json`` (``--json``) and a table on stdout.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from maze_sim.maze import Maze, generate_maze
+
+from ..agents import AGENT_NAMES, make_agent
+from .parallel import agent_trials, default_jobs, warm_up
+from .runner import Caps, greedy_optimal, make_world, run_episode, set_goal, \
+    train_until_converged
+from .scenarios import DEFAULT_MAZE
+from .stats import stat
+
+
+def time_steps(world, agent, n: int) -> np.ndarray:
+    """Nanoseconds of ``act`` + ``observe`` for ``n`` steps of training episodes."""
+    out = np.empty(n, dtype=np.int64)
+    i = 0
+    clock = time.perf_counter_ns
+    while i < n:
+        obs, _ = world.reset()
+        agent.begin_episode(obs, world.cell)
+        while i < n:
+            t0 = clock()
+            a = agent.act()
+            t1 = clock()
+            obs, _, term, trunc, info = world.step(a)
+            t2 = clock()
+            agent.observe(obs, info)
+            t3 = clock()
+            out[i] = (t1 - t0) + (t3 - t2)
+            i += 1
+            if info.reached_goal:
+                agent.goal_attained()
+            if term or trunc:
+                break
+    return out
+
+
+def step_stats(ns: np.ndarray, agent, maze: Maze, trained_episodes: int | None) -> dict:
+    us = ns / 1e3
+    return {"free_cells": len(maze.free_cells()), "nodes": int(agent.map.size),
+            "trained_episodes": trained_episodes, "steps": int(len(us)),
+            "median_us": float(np.median(us)), "mean_us": float(us.mean()),
+            "p10_us": float(np.percentile(us, 10)), "p90_us": float(np.percentile(us, 90)),
+            "p99_us": float(np.percentile(us, 99)), "max_us": float(us.max())}
+
+
+def bench_default(seed: int, steps: int) -> dict:
+    maze = Maze.from_file(DEFAULT_MAZE)
+    caps = Caps.for_maze(maze)
+    world = make_world(maze, "G", caps)
+    agent = make_agent("tmgwr", maze, np.random.default_rng(seed))
+    set_goal(world, agent, "G")
+    conv = train_until_converged(world, agent, caps)
+    out = step_stats(time_steps(world, agent, steps), agent, maze, conv.episodes)
+    out["target_median_us"] = 100.0
+    return out
+
+
+def bench_large(seed: int, steps: int, max_episodes: int = 20) -> dict:
+    maze = Maze.from_text(generate_maze(51, 51, np.random.default_rng(seed)),
+                          source=f"generate_maze(51, 51, seed {seed})")
+    caps = Caps.for_maze(maze)
+    world = make_world(maze, "G", caps)
+    agent = make_agent("tmgwr", maze, np.random.default_rng(seed))
+    set_goal(world, agent, "G")
+    trained = None
+    for k in range(1, max_episodes + 1):
+        run_episode(world, agent)
+        if greedy_optimal(world, agent):
+            trained = k
+            break
+    out = step_stats(time_steps(world, agent, steps), agent, maze, trained)
+    out["maze"] = maze.source
+    out["target_median_us"] = 1000.0
+    return out
+
+
+def _convergence_trial(spec, t, seed, maze_path):
+    maze = Maze.from_file(maze_path)
+    caps = Caps.for_maze(maze)
+    world = make_world(maze, "G", caps)
+    agent = make_agent(spec, maze, np.random.default_rng(seed))
+    set_goal(world, agent, "G")
+    conv = train_until_converged(world, agent, caps)
+    return (conv.cpu_s if conv.episodes is not None else None, conv.episodes)
+
+
+def cpu_to_convergence(trials: int, seed: int, jobs: int) -> dict:
+    res = agent_trials(_convergence_trial, AGENT_NAMES, seed, trials, (str(DEFAULT_MAZE),),
+                       jobs, "cpu to convergence")
+    return {a: {"cpu_s": stat(r[0] for r in rs), "episodes": stat(r[1] for r in rs)}
+            for a, rs in res.items()}
+
+
+def _optional(module: str, args) -> dict | None:
+    if importlib.util.find_spec(module.rsplit(".", 1)[0]) is None or \
+            importlib.util.find_spec(module) is None:
+        print(f"bench: {module} not present, skipped", file=sys.stderr)
+        return None
+    return importlib.import_module(module).run(args)
+
+
+def run(args) -> int:
+    from .cli import write_json
+    from .report import bench_table
+    if args.trials < 1 or args.steps < 1:
+        print("tmgwr: error: --trials and --steps must be >= 1", file=sys.stderr)
+        return 2
+    warm_up()
+    result: dict = {"machine": {"python": platform.python_version(),
+                                "processor": platform.processor() or platform.machine(),
+                                "cores": default_jobs()}}
+    print("bench: TMGWR step time on the default maze ...", file=sys.stderr)
+    result["step_default"] = bench_default(args.seed, args.steps)
+    print("bench: TMGWR step time on a ~1300-cell maze (about a minute of training) ...",
+          file=sys.stderr)
+    result["step_large"] = bench_large(args.seed, args.steps)
+    print("bench: CPU seconds to convergence ...", file=sys.stderr)
+    result["cpu_to_convergence"] = cpu_to_convergence(args.trials, args.seed, args.jobs)
+    if not getattr(args, "no_graph", False):
+        for key, module in (("graph", "tmgwr_agent.graph.bench"),
+                            ("bag", "tmgwr_agent.bag.bench")):
+            part = _optional(module, args)
+            if part is not None:
+                result[key] = part
+    path = Path(args.json) if args.json else Path("results") / "bench.json"
+    write_json(result, path)
+    print(bench_table(result))
+    print(f"written: {path}")
+    return 0

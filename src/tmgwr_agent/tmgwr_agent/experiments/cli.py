@@ -1,0 +1,137 @@
+"""``./tmgwr experiment | demo | bench`` (DESIGN.md section 5).
+
+``experiment SCENARIO --maze FILE --agents LIST --trials N --seed S --json OUT
+[--plot OUT.png] [--jobs J]`` with ``--goals``, ``--episodes``, ``--event``, ``--goal``
+for the scenarios that take them; ``demo`` runs every scenario briefly and then the ROS
+graph demo when :mod:`tmgwr_agent.graph.demo` exists; ``bench`` measures the TMGWR core
+and merges the graph / bag benchmarks when present. An unknown agent, scenario, goal or
+event, or a missing maze file, exits with code 2 and a message naming it.
+
+Imports stay light here (argparse only): the scenario modules load when a command runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+
+def _csv(text: str) -> list[str]:
+    return [t.strip() for t in text.split(",") if t.strip()]
+
+
+def _default_maze() -> str:
+    from ..params import CONFIG_DIR
+    return str(CONFIG_DIR / "mazes" / "paper_13x17.txt")
+
+
+def register(subparsers) -> None:
+    from .names import SCENARIOS
+    p = subparsers.add_parser(
+        "experiment", help="run one of the paper's experiments (Tables 3-6, Figs 5-7)",
+        description="Run a scenario of the paper over several trials and write its JSON "
+                    "(DESIGN.md section 5). Agents: tmgwr, tmgwr:literal, tmgwr:credit, "
+                    "q_learning, model_based, dyna_q_plus.")
+    p.add_argument("scenario", choices=SCENARIOS, metavar="SCENARIO",
+                   help=f"one of {', '.join(SCENARIOS)}")
+    p.add_argument("--maze", default=None,
+                   help="maze file (default config/mazes/paper_13x17.txt)")
+    p.add_argument("--agents", type=_csv, default=None,
+                   help="comma-separated agents (default: tmgwr,q_learning,model_based,"
+                        "dyna_q_plus; env-change adds tmgwr:literal,tmgwr:credit)")
+    p.add_argument("--trials", type=int, default=10, help="trials per agent (default 10)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the trial seeds (default 0)")
+    p.add_argument("--json", default=None, metavar="OUT",
+                   help="write the results JSON here (default: standard output)")
+    p.add_argument("--plot", default=None, metavar="OUT.png", help="also draw the figure")
+    p.add_argument("--jobs", type=int, default=None,
+                   help="worker processes (default: the number of cores)")
+    p.add_argument("--goals", type=_csv, default=None,
+                   help="goal names: goal-change sequence (default 1,2,3,4,1), "
+                        "sample-complexity goals (1,2,3,4), timing FROM,TO (4,3)")
+    p.add_argument("--episodes", type=int, default=None,
+                   help="episodes per goal (goal-change, default 1000) or episodes of "
+                        "the curve (sample-complexity, default 100)")
+    p.add_argument("--event", default="a", help="maze event (env-change, timing; default a)")
+    p.add_argument("--goal", default="G",
+                   help="goal of the env-change / timing training (default G)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_experiment)
+
+    d = subparsers.add_parser(
+        "demo", help="quick run of all four scenarios on the default maze, then the ROS "
+                     "graph demo",
+        description="All four scenarios with few trials on the default maze: JSON and "
+                    "PNG files under results/<timestamp>/, a short table on stdout. Then "
+                    "the ROS 2 graph demo (tmgwr_agent.graph.demo) when it is installed.")
+    d.add_argument("--out", default=None, help="output directory (default results/<UTC time>)")
+    d.add_argument("--trials", type=int, default=3, help="trials per agent (default 3)")
+    d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--jobs", type=int, default=None)
+    d.add_argument("--no-graph", action="store_true", help="skip the ROS graph demo")
+    d.set_defaults(func=cmd_demo)
+
+    b = subparsers.add_parser(
+        "bench", help="step time of the TMGWR core, CPU seconds to convergence; merges "
+                      "the graph and bag benchmarks",
+        description="Median (and percentiles) of the TMGWR core step time (act + observe: "
+                    "learn, plan, select) on the default maze and on a generated maze of "
+                    "about 1300 free cells, CPU seconds to convergence per agent; then the "
+                    "graph and bag benchmarks when present. Writes results/bench.json.")
+    b.add_argument("--json", default=None,
+                   help="output JSON (default results/bench.json)")
+    b.add_argument("--trials", type=int, default=5,
+                   help="trials of the CPU-to-convergence measure (default 5)")
+    b.add_argument("--seed", type=int, default=0)
+    b.add_argument("--steps", type=int, default=5000, help="timed steps per maze (default 5000)")
+    b.add_argument("--jobs", type=int, default=1,
+                   help="processes for the convergence trials (default 1: less noise)")
+    b.add_argument("--no-graph", action="store_true",
+                   help="skip the graph and bag benchmarks")
+    b.set_defaults(func=cmd_bench)
+
+
+def _fail(msg: str) -> int:
+    print(f"tmgwr: error: {msg}", file=sys.stderr)
+    return 2
+
+
+def write_json(result: dict, path: str | Path | None) -> None:
+    text = json.dumps(result, indent=1) + "\n"
+    if path is None or str(path) == "-":
+        sys.stdout.write(text)
+        return
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+
+
+def cmd_experiment(args: argparse.Namespace) -> int:
+    from .scenarios import UsageError, run_scenario
+    try:
+        result = run_scenario(args.scenario, args.maze or _default_maze(), args.agents,
+                              args.trials, args.seed, args.goals, args.episodes, args.event,
+                              args.goal, args.jobs, progress=not args.quiet)
+    except UsageError as exc:
+        return _fail(str(exc))
+    write_json(result, args.json)
+    if args.plot:
+        from .plots import plot
+        Path(args.plot).parent.mkdir(parents=True, exist_ok=True)
+        plot(result, args.plot)
+    if args.json:
+        from .report import table
+        print(table(result))
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from .demo import run
+    return run(args)
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    from .bench import run
+    return run(args)

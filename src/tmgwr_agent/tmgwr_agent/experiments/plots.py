@@ -1,0 +1,141 @@
+"""Figures of the experiments (matplotlib, Agg backend: no display needed).
+
+* goal-change: grouped bars of % visits to the current (and previous) goal per
+  transition and agent, error bars = std over trials (Tables 3-5 as one chart);
+* env-change: bars of the steps to reach the goal after the event per agent, with the
+  ``oracle_steps`` lower bound as a dashed line; failed trials (``null``) are marked
+  "never" above the agent's slot (Table 6, Fig. 5);
+* sample-complexity: one panel per goal, mean steps per episode every 5th episode,
+  log scale (Fig. 6 a-d);
+* timing: grouped bars of CPU seconds for training, goal adaptation and recovery from
+  the event, with std error bars; "never" where every trial failed (Fig. 7 a-c).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def _mean_std(s):
+    if not s or s.get("mean") is None:
+        return np.nan, 0.0
+    return s["mean"], s["std"]
+
+
+def _grouped(ax, groups, series, title, ylabel, log=False):
+    """Bars: ``series = {label: [(mean, std) per group]}``."""
+    n = max(len(series), 1)
+    width = 0.8 / n
+    x = np.arange(len(groups))
+    for i, (label, vals) in enumerate(series.items()):
+        means = np.array([m for m, _ in vals], dtype=float)
+        stds = np.array([s for _, s in vals], dtype=float)
+        pos = x - 0.4 + width * (i + 0.5)
+        ax.bar(pos, np.nan_to_num(means), width, yerr=stds, capsize=2, label=label)
+        for p, m in zip(pos, means):
+            if np.isnan(m):
+                ax.text(p, 0.02, "never", rotation=90, ha="center", va="bottom", fontsize=7,
+                        transform=ax.get_xaxis_transform())
+    ax.set_xticks(x, groups)
+    ax.set_title(title)
+    ax.set_ylabel(ylabel)
+    if log:
+        ax.set_yscale("log")
+    ax.legend(fontsize=7)
+
+
+def plot_goal_change(result: dict, path: str | Path) -> None:
+    agents = result["agents"]
+    first = next(iter(agents.values()))["transitions"]
+    groups = [f"{t['from']}→{t['to']}" for t in first]
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
+    for ax, key, title in ((axes[0], "current_pct", "% episodes ending at the current goal"),
+                           (axes[1], "previous_pct", "% episodes ending at the previous goal")):
+        series = {a: [_mean_std(t[key]) for t in d["transitions"]] for a, d in agents.items()}
+        _grouped(ax, groups, series, title, "% of episodes")
+        ax.set_ylim(0, 105)
+    fig.suptitle(f"Goal change ({result['episodes']} episodes per goal, "
+                 f"{result['trials']} trials) -- Tables 3-5")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_env_change(result: dict, path: str | Path) -> None:
+    agents = result["agents"]
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    names = list(agents)
+    vals = [_mean_std(agents[a]["steps"]) for a in names]
+    means = np.array([m for m, _ in vals])
+    ax.bar(range(len(names)), np.nan_to_num(means), yerr=[s for _, s in vals], capsize=3,
+           color="tab:blue")
+    for i, (a, m) in enumerate(zip(names, means)):
+        failed = agents[a]["steps"].get("failed", 0)
+        if np.isnan(m):
+            ax.text(i, 0.02, "never (∞)", rotation=90, ha="center", va="bottom",
+                    transform=ax.get_xaxis_transform())
+        elif failed:
+            ax.text(i, m, f"{failed} failed", ha="center", va="bottom", fontsize=7)
+    ax.axhline(result["oracle_steps"], color="k", ls="--",
+               label=f"oracle_steps = {result['oracle_steps']}")
+    ax.set_xticks(range(len(names)), names, rotation=20)
+    ax.set_ylabel("steps to reach the goal after the event")
+    ax.set_title(f"Changing environment, event {result['event']!r} "
+                 f"({result['trials']} trials) -- Table 6 / Fig. 5")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_sample_complexity(result: dict, path: str | Path) -> None:
+    agents = result["agents"]
+    goals = result["goals"]
+    every = result.get("every", 5)
+    cols = min(2, len(goals))
+    rows = (len(goals) + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(5.5 * cols, 3.6 * rows), squeeze=False)
+    for ax, g in zip(axes.flat, goals):
+        for a, d in agents.items():
+            curve = d["goals"][g]["curve"]
+            ax.plot([every * (i + 1) for i in range(len(curve))], curve, marker=".",
+                    label=a)
+        ax.set_yscale("log")
+        ax.set_title(f"goal {g}")
+        ax.set_xlabel("episode")
+        ax.set_ylabel("steps (mean over trials)")
+        ax.legend(fontsize=7)
+    for ax in list(axes.flat)[len(goals):]:
+        ax.axis("off")
+    fig.suptitle(f"Sample complexity ({result['trials']} trials) -- Fig. 6")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_timing(result: dict, path: str | Path) -> None:
+    agents = result["agents"]
+    keys = (("train_s", "training"), ("goal_adapt_s",
+                                      f"goal {result['goals'][0]}→{result['goals'][1]}"),
+            ("event_recover_s", f"event {result['event']!r}"))
+    series = {a: [_mean_std(d[k]) for k, _ in keys] for a, d in agents.items()}
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    _grouped(ax, [label for _, label in keys], series,
+             f"CPU seconds ({result['trials']} trials) -- Fig. 7", "CPU s", log=True)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+PLOTS = {"goal-change": plot_goal_change, "env-change": plot_env_change,
+         "sample-complexity": plot_sample_complexity, "timing": plot_timing}
+
+
+def plot(result: dict, path: str | Path) -> None:
+    PLOTS[result["scenario"]](result, path)

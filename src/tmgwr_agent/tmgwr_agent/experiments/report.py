@@ -1,0 +1,64 @@
+"""Short text tables of experiment results (printed by ``experiment``, ``demo``, ``bench``)."""
+
+from __future__ import annotations
+
+from .stats import fmt
+
+
+def _table(header: list[str], rows: list[list[str]]) -> str:
+    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h)
+              for i, h in enumerate(header)]
+    line = "  ".join(h.ljust(w) for h, w in zip(header, widths))
+    out = [line, "  ".join("-" * w for w in widths)]
+    out += ["  ".join(c.ljust(w) for c, w in zip(r, widths)) for r in rows]
+    return "\n".join(out)
+
+
+def table(result: dict) -> str:
+    sc, agents = result["scenario"], result["agents"]
+    if sc == "goal-change":
+        rows = [[a, f"{t['from']}->{t['to']}", fmt(t["previous_pct"]), fmt(t["current_pct"])]
+                for a, d in agents.items() for t in d["transitions"]]
+        return _table(["agent", "goals", "% previous", "% current"], rows)
+    if sc == "env-change":
+        rows = [[a, fmt(d["steps"]), fmt(d["episodes_to_optimal"])]
+                for a, d in agents.items()]
+        return (f"event {result['event']}: oracle_steps {result['oracle_steps']} "
+                f"(shortest path {result['shortest_before']} -> {result['shortest_after']})\n"
+                + _table(["agent", "steps", "episodes_to_optimal"], rows))
+    if sc == "sample-complexity":
+        goals = result["goals"]
+        rows = [[a] + [fmt(d["goals"][g]["episodes_to_converge"]) for g in goals]
+                for a, d in agents.items()]
+        return ("episodes to converge (ten consecutive optimal greedy paths)\n"
+                + _table(["agent"] + [f"goal {g}" for g in goals], rows))
+    if sc == "timing":
+        rows = [[a, fmt(d["train_s"], 3), fmt(d["goal_adapt_s"], 3),
+                 fmt(d["event_recover_s"], 3)] for a, d in agents.items()]
+        return ("CPU seconds\n" + _table(
+            ["agent", "train", f"goal {'->'.join(result['goals'])}",
+             f"event {result['event']}"], rows))
+    raise ValueError(f"unknown scenario {sc!r}")
+
+
+def bench_table(result: dict) -> str:
+    rows = []
+    for key, val in result.items():
+        if isinstance(val, dict):
+            for k, v in val.items():
+                rows.append([f"{key}.{k}", _short(v)])
+        else:
+            rows.append([key, _short(val)])
+    return _table(["measure", "value"], rows)
+
+
+def _short(v) -> str:
+    if isinstance(v, dict) and "mean" in v:
+        return fmt(v, 4)
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    if isinstance(v, (list, tuple)):
+        return ", ".join(_short(x) for x in v)
+    if isinstance(v, dict):
+        return "; ".join(f"{k}={_short(x)}" for k, x in v.items())
+    return str(v)

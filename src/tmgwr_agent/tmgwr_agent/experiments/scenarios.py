@@ -1,0 +1,122 @@
+"""One entry point for the four scenarios: checks the request, runs it, returns the JSON.
+
+:func:`run_scenario` validates every name before any work starts (agents, goals, event,
+maze file) and raises :class:`UsageError` with a message naming what is wrong; the CLI
+turns it into exit code 2. The JSON starts with the contract header of DESIGN.md section 5
+(``scenario, maze, trials, seed``), then the scenario's own top-level fields, the step
+caps used (:class:`.runner.Caps`), and ``agents``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+from pathlib import Path
+from typing import Sequence
+
+from maze_sim.maze import Maze, MazeError
+
+from ..agents import AGENT_NAMES, parse_spec
+from ..params import CONFIG_DIR
+from . import env_change, goal_change, sample_complexity, timing
+from .runner import Caps
+
+DEFAULT_MAZE = CONFIG_DIR / "mazes" / "paper_13x17.txt"
+DEFAULT_AGENTS = AGENT_NAMES
+from .names import SCENARIOS  # noqa: E402
+
+#: Per scenario: default goals (None = the scenario takes a single --goal), episodes, agents.
+DEFAULTS = {
+    "goal-change": {"goals": goal_change.DEFAULT_GOALS,
+                    "episodes": goal_change.DEFAULT_EPISODES, "agents": DEFAULT_AGENTS},
+    "env-change": {"goals": None, "episodes": None, "agents": env_change.DEFAULT_AGENTS},
+    "sample-complexity": {"goals": sample_complexity.DEFAULT_GOALS,
+                          "episodes": sample_complexity.DEFAULT_EPISODES,
+                          "agents": DEFAULT_AGENTS},
+    "timing": {"goals": timing.DEFAULT_GOALS, "episodes": None, "agents": DEFAULT_AGENTS},
+}
+
+
+class UsageError(ValueError):
+    """A request that names something that does not exist (exit code 2)."""
+
+
+def load_maze(path: str | Path) -> Maze:
+    path = Path(path)
+    if not path.is_file():
+        raise UsageError(f"maze file not found: {path}")
+    try:
+        return Maze.from_file(path)
+    except MazeError as exc:
+        raise UsageError(str(exc)) from exc
+
+
+def check_agents(agents: Sequence[str]) -> list[str]:
+    agents = [a.strip() for a in agents if a.strip()]
+    if not agents:
+        raise UsageError("no agents given")
+    for a in agents:
+        try:
+            parse_spec(a)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from exc
+    if len(set(agents)) != len(agents):
+        raise UsageError(f"agent listed twice in {','.join(agents)}")
+    return agents
+
+
+def check_goals(maze: Maze, goals: Sequence[str]) -> tuple[str, ...]:
+    for g in goals:
+        if g not in maze.goals:
+            raise UsageError(f"no goal named {g!r} in {maze.source} "
+                             f"(goals: {', '.join(sorted(maze.goals))})")
+    return tuple(goals)
+
+
+def check_event(maze: Maze, event: str, goal: str = "G") -> str:
+    if event not in maze.events:
+        known = ", ".join(sorted(maze.events)) or "none"
+        raise UsageError(f"no event named {event!r} in {maze.source} (events: {known})")
+    if maze.shortest_path_length(maze.start, maze.goal_cell(goal),
+                                 walls=maze.walls_after([event])) < 0:
+        raise UsageError(f"event {event!r} cuts the goal off from the start in {maze.source}")
+    return event
+
+
+def run_scenario(scenario: str, maze_path: str | Path = DEFAULT_MAZE,
+                 agents: Sequence[str] | None = None, trials: int = 10, seed: int = 0,
+                 goals: Sequence[str] | None = None, episodes: int | None = None,
+                 event: str = "a", goal: str = "G", jobs: int | None = None,
+                 progress: bool = True) -> dict:
+    if scenario not in SCENARIOS:
+        raise UsageError(f"unknown scenario {scenario!r}; scenarios: {', '.join(SCENARIOS)}")
+    d = DEFAULTS[scenario]
+    maze = load_maze(maze_path)
+    agents = check_agents(agents if agents else d["agents"])
+    if trials < 1:
+        raise UsageError(f"--trials must be >= 1, got {trials}")
+    goals = check_goals(maze, goals if goals else (d["goals"] or ()))
+    check_goals(maze, [goal])
+    episodes = episodes if episodes is not None else d["episodes"]
+    if episodes is not None and episodes < 1:
+        raise UsageError(f"--episodes must be >= 1, got {episodes}")
+    maze_s = str(maze_path)
+    common = dict(jobs=jobs, progress=progress)
+    if scenario == "goal-change":
+        if len(goals) < 2:
+            raise UsageError("goal-change needs at least two goals (--goals 1,2,...)")
+        body = goal_change.run(maze_s, agents, trials, seed, goals, episodes, **common)
+    elif scenario == "env-change":
+        body = env_change.run(maze_s, agents, trials, seed, check_event(maze, event, goal),
+                              goal, **common)
+    elif scenario == "sample-complexity":
+        body = sample_complexity.run(maze_s, agents, trials, seed, goals, episodes, **common)
+    else:
+        if len(goals) != 2:
+            raise UsageError(f"timing takes two goals FROM,TO (got {','.join(goals)})")
+        body = timing.run(maze_s, agents, trials, seed, goals, check_event(maze, event, goal),
+                          goal, **common)
+    out = {"scenario": scenario, "maze": maze_s, "trials": trials, "seed": seed}
+    out.update({k: v for k, v in body.items() if k != "agents"})
+    out["caps"] = asdict(Caps.for_maze(maze))
+    out["agents"] = body["agents"]
+    return out
