@@ -139,6 +139,8 @@ class EpisodeMonitor:
     def on_observation(self, msg) -> None:
         now = time.perf_counter()
         sid = int(msg.step_id)
+        if sid <= self.last_step_id:
+            return          # the simulator resent an observation nobody answered yet
         if self.first_step_id < 0:
             self.first_step_id, self.first_time = sid, now
         elif sid > self.last_step_id + 1:

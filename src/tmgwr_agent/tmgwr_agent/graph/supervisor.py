@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
 READY = re.compile(r"\bready\b", re.IGNORECASE)
+RECORDER_READY = re.compile(r"\bready\b|\brecording\b.* to ", re.IGNORECASE)
 
 #: The five nodes of Fig. 1a in data-flow order (DESIGN.md section 2: contract names).
 GRAPH_NODES: tuple[tuple[str, str], ...] = (
@@ -306,8 +307,10 @@ def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | No
     node_params = node_params or {}
     specs: list[NodeSpec] = []
     if record_dir is not None:
-        specs.append(NodeSpec("tmgwr_agent", "recorder", params_files_for("tmgwr_agent"),
-                              {"output": str(record_dir), **node_params.get("recorder", {})}))
+        # The recorder logs "recording ... to DIR" once its writer is open.
+        specs.append(NodeSpec("tmgwr_agent", "recorder", (),
+                              {"output_dir": str(record_dir), **node_params.get("recorder", {})},
+                              ready=RECORDER_READY))
     for package, exe in GRAPH_NODES:
         params: dict[str, object] = {}
         if exe == "maze_sim":
@@ -315,6 +318,12 @@ def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | No
                 params["maze"] = str(Path(maze).expanduser().resolve())
             if goal is not None:
                 params["goal"] = str(goal)
+            if record_dir is not None:
+                # the recorder discovers topics every 0.5 s: let it subscribe to the
+                # Observation topic before the first step is published
+                params["start_delay"] = 1.0
+        if exe == "map_learner" and record_dir is not None:
+            params["map_path"] = str(Path(record_dir) / "tmgwr_map.npz")  # the run's own map
         if seed is not None and exe in ("maze_sim", "action_selector"):
             params["seed"] = int(seed)
         params.update(node_params.get(exe, {}))
