@@ -1,0 +1,87 @@
+"""Bag commands of ``./tmgwr``: ``recover``, ``replay``, ``report`` (MCAP recordings).
+
+Recordings are made by the ``tmgwr_agent recorder`` node (``./tmgwr up`` starts it, writing
+to ``runs/<UTC timestamp>/``). Imports stay inside the command functions so that
+``./tmgwr --help`` does not load rclpy, mcap or matplotlib.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        'recover', help='salvage a recording whose writer died (kill -9) into a valid file',
+        description='Read a broken MCAP file (or every file of a bag directory) as a stream '
+                    'and rewrite everything readable into a finished, indexed file.')
+    p.add_argument('bag', metavar='BAG', help='.mcap file or bag directory')
+    p.add_argument('-o', '--output', metavar='OUT',
+                   help='output file (default BAG.recovered.mcap) or directory '
+                        '(default BAG.recovered/)')
+    p.add_argument('--compression', default='zstd', choices=('zstd', 'lz4', 'none'))
+    p.set_defaults(func=_recover)
+
+    p = subparsers.add_parser(
+        'replay', help='republish a recording on live topics with its timing and QoS',
+        description='Publish the recorded CDR bytes unchanged, each topic with the QoS its '
+                    'publisher offered, at the recorded pace (scaled by --rate).')
+    p.add_argument('bag', metavar='BAG', help='.mcap file or bag directory')
+    p.add_argument('--rate', type=float, default=1.0, metavar='R',
+                   help='playback speed factor (default 1.0)')
+    p.add_argument('--topics', nargs='+', metavar='TOPIC', help='only these topics')
+    p.add_argument('--loop', action='store_true', help='play again and again until Ctrl-C')
+    p.add_argument('--delay', type=float, default=1.0, metavar='S',
+                   help='seconds to wait for discovery before the first message (default 1)')
+    p.add_argument('--wait-subscribers', type=int, default=0, metavar='N',
+                   help='before playing, wait until every topic has N subscribers')
+    p.set_defaults(func=_replay)
+
+    p = subparsers.add_parser(
+        'report', help='JSON summary and figures of a recorded run (from the bag alone)',
+        description='Read a recording with rosbags and compute the run\'s episodes, goal '
+                    'changes, events and map growth; write report.json and PNG figures.')
+    p.add_argument('bag', metavar='BAG', help='.mcap file or bag directory')
+    p.add_argument('-o', '--output', metavar='DIR',
+                   help='output directory (default BAG/report or BAG_report/)')
+    p.set_defaults(func=_report)
+
+
+def _recover(args: argparse.Namespace) -> int:
+    from .recover import recover
+    try:
+        results = recover(args.bag, args.output, args.compression)
+    except (OSError, ValueError) as exc:
+        print(f'recover: {exc}', file=sys.stderr)
+        return 1
+    for r in results:
+        print(r.describe())
+    total = sum(r.messages for r in results)
+    print(f'recover: {total} messages saved into {results[0].output if len(results) == 1 else results[0].output.parent}')
+    return 0
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from .replay import replay
+    try:
+        res = replay(args.bag, rate=args.rate, topics=args.topics, loop=args.loop,
+                     delay=args.delay, wait_subscribers=args.wait_subscribers)
+    except (OSError, ValueError, TimeoutError) as exc:
+        print(f'replay: {exc}', file=sys.stderr)
+        return 1
+    print('REPLAY ' + json.dumps(res))
+    return 0
+
+
+def _report(args: argparse.Namespace) -> int:
+    from .report import report
+    try:
+        res = report(args.bag, args.output)
+    except (OSError, ValueError) as exc:
+        print(f'report: {exc}', file=sys.stderr)
+        return 1
+    print(f'report: {res["output"]["json"]} and {len(res["output"]["figures"])} figures in '
+          f'{res["output"]["dir"]}')
+    return 0
