@@ -63,12 +63,15 @@ class NodeSpec:
     params: Mapping[str, object] = field(default_factory=dict)
     name: str = ""                       # label for output; default: the executable
     ready: re.Pattern = READY
+    argv: Sequence[str] = ()             # a plain command instead of the package executable
 
     @property
     def label(self) -> str:
         return self.name or self.executable
 
     def command(self) -> list[str]:
+        if self.argv:
+            return list(self.argv)
         cmd = [str(executable_path(self.package, self.executable))]
         ros_args: list[str] = []
         for f in self.params_files:
@@ -232,7 +235,8 @@ class GraphSupervisor:
         self.stopped: dict[str, int | None] = {}
 
     # ------------------------------------------------------------------ start
-    def start(self, ready_timeout: float = 60.0, parallel: bool = True) -> None:
+    def start(self, ready_timeout: float = 60.0, parallel: bool = True,
+              wait_ready: bool = True) -> None:
         """Start every process and wait until each printed its ``ready`` line.
 
         With ``parallel`` all are started at once (discovery overlaps) and then awaited in
@@ -243,9 +247,9 @@ class GraphSupervisor:
             for spec in self.specs:
                 p = ManagedProcess(spec, self.env, self._sink)
                 self.processes.append(p)
-                if not parallel:
+                if not parallel and wait_ready:
                     self._await_ready(p, ready_timeout)
-            if parallel:
+            if parallel and wait_ready:
                 deadline = time.monotonic() + ready_timeout
                 for p in self.processes:
                     self._await_ready(p, max(0.1, deadline - time.monotonic()))
