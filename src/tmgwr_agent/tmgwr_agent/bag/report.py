@@ -1,0 +1,434 @@
+"""``./tmgwr report BAG [-o DIR]``: what a recorded run did, from the recording alone.
+
+The bag is read with rosbags' ``AnyReader`` (types come from the schemas embedded in the
+file, no ROS installation needed) and summarised as the experiments CLI and the demo
+summarise a run:
+
+* **episodes** from ``/observation``, with the demo's own episode rules
+  (:class:`tmgwr_agent.graph.clients.EpisodeMonitor`: resent observations ignored, steps
+  count actions, an episode ends with a ``terminal`` observation: ``goal``,
+  ``previous_goal`` or ``cut``), so the report states the figures the run itself stated;
+* **goal changes** (``/maze_events`` lines ``step N: goal -> row R, col C``, the step whose
+  observation first carries the new goal; else ``/goal`` messages): for each change, the
+  episodes until the next change and the % of them that ended at the previous and at the
+  current goal (the goal-change scenario's ``previous_pct`` / ``current_pct``), and the
+  steps from the change until the goal is first reached;
+* **events** (``/maze_events`` lines about events and cells): the steps from the event to
+  the first time the goal is reached (the env-change scenario's ``steps``);
+* **map** growth from ``/map`` (``tmgwr_interfaces/SensorimotorMap``): nodes, links, mean
+  link reliability E (Eq. 1-2) per snapshot;
+* the **final map** drawn over the maze (``/maze_grid``): every node at the cell where it
+  most often won (``/sensorimotor_state`` winner joined with the ``/observation`` cell of the
+  same step), coloured by its motivation potential (last ``/motivation``, Eq. 4-5), links
+  coloured by E.
+
+Writes ``report.json`` and PNG figures into DIR (default: ``BAG/report`` for a bag
+directory, ``<file>_report/`` for a single file).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections import Counter, defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import topics as T
+
+GOAL_EVENT = re.compile(r'step (\d+): goal -> row (-?\d+), col (-?\d+)')
+STEP_EVENT = re.compile(r'step (\d+): (.*)')
+
+
+def default_output(bag: Path) -> Path:
+    bag = Path(bag)
+    return bag / 'report' if bag.is_dir() else bag.with_name(bag.stem + '_report')
+
+
+def _bag_paths(bag: Path) -> list[Path]:
+    if bag.is_dir():
+        if (bag / 'metadata.yaml').is_file():
+            return [bag]                       # rosbag2 directory: AnyReader reads it whole
+        files = sorted(bag.glob('*.mcap'))
+        if not files:
+            raise FileNotFoundError(f'{bag} holds neither metadata.yaml nor .mcap files')
+        return files
+    if not bag.is_file():
+        raise FileNotFoundError(f'{bag} does not exist')
+    return [bag]
+
+
+# ----------------------------------------------------------------------------- reading
+def read_bag(bag: str | Path) -> dict[str, Any]:
+    """Everything the report needs, in plain Python/numpy form."""
+    from rosbags.highlevel import AnyReader
+
+    from ..graph.clients import EpisodeMonitor
+
+    bag = Path(bag)
+    data: dict[str, Any] = {'topics': {}, 'goals': [], 'events': [], 'map': [],
+                            'winners': {}, 'cells': {}, 'grid': None, 'motivation': None,
+                            'first_goal': None}
+    monitor = EpisodeMonitor()
+    obs_times: dict[int, int] = {}
+    last_raw: dict[str, tuple[Any, bytes]] = {}
+    with AnyReader(_bag_paths(bag)) as reader:
+        for c in reader.connections:
+            entry = data['topics'].setdefault(c.topic, {'type': c.msgtype, 'count': 0})
+            entry['count'] += c.msgcount
+        data['start_ns'], data['end_ns'] = reader.start_time, reader.end_time
+        wanted = {T.OBSERVATION, T.SENSORIMOTOR_STATE, T.MAP, T.GOAL, T.EVENTS}
+        conns = [c for c in reader.connections if c.topic in wanted]
+        for conn, t, raw in reader.messages(connections=conns):
+            msg = reader.deserialize(raw, conn.msgtype)
+            if conn.topic == T.OBSERVATION:
+                monitor.on_observation(msg)
+                sid = int(msg.step_id)
+                obs_times.setdefault(sid, t)
+                data['cells'][sid] = (int(msg.row), int(msg.col))
+            elif conn.topic == T.SENSORIMOTOR_STATE:
+                data['winners'][int(msg.step_id)] = int(msg.winner)
+            elif conn.topic == T.MAP:
+                E = np.array([float(lk.reliability) for lk in msg.links])
+                data['map'].append({'t': t, 'step_id': int(msg.step_id),
+                                    'nodes': len(msg.nodes), 'links': len(msg.links),
+                                    'mean_reliability': float(E.mean()) if len(E) else 0.0})
+                last_raw[T.MAP] = (conn, raw)
+            elif conn.topic == T.GOAL:
+                data['goals'].append({'t': t, 'cell': (int(round(msg.point.y)),
+                                                       int(round(msg.point.x)))})
+            elif conn.topic == T.EVENTS:
+                data['events'].append({'t': t, 'text': str(msg.data)})
+        for topic in (T.MOTIVATION, T.GRID):    # only the newest of these is needed
+            cs = [c for c in reader.connections if c.topic == topic]
+            for conn, _t, raw in reader.messages(connections=cs):
+                last_raw[topic] = (conn, raw)
+        for topic, key in ((T.MOTIVATION, 'motivation'), (T.GRID, 'grid'), (T.MAP, 'final_map')):
+            if topic in last_raw:
+                conn, raw = last_raw[topic]
+                data[key] = reader.deserialize(raw, conn.msgtype)
+    data['monitor'] = monitor
+    data['obs_times'] = obs_times
+    return data
+
+
+# ----------------------------------------------------------------------------- metrics
+def goal_changes(data: dict) -> list[dict]:
+    """Goal changes with the step whose observation first carries the new goal."""
+    out = []
+    for e in data['events']:
+        m = GOAL_EVENT.search(e['text'])
+        if m:
+            out.append({'step': int(m.group(1)), 'cell': [int(m.group(2)), int(m.group(3))],
+                        't': e['t'], 'source': T.EVENTS})
+    if out or len(data['goals']) < 2:
+        return out
+    # no event lines recorded: the latched /goal messages after the first one, each placed
+    # at the first observation received after it
+    times = sorted((t, s) for s, t in data['obs_times'].items())
+    for g in data['goals'][1:]:
+        step = next((s for t, s in times if t >= g['t']), None)
+        if step is not None:
+            out.append({'step': step, 'cell': list(g['cell']), 't': g['t'],
+                        'source': T.GOAL})
+    return out
+
+
+def maze_events(data: dict) -> list[dict]:
+    """Layout events (event fired, cell blocked/opened) with their step."""
+    out = []
+    for e in data['events']:
+        if GOAL_EVENT.search(e['text']):
+            continue
+        m = STEP_EVENT.search(e['text'])
+        if m:
+            out.append({'step': int(m.group(1)), 'what': m.group(2), 't': e['t']})
+    return out
+
+
+def after(episodes, after_step: int, until_step: int | None = None) -> dict:
+    """Episodes that ended after ``after_step`` (and not after ``until_step``): the
+    goal-change percentages and the steps until the goal is first reached."""
+    eps = [e for e in episodes if e.end_step > after_step
+           and (until_step is None or e.end_step <= until_step)]
+    n = len(eps)
+    first = next((e for e in eps if e.outcome == 'goal'), None)
+    return {
+        'after_step': after_step,
+        'episodes': n,
+        'steps_per_episode': [e.steps for e in eps],
+        'previous_pct': 100.0 * sum(e.outcome == 'previous_goal' for e in eps) / n if n else None,
+        'current_pct': 100.0 * sum(e.outcome == 'goal' for e in eps) / n if n else None,
+        'goal_reached_episodes': sum(e.outcome == 'goal' for e in eps),
+        'first_goal_steps_after': (first.end_step - after_step) if first else None,
+    }
+
+
+def summarise(data: dict, bag: Path) -> dict:
+    mon = data['monitor']
+    eps = mon.episodes
+    changes = goal_changes(data)
+    events = maze_events(data)
+    boundaries = sorted([c['step'] - 1 for c in changes] + [e['step'] for e in events])
+    initial_goal = data['goals'][0]['cell'] if data['goals'] else None
+
+    def next_boundary(step):
+        return next((b for b in boundaries if b > step), None)
+
+    transitions = []
+    previous = list(initial_goal) if initial_goal else None
+    for c in changes:
+        # the new goal is sensed from step c['step']: step c['step'] - 1 is the last one
+        # under the old goal (the demo's "at_step" of the /set_goal call)
+        res = after(eps, c['step'] - 1, next_boundary(c['step'] - 1))
+        transitions.append({'step': c['step'], 'from': previous, 'to': c['cell'], **res})
+        previous = c['cell']
+    event_rows = [{'step': e['step'], 'what': e['what'],
+                   **after(eps, e['step'], next_boundary(e['step']))} for e in events]
+    seconds = (data['end_ns'] - data['start_ns']) / 1e9 if data.get('end_ns') else 0.0
+    steps_total = mon.last_step_id - mon.first_step_id + 1 if mon.first_step_id >= 0 else 0
+    final = data['map'][-1] if data['map'] else None
+    return {
+        'bag': str(bag),
+        'seconds': round(seconds, 3),
+        'topics': data['topics'],
+        'steps': {'first': mon.first_step_id, 'last': mon.last_step_id,
+                  'count': steps_total, 'seen': mon.seen, 'missed': mon.missed,
+                  'steps_per_s': round(_rate(data), 1)},
+        'episodes': {
+            'count': len(eps),
+            'steps_per_episode': [e.steps for e in eps],
+            'end_steps': [e.end_step for e in eps],
+            'outcomes': dict(Counter(e.outcome for e in eps)),
+        },
+        'initial_goal': initial_goal,
+        'goal_changes': transitions,
+        'events': event_rows,
+        'map': ({'snapshots': len(data['map']), 'nodes': final['nodes'],
+                 'links': final['links'], 'mean_reliability': round(final['mean_reliability'], 4),
+                 'step_id': final['step_id']} if final else None),
+    }
+
+
+def _rate(data: dict) -> float:
+    times = data['obs_times']
+    if len(times) < 2:
+        return 0.0
+    s0, s1 = min(times), max(times)
+    dt = (times[s1] - times[s0]) / 1e9
+    return (s1 - s0) / dt if dt > 0 else 0.0
+
+
+# ----------------------------------------------------------------------------- figures
+def _figures(data: dict, summary: dict, out: Path) -> list[str]:
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    files = []
+    eps = data['monitor'].episodes
+    t0 = data.get('start_ns') or 0
+    times = data['obs_times']
+
+    def t_of(step):
+        return (times.get(step, t0) - t0) / 1e9
+
+    def mark(ax, use_time):
+        for c in summary['goal_changes']:
+            x = t_of(c['step']) if use_time else c['step']
+            ax.axvline(x, color='tab:purple', ls='--', lw=1)
+            ax.annotate(f'goal -> {tuple(c["to"])}', (x, 1), xycoords=('data', 'axes fraction'),
+                        rotation=90, va='top', ha='right', fontsize=7, color='tab:purple')
+        for e in summary['events']:
+            x = t_of(e['step']) if use_time else e['step']
+            ax.axvline(x, color='tab:red', ls=':', lw=1)
+            ax.annotate(e['what'], (x, 1), xycoords=('data', 'axes fraction'), rotation=90,
+                        va='top', ha='right', fontsize=7, color='tab:red')
+
+    # 1. steps per episode over time
+    fig, ax = plt.subplots(figsize=(8, 4))
+    colours = {'goal': 'tab:green', 'previous_goal': 'tab:orange', 'cut': 'tab:gray'}
+    for outcome, colour in colours.items():
+        sel = [e for e in eps if e.outcome == outcome]
+        ax.scatter([t_of(e.end_step) for e in sel], [e.steps for e in sel], s=12, c=colour,
+                   label=outcome.replace('_', ' '))
+    ax.plot([t_of(e.end_step) for e in eps], [e.steps for e in eps], lw=0.5, c='k', alpha=0.4)
+    mark(ax, True)
+    ax.set_xlabel('time since the recording started (s)')
+    ax.set_ylabel('steps in the episode')
+    ax.set_title('Steps per episode')
+    ax.legend(fontsize=8)
+    files.append(_save(fig, out / 'steps_per_episode.png'))
+
+    # 2. visits to the previous / current goal after each goal change
+    tr = summary['goal_changes']
+    fig, ax = plt.subplots(figsize=(max(4, 1.6 * len(tr) + 2), 3.5))
+    if tr:
+        x = np.arange(len(tr))
+        ax.bar(x - 0.2, [t['previous_pct'] or 0 for t in tr], 0.4, label='previous goal',
+               color='tab:orange')
+        ax.bar(x + 0.2, [t['current_pct'] or 0 for t in tr], 0.4, label='current goal',
+               color='tab:green')
+        ax.set_xticks(x, [f'{tuple(t["from"]) if t["from"] else "?"}->{tuple(t["to"])}\n'
+                          f'step {t["step"]}, {t["episodes"]} ep.' for t in tr], fontsize=7)
+        ax.legend(fontsize=8)
+    else:
+        ax.text(0.5, 0.5, 'no goal change recorded', ha='center', va='center',
+                transform=ax.transAxes)
+    ax.set_ylim(0, 100)
+    ax.set_ylabel('% of episodes ending there')
+    ax.set_title('Visits after each goal change')
+    files.append(_save(fig, out / 'goal_change_visits.png'))
+
+    # 3. steps to the goal after each goal change / event
+    rows = [(f'goal -> {tuple(t["to"])}\n(step {t["step"]})', t['first_goal_steps_after'])
+            for t in tr] + [(f'{e["what"]}\n(step {e["step"]})', e['first_goal_steps_after'])
+                            for e in summary['events']]
+    fig, ax = plt.subplots(figsize=(max(4, 1.6 * len(rows) + 2), 3.5))
+    if rows:
+        vals = [v if v is not None else 0 for _l, v in rows]
+        bars = ax.bar(range(len(rows)), vals, color=['tab:purple'] * len(tr) +
+                      ['tab:red'] * len(summary['events']))
+        for b, (_l, v) in zip(bars, rows):
+            ax.annotate('not reached' if v is None else str(v), (b.get_x() + b.get_width() / 2,
+                        b.get_height()), ha='center', va='bottom', fontsize=8)
+        ax.set_xticks(range(len(rows)), [label for label, _v in rows], fontsize=7)
+    else:
+        ax.text(0.5, 0.5, 'no goal change or event recorded', ha='center', va='center',
+                transform=ax.transAxes)
+    ax.set_ylabel('steps until the goal is first reached')
+    ax.set_title('Steps to the goal after each change')
+    files.append(_save(fig, out / 'steps_to_goal.png'))
+
+    # 4. map size and reliability over time
+    fig, ax = plt.subplots(figsize=(8, 4))
+    if data['map']:
+        tm = [(m['t'] - t0) / 1e9 for m in data['map']]
+        ax.plot(tm, [m['nodes'] for m in data['map']], label='nodes', c='tab:blue')
+        ax.plot(tm, [m['links'] for m in data['map']], label='links', c='tab:cyan')
+        ax.set_ylabel('count')
+        ax2 = ax.twinx()
+        ax2.plot(tm, [m['mean_reliability'] for m in data['map']], c='tab:green',
+                 label='mean link reliability E')
+        ax2.set_ylabel('mean reliability E (Eq. 1-2)')
+        ax2.set_ylim(0, 1.05)
+        h1, l1 = ax.get_legend_handles_labels()
+        h2, l2 = ax2.get_legend_handles_labels()
+        ax.legend(h1 + h2, l1 + l2, fontsize=8, loc='lower right')
+        mark(ax, True)
+    else:
+        ax.text(0.5, 0.5, f'no {T.MAP} messages recorded', ha='center', va='center',
+                transform=ax.transAxes)
+    ax.set_xlabel('time since the recording started (s)')
+    ax.set_title('Sensorimotor map size and reliability')
+    files.append(_save(fig, out / 'map_over_time.png'))
+
+    # 5. the final map over the maze, with motivation potentials
+    files.append(_final_map(data, out / 'final_map.png'))
+    plt.close('all')
+    return files
+
+
+def node_cells(data: dict) -> dict[int, tuple[int, int]]:
+    """Each node's cell: where it most often won (winner of step s, cell of step s)."""
+    votes: dict[int, Counter] = defaultdict(Counter)
+    for sid, w in data['winners'].items():
+        cell = data['cells'].get(sid)
+        if w >= 0 and cell is not None:
+            votes[w][cell] += 1
+    return {n: c.most_common(1)[0][0] for n, c in votes.items()}
+
+
+def _final_map(data: dict, path: Path) -> str:
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import LineCollection
+
+    fig, ax = plt.subplots(figsize=(7, 6))
+    grid = data.get('grid')
+    if grid is not None:
+        walls = (np.asarray(grid.data, dtype=np.int16).reshape(grid.info.height,
+                                                                grid.info.width) >= 50)
+        ax.imshow(walls, cmap='Greys', vmin=0, vmax=1.5, origin='upper')
+    cells = node_cells(data)
+    final = data.get('final_map')
+    alive = {int(n.id) for n in final.nodes} if final is not None else set(cells)
+    pos = {n: np.array([c[1], c[0]], float) for n, c in cells.items() if n in alive}
+    # several nodes in one cell: spread them on a small circle so all are visible
+    by_cell: dict[tuple, list[int]] = defaultdict(list)
+    for n, c in cells.items():
+        if n in pos:
+            by_cell[c].append(n)
+    for members in by_cell.values():
+        if len(members) > 1:
+            for k, n in enumerate(sorted(members)):
+                a = 2 * np.pi * k / len(members)
+                pos[n] = pos[n] + 0.22 * np.array([np.cos(a), np.sin(a)])
+    if final is not None and pos:
+        segs, rel = [], []
+        for lk in final.links:
+            s, t = int(lk.source), int(lk.target)
+            if s in pos and t in pos:
+                segs.append([pos[s], pos[t]])
+                rel.append(float(lk.reliability))
+        if segs:
+            lc = LineCollection(segs, cmap='RdYlGn', linewidths=1.2, alpha=0.8)
+            lc.set_array(np.array(rel))
+            lc.set_clim(0, 1)
+            ax.add_collection(lc)
+            fig.colorbar(lc, ax=ax, fraction=0.04, pad=0.02, label='link reliability E')
+    potentials = {}
+    mot = data.get('motivation')
+    if mot is not None:
+        potentials = {int(i): float(v) for i, v in zip(mot.node_ids, mot.potentials)}
+    if pos:
+        ids = sorted(pos)
+        xy = np.array([pos[i] for i in ids])
+        v = np.array([potentials.get(i, np.nan) for i in ids])
+        sc = ax.scatter(xy[:, 0], xy[:, 1], c=np.nan_to_num(v, nan=0.0), cmap='plasma', s=45,
+                        edgecolors='k', linewidths=0.4, zorder=3)
+        fig.colorbar(sc, ax=ax, fraction=0.04, pad=0.08, label='motivation potential (Eq. 4-5)')
+    if data['goals']:
+        r, c = data['goals'][-1]['cell']
+        ax.scatter([c], [r], marker='*', s=300, c='gold', edgecolors='k', zorder=4,
+                   label='goal')
+        ax.legend(loc='upper right', fontsize=8)
+    ax.set_title(f'Final map: {len(pos)} nodes at the cells where they won'
+                 + (f', {len(final.links)} links' if final is not None else ''))
+    ax.set_xlabel('column')
+    ax.set_ylabel('row')
+    return _save(fig, path)
+
+
+def _save(fig, path: Path) -> str:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    return str(path)
+
+
+# ----------------------------------------------------------------------------- entry
+def report(bag: str | Path, output: str | Path | None = None, figures: bool = True) -> dict:
+    """Read ``bag``, write ``report.json`` and the figures; returns the summary."""
+    bag = Path(bag)
+    data = read_bag(bag)
+    if T.OBSERVATION not in data['topics']:
+        raise ValueError(f'{bag} has no {T.OBSERVATION} topic: not a recording of the graph '
+                         f'(topics: {", ".join(sorted(data["topics"])) or "none"})')
+    summary = summarise(data, bag)
+    out = Path(output) if output else default_output(bag)
+    out.mkdir(parents=True, exist_ok=True)
+    summary['output'] = {'dir': str(out), 'json': str(out / 'report.json'),
+                         'figures': _figures(data, summary, out) if figures else []}
+    (out / 'report.json').write_text(json.dumps(summary, indent=2, default=_jsonable))
+    return summary
+
+
+def _jsonable(o):
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.floating,)):
+        return float(o)
+    if isinstance(o, tuple):
+        return list(o)
+    raise TypeError(f'not JSON serialisable: {type(o)}')
