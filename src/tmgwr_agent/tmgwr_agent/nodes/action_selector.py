@@ -38,7 +38,7 @@ NODE_SPECS = (
 class ActionSelectorNode(Node):
     def __init__(self):
         super().__init__("action_selector")
-        p = declare_specs(self, EXPLORATION_SPECS, config_defaults())
+        p = declare_specs(self, EXPLORATION_SPECS, config_defaults(), section="tmgwr")
         self.p = declare_specs(self, NODE_SPECS)
         self.core = ActionSelector(np.random.default_rng(self.p["seed"]), **p)
         self.last_step = -1

@@ -120,17 +120,28 @@ def descriptor(p: Param):
     return d
 
 
-def declare_specs(node, specs: Iterable[Param],
-                  defaults: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    """Declare each Param on ``node`` (default from ``defaults`` else the Param's own);
-    returns the checked values. Raises ParamError naming the first invalid parameter."""
+def declare_specs(node, specs: Iterable[Param], defaults: Mapping[str, Any] | None = None,
+                  section: str | None = None) -> dict[str, Any]:
+    """Declare each Param on ``node``; returns the checked values.
+
+    The default is, in order: a ``<section>.<name>`` value of a ``--params-file`` in the
+    config/ layout (``/**: ros__parameters: tmgwr: {...}``), ``defaults`` (the config
+    file), the Param's own. ``-p name:=value`` overrides it. Raises ParamError naming the
+    first invalid parameter.
+    """
     from rclpy.exceptions import (InvalidParameterTypeException,
                                   InvalidParameterValueException)
     defaults = dict(defaults or {})
+    overrides = getattr(node, "_parameter_overrides", {}) or {}
     values: dict[str, Any] = {}
     where = f"node '{node.get_name()}'"
     for p in specs:
-        default = _check(p, defaults.get(p.name, p.default), where + " (config default)")
+        src = where + " (config default)"
+        default = defaults.get(p.name, p.default)
+        if section and f"{section}.{p.name}" in overrides:
+            default = overrides[f"{section}.{p.name}"].value
+            src = where + f" (parameter file '{section}.{p.name}')"
+        default = _check(p, default, src)
         if not p.integer and isinstance(default, int) and not isinstance(default, bool) \
                 and p.choices is None and not isinstance(p.default, (bool, str)):
             default = float(default)

@@ -78,7 +78,7 @@ def load_map(m: SensorimotorMap | None, path: Path, params: dict) -> tuple[Senso
 class MapLearnerNode(Node):
     def __init__(self):
         super().__init__("map_learner")
-        self.params = declare_specs(self, tmgwr_map.SPECS, config_defaults())
+        self.params = declare_specs(self, tmgwr_map.SPECS, config_defaults(), section="tmgwr")
         self.p = declare_specs(self, NODE_SPECS)
         self.map: SensorimotorMap | None = None
         self.last_step = -1

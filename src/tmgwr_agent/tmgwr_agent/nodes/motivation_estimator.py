@@ -59,7 +59,7 @@ def map_view(m: SensorimotorMap | None, s: SensorimotorState) -> SensorimotorMap
 class MotivationEstimatorNode(Node):
     def __init__(self):
         super().__init__("motivation_estimator")
-        p = declare_specs(self, motivation.SPECS, config_defaults())
+        p = declare_specs(self, motivation.SPECS, config_defaults(), section="tmgwr")
         self.p = declare_specs(self, NODE_SPECS)
         self.core = MotivationEstimator(**p)
         self.view: SensorimotorMap | None = None
@@ -145,7 +145,10 @@ class MotivationEstimatorNode(Node):
                             f"{topics.SIM_SET_GOAL} within {self.p['set_goal_timeout']} s")
         else:
             resp.accepted, resp.message = answer.accepted, answer.message
-        (self.get_logger().info if resp.accepted else self.get_logger().warn)(resp.message)
+        if resp.accepted:
+            self.get_logger().info(resp.message)
+        else:
+            self.get_logger().warn(resp.message)
         return resp
 
     def on_shutdown(self):

@@ -19,7 +19,7 @@ from .common import STEP_QOS, CallbackTimer, config_defaults, declare_specs, f64
 class SensoryPreprocessorNode(Node):
     def __init__(self):
         super().__init__("sensory_preprocessor")
-        p = declare_specs(self, preprocessor.SPECS, config_defaults())
+        p = declare_specs(self, preprocessor.SPECS, config_defaults(), section="tmgwr")
         self.core = SensoryPreprocessor(**p)
         self.pub = self.create_publisher(Features, topics.FEATURES, STEP_QOS)
         self.create_subscription(Observation, topics.OBSERVATION, self.on_observation,

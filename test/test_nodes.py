@@ -1,0 +1,239 @@
+"""The five nodes as real processes over DDS (each test its own ROS_DOMAIN_ID).
+
+What must hold (issue 3): the graph reaches the goal; /set_goal is refused outside the maze,
+in a wall and when not finite, the estimator stays up, and an accepted goal is reached;
+the same seeds give the same cells over the graph as the in-process TMGWRAgent loop for
+>= 2000 steps including that goal change; the agent finds the detour after an event fired
+through the service; a map_learner stopped with SIGINT and restarted from its saved map
+continues with the same map; every node refuses an invalid parameter, naming it.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import time
+
+import numpy as np
+import pytest
+
+from ros_helpers import ROOT, parse_json_line, ros2_run, spawn_python
+
+pytestmark = pytest.mark.ros
+
+MAZE = ROOT / "config" / "mazes" / "paper_13x17.txt"
+AGENT_NODES = ("sensory_preprocessor", "map_learner", "motivation_estimator",
+               "action_selector")
+
+# A service client: argv[1] = JSON list of [service, type, request fields].
+CALL = r'''
+import json, sys, time
+import rclpy
+from geometry_msgs.msg import Point
+from tmgwr_interfaces.srv import SetGoal, FireEvent, SaveMap
+types = {"SetGoal": SetGoal, "FireEvent": FireEvent, "SaveMap": SaveMap}
+rclpy.init()
+node = rclpy.create_node("test_client")
+results = []
+for name, typ, fields in json.loads(sys.argv[1]):
+    srv = types[typ]
+    cli = node.create_client(srv, name)
+    if not cli.wait_for_service(timeout_sec=30):
+        raise SystemExit(f"{name} not available")
+    req = srv.Request()
+    if typ == "SetGoal":
+        req.goal = Point(x=float(fields["x"]), y=float(fields["y"]), z=0.0)
+    else:
+        for k, v in fields.items():
+            setattr(req, k, v)
+    fut = cli.call_async(req)
+    t0 = time.monotonic()
+    while not fut.done() and time.monotonic() - t0 < 30:
+        rclpy.spin_once(node, timeout_sec=0.1)
+    r = fut.result()
+    results.append({k: getattr(r, k) for k in r.get_fields_and_field_types()})
+print("RESULT " + json.dumps(results), flush=True)
+node.destroy_node()
+rclpy.shutdown()
+'''
+
+# Prints the latched map (node count, link count, weights) once it arrives.
+MAP_ECHO = r'''
+import json
+import rclpy
+from rclpy.qos import QoSProfile, DurabilityPolicy, ReliabilityPolicy
+from tmgwr_interfaces.msg import SensorimotorMap
+rclpy.init()
+node = rclpy.create_node("test_map_echo")
+qos = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                 reliability=ReliabilityPolicy.RELIABLE)
+def show(m):
+    print("MAP " + json.dumps({"nodes": [[n.id, list(n.weight)] for n in m.nodes],
+                               "links": len(m.links), "step_id": m.step_id}), flush=True)
+node.create_subscription(SensorimotorMap, "/map", show, qos)
+print("ECHO READY", flush=True)
+rclpy.spin(node)
+'''
+
+
+def start_graph(domain, tmp_path, sim_args=(), learner_args=(), seed=1, goal="2"):
+    """The five executables as `ros2 run` starts them; returns {name: RosProcess}."""
+    procs = {}
+    per_node = {"map_learner": ["-p", f"map_path:={tmp_path / 'map.npz'}", *learner_args],
+                "action_selector": ["-p", f"seed:={seed}"]}
+    for name in AGENT_NODES:
+        procs[name] = ros2_run("tmgwr_agent", name, "--ros-args", *per_node.get(name, []),
+                               domain=domain)
+    procs["maze_sim"] = ros2_run("maze_sim", "maze_sim", "--ros-args", "-p", f"goal:={goal}",
+                                 "-p", "seed:=0", "-p", "start_delay:=1.5", *sim_args,
+                                 domain=domain)
+    for p in procs.values():
+        p.wait_for_line("ready", timeout=60)
+    return procs
+
+
+def stop_graph(procs):
+    for p in procs.values():
+        p.stop()
+
+
+def call(domain, calls, timeout=60):
+    p = spawn_python(CALL, json.dumps(calls), domain=domain, name="client")
+    with p:
+        return parse_json_line(p.wait(timeout=timeout), "RESULT ")
+
+
+def goals_reached(sim, cell=None):
+    pat = re.compile(r"goal \((\d+), (\d+)\) reached in (\d+) steps \(step (\d+)\)")
+    out = []
+    for line in sim.lines:
+        m = pat.search(line)
+        if m and (cell is None or (int(m[1]), int(m[2])) == tuple(cell)):
+            out.append(int(m[4]))
+    return out
+
+
+def wait_until(pred, timeout, what, procs):
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        if pred():
+            return
+        dead = [n for n, p in procs.items() if not p.running()]
+        if dead:
+            raise AssertionError(procs[dead[0]].describe(f"{dead[0]} died waiting for {what}"))
+        time.sleep(0.2)
+    raise AssertionError(procs["maze_sim"].describe(f"timed out waiting for {what}"))
+
+
+# --------------------------------------------------------------------------- parameters
+def test_each_node_refuses_an_invalid_parameter(ros_domain):
+    bad = {("tmgwr_agent", "sensory_preprocessor"): "feature_scale:=-1.0",
+           ("tmgwr_agent", "map_learner"): "alpha:=7.0",
+           ("tmgwr_agent", "motivation_estimator"): "gamma:=1.5",
+           ("tmgwr_agent", "action_selector"): "eps_min:=2.0",
+           ("maze_sim", "maze_sim"): "sensor_noise:=-0.5"}
+    procs = {exe: (arg.split(":=")[0], ros2_run(pkg, exe, "--ros-args", "-p", arg,
+                                                 domain=ros_domain))
+             for (pkg, exe), arg in bad.items()}
+    for exe, (param, p) in procs.items():
+        with p:
+            out = p.wait(timeout=60, check=False)
+            assert p.proc.returncode == 2, p.describe(f"{exe} did not exit with code 2")
+            assert f"'{param}'" in out and "cannot start" in out, out
+            assert "ready" not in out
+
+
+# --------------------------------------------------------------------------- the run
+@pytest.mark.timeout(240)
+def test_goal_change_by_service_and_same_cells_as_in_process(ros_domain, tmp_path):
+    """>= 2000 lockstep steps over DDS, a /set_goal change on the way, cell for cell the
+    in-process TMGWRAgent loop; the refused /set_goal requests leave the estimator up."""
+    from tmgwr_agent.nodes.reference import read_trajectory, run_reference
+
+    steps = 2400
+    traj = tmp_path / "trajectory.txt"
+    procs = start_graph(ros_domain, tmp_path, sim_args=[
+        "-p", f"max_steps:={steps}", "-p", "exit_when_done:=true",
+        "-p", f"trajectory_path:={traj}"])
+    sim = procs["maze_sim"]
+    try:
+        # the graph reaches goal 2, several times (epsilon decays, Eq. 7)
+        wait_until(lambda: len(goals_reached(sim, (1, 11))) >= 5, 120, "goal 2 x5", procs)
+        res = call(ros_domain, [
+            ["/set_goal", "SetGoal", {"x": 40, "y": 2}],              # outside
+            ["/set_goal", "SetGoal", {"x": 0, "y": 0}],               # a wall
+            ["/set_goal", "SetGoal", {"x": float("nan"), "y": 2}],    # not finite
+            ["/set_goal", "SetGoal", {"x": 15, "y": 2}],              # goal 1, row 2 col 15
+        ])
+        assert [r["accepted"] for r in res] == [False, False, False, True], res
+        assert "outside" in res[0]["message"]
+        assert "wall" in res[1]["message"]
+        assert "not finite" in res[2]["message"]
+        summary = parse_json_line(sim.wait(timeout=180), "SUMMARY ")
+    finally:
+        stop_graph(procs)
+        import os
+        if os.environ.get("B1_DEBUG"):
+            print(procs["motivation_estimator"].output[-3000:]); print(sim.output[-3000:])
+    assert summary["steps"] == steps
+    assert procs["motivation_estimator"].proc.returncode in (0, -2), \
+        procs["motivation_estimator"].describe("estimator did not stop cleanly")
+    [(k, cell)] = summary["goal_changes"]
+    assert cell == [2, 15]
+    # the agent reaches the goal given at runtime
+    assert [s for s in goals_reached(sim, (2, 15)) if s > k], sim.describe("goal 1 never reached")
+
+    graph, changes = read_trajectory(traj)
+    assert changes == [(k, (2, 15))] and len(graph) == steps
+    ref, _ = run_reference(MAZE, steps, goal="2", world_seed=0, agent_seed=1,
+                           goal_changes=changes)
+    first = next((i for i, (a, b) in enumerate(zip(graph, ref)) if a != b), None)
+    assert first is None, f"graph and in-process differ from step {first}: " \
+                          f"{graph[first:first + 3]} vs {ref[first:first + 3]}"
+
+
+@pytest.mark.timeout(200)
+def test_detour_after_event_and_learner_restart_from_saved_map(ros_domain, tmp_path):
+    # resends every 10 s: the restarted learner shows its loaded map before the ring resumes
+    procs = start_graph(ros_domain, tmp_path, sim_args=["-p", "resend_period:=10.0"])
+    sim = procs["maze_sim"]
+    echo = None
+    try:
+        wait_until(lambda: len(goals_reached(sim)) >= 10, 120, "goal 2 x10", procs)
+        [res] = call(ros_domain, [["/maze_sim/fire_event", "FireEvent", {"event": "a"}]])
+        assert res["accepted"], res
+        fired_at = int(sim.wait_for_line(r"event 'a' fired").split("step ")[1].split(":")[0])
+        # the old path is cut at (6, 3); the agent finds the detour (>= 46 steps)
+        wait_until(lambda: len([s for s in goals_reached(sim) if s > fired_at]) >= 2, 90,
+                   "goal 2 after event a", procs)
+
+        # SIGINT the learner: it saves its map; restart it from that file
+        learner = procs["map_learner"]
+        learner.stop()
+        line = next(ln for ln in learner.lines if "map_learner: saved" in ln)
+        n_nodes, n_links = (int(v) for v in re.findall(r"saved (\d+) nodes, (\d+) links", line)[0])
+        with np.load(tmp_path / "map.npz") as d:
+            saved = {k: d[k] for k in d.files}
+        assert int(saved["alive"].sum()) == n_nodes and int((saved["out"] >= 0).sum()) == n_links
+        before = len(goals_reached(sim))
+        echo = spawn_python(MAP_ECHO, domain=ros_domain, name="map_echo")
+        echo.wait_for_line("ECHO READY", timeout=60)
+        procs["map_learner"] = ros2_run(
+            "tmgwr_agent", "map_learner", "--ros-args", "-p",
+            f"initial_map:={tmp_path / 'map.npz'}", "-p", f"map_path:={tmp_path / 'map2.npz'}",
+            domain=ros_domain)
+        procs["map_learner"].wait_for_line(f"started from .*{n_nodes} nodes, {n_links} links",
+                                           timeout=60)
+        snap = json.loads(echo.wait_for_line("^MAP ", timeout=60)[4:])
+        # the learner continues the ring with the same map
+        wait_until(lambda: len(goals_reached(sim)) >= before + 2, 90, "goal after restart",
+                   procs)
+    finally:
+        stop_graph(procs)
+        if echo is not None:
+            echo.stop()
+    assert snap["step_id"] == int(saved["step_id"])
+    alive = np.flatnonzero(saved["alive"])
+    assert [n[0] for n in snap["nodes"]] == alive.tolist()
+    assert np.array_equal(np.array([n[1] for n in snap["nodes"]]), saved["w"][alive])
+    assert snap["links"] == n_links
