@@ -27,6 +27,8 @@ import sys
 import time
 from pathlib import Path
 
+from .output import say
+
 CALLBACKS = re.compile(r"(\d+) step callbacks, mean (\d+) us, total ([\d.]+) s")
 
 
@@ -154,19 +156,18 @@ def run(args=None) -> dict:
     steps = int(_opt(args, "graph_steps", 2000))
     seed = int(_opt(args, "graph_seed", 0))
     maze = _opt(args, "maze", None)
-    print(f"graph bench: rings of 5 and 2 processes ({laps} laps), graph and in-process "
-          f"({steps} steps, seed {seed})", flush=True)
+    say(f"graph bench: rings of 5 and 2 processes ({laps} laps), graph and in-process "
+          f"({steps} steps, seed {seed})")
     r5 = ring(5, laps)
-    print(f"  ring of 5: {r5['laps_per_s']} laps/s ({r5['hop_ms']} ms per hop)", flush=True)
+    say(f"  ring of 5: {r5['laps_per_s']} laps/s ({r5['hop_ms']} ms per hop)")
     r2 = ring(2, laps)
-    print(f"  ring of 2: {r2['laps_per_s']} laps/s ({r2['hop_ms']} ms per hop)", flush=True)
+    say(f"  ring of 2: {r2['laps_per_s']} laps/s ({r2['hop_ms']} ms per hop)")
     g = graph_rate(steps, seed=seed, maze=maze)
-    print(f"  graph: {g['steps_per_s']} steps/s ({g['step_us']} us a step: "
+    say(f"  graph: {g['steps_per_s']} steps/s ({g['step_us']} us a step: "
           f"{g['callbacks_us_per_step']} us in the nodes' callbacks, "
-          f"{g['messaging_us_per_step']} us messaging and executors)", flush=True)
+          f"{g['messaging_us_per_step']} us messaging and executors)")
     ip = in_process_rate(steps, seed=seed, maze=maze)
-    print(f"  in-process: {ip['steps_per_s']} steps/s ({ip['step_us_median']} us median step)",
-          flush=True)
+    say(f"  in-process: {ip['steps_per_s']} steps/s ({ip['step_us_median']} us median step)")
     ratio = g["steps_per_s"] / r5["laps_per_s"]
     out = {
         "ring5_laps_per_s": r5["laps_per_s"], "ring2_laps_per_s": r2["laps_per_s"],
@@ -176,11 +177,11 @@ def run(args=None) -> dict:
         "cpus": os.cpu_count(), "load_avg_1min": round(os.getloadavg()[0], 2),
     }
     ring_lap_us = 1e6 / r5["laps_per_s"]
-    print(f"  graph / ring = {ratio:.2f} (target >= 0.6). Per step: ring lap {ring_lap_us:.0f} "
+    say(f"  graph / ring = {ratio:.2f} (target >= 0.6). Per step: ring lap {ring_lap_us:.0f} "
           f"us; graph step {g['step_us']} us = callbacks "
           + ", ".join(f"{k} {v['mean_us']}" for k, v in g["callbacks"].items())
           + f" us + {g['messaging_us_per_step']} us messaging; in-process step "
-            f"{ip['step_us_median']} us", flush=True)
+            f"{ip['step_us_median']} us")
     return out
 
 
@@ -198,7 +199,7 @@ def main(argv: list[str] | None = None) -> int:
     text = json.dumps(result, indent=2)
     if args.json:
         Path(args.json).write_text(text + "\n")
-    print("BENCH " + json.dumps(result), flush=True)
+    say("BENCH " + json.dumps(result))
     return 0
 
 

@@ -18,6 +18,8 @@ import os
 import sys
 import time
 
+from .output import say
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
@@ -93,13 +95,13 @@ def _service(args, make, name: str, what: str) -> int:
     try:
         response = call_once(srv_type, name, request, timeout=args.timeout)
     except NoGraph as exc:
-        print(f"{what}: {exc}", file=sys.stderr)
+        say(f"{what}: {exc}", sys.stderr)
         return 2
     except (TimeoutError, RuntimeError) as exc:
-        print(f"{what}: {exc}", file=sys.stderr)
+        say(f"{what}: {exc}", sys.stderr)
         return 1
     ok = bool(getattr(response, "accepted", getattr(response, "success", False)))
-    print(f"{what}: {'accepted' if ok else 'refused'}: {response.message}")
+    say(f"{what}: {'accepted' if ok else 'refused'}: {response.message}")
     return 0 if ok else 1
 
 
@@ -144,28 +146,28 @@ def cmd_up(args) -> int:
                 "cut": "cut short"}
 
     def episode_line(rec) -> None:
-        print(f"episode {rec.episode}: {rec.steps} steps, {outcomes[rec.outcome]} "
-              f"(step {rec.end_step}, {run.monitor.rate():.0f} steps/s)", flush=True)
+        say(f"episode {rec.episode}: {rec.steps} steps, {outcomes[rec.outcome]} "
+              f"(step {rec.end_step}, {run.monitor.rate():.0f} steps/s)")
 
     run.monitor.on_episode = episode_line
     stop = {"now": False}
     if run.record_note:
-        print(f"up: {run.record_note}", flush=True)
+        say(f"up: {run.record_note}")
     try:
         run.start(on_stop_signal=lambda: stop.update(now=True))
     except GraphError as exc:
-        print(f"up: the graph did not start: {exc}", file=sys.stderr)
+        say(f"up: the graph did not start: {exc}", sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print("up: interrupted during start-up; nodes stopped", file=sys.stderr)
+        say("up: interrupted during start-up; nodes stopped", sys.stderr)
         return 130
     domain = os.environ.get("ROS_DOMAIN_ID", "0")
-    print(f"graph up in ROS_DOMAIN_ID={domain}: "
-          + ", ".join(f"{k} (pid {v})" for k, v in run.supervisor.pids().items()), flush=True)
+    say(f"graph up in ROS_DOMAIN_ID={domain}: "
+          + ", ".join(f"{k} (pid {v})" for k, v in run.supervisor.pids().items()))
     if run.record_dir:
-        print(f"recording to {run.record_dir}", flush=True)
-    print("Ctrl-C stops the graph; from another shell: ./tmgwr goal X Y | cell R C --block "
-          "| event a | reset" + (f" --domain-id {domain}" if domain != "0" else ""), flush=True)
+        say(f"recording to {run.record_dir}")
+    say("Ctrl-C stops the graph; from another shell: ./tmgwr goal X Y | cell R C --block "
+          "| event a | reset" + (f" --domain-id {domain}" if domain != "0" else ""))
 
     code = 0
     last_note = time.monotonic()
@@ -175,20 +177,20 @@ def cmd_up(args) -> int:
             dead = run.supervisor.dead()
             if dead:
                 for p in dead:
-                    print(f"up: {describe_exit(p)}", file=sys.stderr, flush=True)
+                    say(f"up: {describe_exit(p)}", sys.stderr)
                 code = 1
                 break
             if args.max_steps is not None and run.monitor.last_step_id >= args.max_steps:
-                print(f"up: {args.max_steps} steps done", flush=True)
+                say(f"up: {args.max_steps} steps done")
                 break
             if time.monotonic() - last_note > 10.0:
                 last_note = time.monotonic()
                 m = run.monitor
-                print(f"... step {m.last_step_id}, {len(m.episodes)} episodes ended, "
-                      f"{m.rate():.0f} steps/s", flush=True)
+                say(f"... step {m.last_step_id}, {len(m.episodes)} episodes ended, "
+                      f"{m.rate():.0f} steps/s")
     finally:
         codes = run.stop()
-    print("graph stopped: " + ", ".join(f"{k} exit {v}" for k, v in codes.items()), flush=True)
+    say("graph stopped: " + ", ".join(f"{k} exit {v}" for k, v in codes.items()))
     if run.record_dir:
-        print(f"recording: {run.record_dir}", flush=True)
+        say(f"recording: {run.record_dir}")
     return code

@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 
 from .. import topics
+from .output import say
 
 #: Seed of the demo (simulator and exploration policy). The paper maze takes about 2,000
 #: steps to learn G with this seed; other seeds take 2,000-16,000 (in-process check of
@@ -45,7 +46,7 @@ def _opt(args, name, default):
 
 def _echo_problems(line: str) -> None:
     if NOISY.search(line):
-        print(line, flush=True)
+        say(line)
 
 
 def run(args) -> int:
@@ -69,7 +70,7 @@ def run(args) -> int:
 
     maze = Maze.from_file(maze_path)
     if NEW_GOAL not in maze.goals or EVENT not in maze.events:
-        print(f"demo: maze {maze_path} needs goal '{NEW_GOAL}' and event '{EVENT}'",
+        say(f"demo: maze {maze_path} needs goal '{NEW_GOAL}' and event '{EVENT}'",
               file=sys.stderr)
         return 2
     world = GridWorld(maze, goal="G")
@@ -80,35 +81,33 @@ def run(args) -> int:
     optimal["event"] = world.shortest_path_length()
     new_row, new_col = maze.goals[NEW_GOAL]
 
-    print(f"== ROS 2 graph demo: maze {maze_path.name}, seed {seed}; shortest paths: G "
+    say(f"== ROS 2 graph demo: maze {maze_path.name}, seed {seed}; shortest paths: G "
           f"{optimal['learn']}, goal {NEW_GOAL} {optimal['goal']}, goal {NEW_GOAL} after "
-          f"event {EVENT!r} {optimal['event']} steps", flush=True)
+          f"event {EVENT!r} {optimal['event']} steps")
     graph = GraphRun(maze=str(maze_path), seed=seed, record=record,
                      record_dir=getattr(args, "record_dir", None), echo=_echo_problems)
     if graph.record_note:
-        print(f"demo: {graph.record_note}", flush=True)
+        say(f"demo: {graph.record_note}")
     stop = {"now": False}
     t0 = time.monotonic()
     try:
         graph.start(on_stop_signal=lambda: stop.update(now=True))
     except GraphError as exc:
-        print(f"demo: the graph did not start: {exc}", file=sys.stderr)
+        say(f"demo: the graph did not start: {exc}", sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print("demo: interrupted during start-up; nodes stopped", file=sys.stderr)
+        say("demo: interrupted during start-up; nodes stopped", sys.stderr)
         return 130
     mon = graph.monitor
-    print(f"graph up in {time.monotonic() - t0:.1f} s: " + ", ".join(graph.supervisor.pids()),
-          flush=True)
+    say(f"graph up in {time.monotonic() - t0:.1f} s: " + ", ".join(graph.supervisor.pids()))
     if graph.record_dir:
-        print(f"recording to {graph.record_dir}", flush=True)
+        say(f"recording to {graph.record_dir}")
 
     phase = {"name": "learn"}
 
     def on_episode(rec) -> None:
         mark = {"goal": "goal", "previous_goal": "previous goal", "cut": "cut"}[rec.outcome]
-        print(f"  [{phase['name']}] episode {rec.episode}: {rec.steps} steps ({mark})",
-              flush=True)
+        say(f"  [{phase['name']}] episode {rec.episode}: {rec.steps} steps ({mark})")
 
     mon.on_episode = on_episode
     report: dict = {"seed": seed, "maze": str(maze_path), "optimal": optimal, "phases": {}}
@@ -142,28 +141,26 @@ def run(args) -> int:
 
     def describe(name: str, res: dict, what: str) -> None:
         first = res["first_goal_steps_after"]
-        print(f"{what}: " + (f"goal first reached {first} steps later; " if first is not None
+        say(f"{what}: " + (f"goal first reached {first} steps later; " if first is not None
                              else "goal not reached; ")
               + (f"reliable (last {streak} episodes <= {slack:g} x {optimal[name]} steps) "
                  if res["reliable"] else f"not yet reliable ")
-              + f"after {res['episodes']} episodes, {res['steps']} steps, {res['seconds']} s",
-              flush=True)
+              + f"after {res['episodes']} episodes, {res['steps']} steps, {res['seconds']} s")
 
     try:
-        print(f"-- phase 1: learn the default goal G (until {streak} episodes in a row take "
-              f"<= {slack:g} x {optimal['learn']} steps)", flush=True)
+        say(f"-- phase 1: learn the default goal G (until {streak} episodes in a row take "
+              f"<= {slack:g} x {optimal['learn']} steps)")
         res = wait_phase("learn", -1)
         describe("learn", res, "learn G")
         if stop["now"]:
             raise KeyboardInterrupt
         code |= not res["reliable"]
 
-        print(f"-- phase 2: /set_goal x={new_col} y={new_row} (goal {NEW_GOAL}: row {new_row}, "
-              f"col {new_col})", flush=True)
+        say(f"-- phase 2: /set_goal x={new_col} y={new_row} (goal {NEW_GOAL}: row {new_row}, "
+              f"col {new_col})")
         srv, req = set_goal_request(new_col, new_row)
         resp = graph.call(srv, topics.SET_GOAL, req)
-        print(f"/set_goal: {'accepted' if resp.accepted else 'refused'}: {resp.message}",
-              flush=True)
+        say(f"/set_goal: {'accepted' if resp.accepted else 'refused'}: {resp.message}")
         report["set_goal"] = {"accepted": bool(resp.accepted), "message": resp.message,
                               "at_step": mon.last_step_id}
         if not resp.accepted:
@@ -174,12 +171,10 @@ def run(args) -> int:
             raise KeyboardInterrupt
         code |= res["first_goal_steps_after"] is None
 
-        print(f"-- phase 3: fire event {EVENT!r} (a corridor of the learnt route closes)",
-              flush=True)
+        say(f"-- phase 3: fire event {EVENT!r} (a corridor of the learnt route closes)")
         srv, req = fire_event_request(EVENT)
         resp = graph.call(srv, topics.FIRE_EVENT, req)
-        print(f"event {EVENT!r}: {'accepted' if resp.accepted else 'refused'}: {resp.message}",
-              flush=True)
+        say(f"event {EVENT!r}: {'accepted' if resp.accepted else 'refused'}: {resp.message}")
         report["event"] = {"accepted": bool(resp.accepted), "message": resp.message,
                            "at_step": mon.last_step_id}
         if not resp.accepted:
@@ -188,10 +183,10 @@ def run(args) -> int:
         describe("event", res, f"after event {EVENT!r}")
         code |= res["first_goal_steps_after"] is None
     except KeyboardInterrupt:
-        print("demo: interrupted", file=sys.stderr, flush=True)
+        say("demo: interrupted", sys.stderr)
         code = 130
     except (GraphError, TimeoutError, RuntimeError) as exc:
-        print(f"demo: {exc}", file=sys.stderr, flush=True)
+        say(f"demo: {exc}", sys.stderr)
         code = 1
     finally:
         report["steps"] = mon.last_step_id + 1
@@ -204,14 +199,14 @@ def run(args) -> int:
         report["seconds"] = round(time.monotonic() - t0, 1)
 
     eps = mon.episodes
-    print(f"== {report['steps']} steps in {len(eps)} episodes at {report['steps_per_s']} "
-          f"steps/s; steps per episode: {' '.join(str(e.steps) for e in eps)}", flush=True)
-    print("nodes stopped: " + ", ".join(f"{k} exit {v}" for k, v in codes.items()), flush=True)
+    say(f"== {report['steps']} steps in {len(eps)} episodes at {report['steps_per_s']} "
+          f"steps/s; steps per episode: {' '.join(str(e.steps) for e in eps)}")
+    say("nodes stopped: " + ", ".join(f"{k} exit {v}" for k, v in codes.items()))
     if any(v not in (0, None) for v in codes.values()):
         code = code or 1
     if graph.record_dir:
-        print(f"recording: {graph.record_dir}  (./tmgwr report {graph.record_dir})", flush=True)
-    print("DEMO " + json.dumps(report), flush=True)
+        say(f"recording: {graph.record_dir}  (./tmgwr report {graph.record_dir})")
+    say("DEMO " + json.dumps(report))
     return int(code)
 
 

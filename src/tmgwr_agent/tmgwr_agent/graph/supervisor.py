@@ -36,6 +36,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
+from .output import say
+
 READY = re.compile(r"\bready\b", re.IGNORECASE)
 RECORDER_READY = re.compile(r"\bready\b|\brecording\b.* to ", re.IGNORECASE)
 
@@ -298,7 +300,7 @@ class GraphSupervisor:
 
 
 def _print_line(line: str) -> None:
-    print(line, flush=True)
+    say(line)
 
 
 # ---------------------------------------------------------------------- the graph itself
