@@ -377,7 +377,8 @@ def _final_map(data: dict, path: Path) -> str:
             lc.set_array(np.array(rel))
             lc.set_clim(0, 1)
             ax.add_collection(lc)
-            fig.colorbar(lc, ax=ax, fraction=0.04, pad=0.02, label='link reliability E')
+            fig.colorbar(lc, ax=ax, fraction=0.04, pad=0.08, orientation='horizontal',
+                         label='link reliability E (Eq. 1-2)')
     potentials = {}
     mot = data.get('motivation')
     if mot is not None:
@@ -388,7 +389,7 @@ def _final_map(data: dict, path: Path) -> str:
         v = np.array([potentials.get(i, np.nan) for i in ids])
         sc = ax.scatter(xy[:, 0], xy[:, 1], c=np.nan_to_num(v, nan=0.0), cmap='plasma', s=45,
                         edgecolors='k', linewidths=0.4, zorder=3)
-        fig.colorbar(sc, ax=ax, fraction=0.04, pad=0.08, label='motivation potential (Eq. 4-5)')
+        fig.colorbar(sc, ax=ax, fraction=0.04, pad=0.02, label='motivation potential (Eq. 4-5)')
     if data['goals']:
         r, c = data['goals'][-1]['cell']
         ax.scatter([c], [r], marker='*', s=300, c='gold', edgecolors='k', zorder=4,

@@ -1,0 +1,171 @@
+"""A recording of the real node graph, read back and reported (own ROS_DOMAIN_ID).
+
+``./tmgwr up`` starts the five nodes and the recorder as separate processes on a small maze;
+the test changes the goal with ``./tmgwr goal`` and fires an event with ``./tmgwr event``
+while the graph runs, and keeps every episode the run printed live. Then:
+
+* the bag is complete: each per-step topic holds every step id from 0 to the last without
+  a gap, the recorder wrote everything it received, and rosbags and Foxglove's own readers
+  decode every message of every topic (custom tmgwr_interfaces types, OccupancyGrid,
+  MarkerArray, ...);
+* ``./tmgwr report`` states the run's own figures: the same episodes (steps and outcome)
+  as printed live, the goal change at the step the simulator announced, the steps to the
+  goal after the goal change and after the event as computed from the live episodes.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from ros_helpers import ROOT, RosProcess, ros_env
+from test_recorder import foxglove_decoder, mcap_files, tmgwr_cli  # noqa: F401 (fixture)
+
+pytestmark = pytest.mark.ros
+
+MAZE = """\
+#######
+#S.a.G#
+#.###.#
+#.1...#
+#######
+"""
+EPISODE = re.compile(r'^episode (\d+): (\d+) steps, (.+?) \(step (\d+),')
+OUTCOMES = {'reached the goal': 'goal', 'ended at the previous goal': 'previous_goal',
+            'cut short': 'cut'}
+PER_STEP = ('/observation', '/features', '/sensorimotor_state', '/motivation', '/action')
+
+
+def live_episodes(up: RosProcess) -> list[tuple[int, int, str, int]]:
+    out = []
+    for line in up.lines:
+        m = EPISODE.match(line)
+        if m:
+            out.append((int(m.group(1)), int(m.group(2)), OUTCOMES[m.group(3)], int(m.group(4))))
+    return out
+
+
+def wait_episodes(up: RosProcess, n: int, timeout: float) -> None:
+    deadline = time.monotonic() + timeout
+    while len(live_episodes(up)) < n:
+        if not up.running() or time.monotonic() > deadline:
+            raise AssertionError(up.describe(f'fewer than {n} episodes within {timeout} s'))
+        time.sleep(0.2)
+
+
+@pytest.fixture(scope='module')
+def graph_run(tmp_path_factory):
+    """Run the graph once for the module: (bag directory, live episodes, goal step)."""
+    from ros_helpers import allocate_domain, release_domain
+    domain = allocate_domain()
+    tmp = tmp_path_factory.mktemp('graph')
+    maze = tmp / 'small.txt'
+    maze.write_text(MAZE)
+    bag = tmp / 'run'
+    up = RosProcess([str(ROOT / '.venv/bin/python'), '-m', 'tmgwr_agent.cli', 'up', '--maze',
+                     str(maze), '--seed', '3', '--record-dir', str(bag),
+                     '--domain-id', str(domain)], ros_env(domain), name='up')
+    try:
+        with up:
+            up.wait_for_line(r'^recording to ', timeout=90)
+            wait_episodes(up, 4, timeout=90)
+            goal = tmgwr_cli('goal', '2', '3', '--domain-id', str(domain), domain=domain)
+            assert goal.returncode == 0 and 'accepted' in goal.stdout, goal.stdout + goal.stderr
+            goal_step = int(re.search(r'applies from step (\d+)', goal.stdout).group(1))
+            n = len(live_episodes(up))
+            wait_episodes(up, n + 4, timeout=90)
+            event = tmgwr_cli('event', 'a', '--domain-id', str(domain), domain=domain)
+            assert event.returncode == 0 and 'accepted' in event.stdout, \
+                event.stdout + event.stderr
+            n = len(live_episodes(up))
+            wait_episodes(up, n + 3, timeout=90)
+            up.proc.send_signal(2)             # Ctrl-C: the nodes stop, the recorder last
+            up.wait_for_line(r'^recording: ', timeout=60)
+            up.wait(timeout=60, check=False)
+        assert up.proc.returncode == 0, up.describe('./tmgwr up failed')
+        yield bag, live_episodes(up), goal_step, up.output
+    finally:
+        release_domain(domain)
+
+
+def test_graph_recording_is_complete_and_decodes_everywhere(graph_run, foxglove_decoder):
+    bag, _live, _goal_step, _out = graph_run
+    files = mcap_files(bag)
+    from rosbags.highlevel import AnyReader
+    steps: dict[str, list[int]] = {}
+    counts: dict[str, int] = {}
+    with AnyReader([bag]) as reader:
+        for conn, _t, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)      # every message decodes
+            counts[conn.topic] = counts.get(conn.topic, 0) + 1
+            if conn.topic in PER_STEP:
+                steps.setdefault(conn.topic, []).append(int(msg.step_id))
+        meta_counts = {c.topic: c.msgcount for c in reader.connections}
+    assert counts == {t: n for t, n in meta_counts.items() if n}
+    last = max(steps['/observation'])
+    assert last > 100
+    for topic in PER_STEP:
+        ids = sorted(set(steps[topic]))
+        # the ring answers every step; the newest step may still be in flight at the stop
+        assert ids[0] == 0 and ids == list(range(ids[-1] + 1)), topic
+        assert ids[-1] >= last - 1, (topic, ids[-1], last)
+    for topic in ('/maze_grid', '/goal', '/map', '/map_markers', '/maze_events'):
+        assert counts.get(topic, 0) >= 1, topic
+
+    result = foxglove_decoder(files)
+    fox: dict[str, int] = {}
+    for path in files:
+        for topic, t in result['files'][str(path)]['topics'].items():
+            assert not t['errors'], (topic, t['errors'])
+            fox[topic] = fox.get(topic, 0) + t['count']
+    assert {t: n for t, n in fox.items() if n} == counts
+
+
+def test_recorder_lost_nothing(graph_run):
+    bag, _live, _goal_step, out = graph_run
+    m = re.search(r'recorded: received (\d+), written (\d+) messages', out)
+    assert m, out[-3000:]
+    assert m.group(1) == m.group(2)
+    info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert info['message_count'] == int(m.group(2))
+
+
+def test_report_states_the_runs_own_figures(graph_run, tmp_path):
+    bag, live, goal_step, _out = graph_run
+    proc = tmgwr_cli('report', str(bag), '-o', str(tmp_path / 'report'))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    rep = json.loads((tmp_path / 'report' / 'report.json').read_text())
+    for name in ('steps_per_episode', 'goal_change_visits', 'steps_to_goal', 'map_over_time',
+                 'final_map'):
+        png = tmp_path / 'report' / f'{name}.png'
+        assert png.is_file() and png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+
+    # the same episodes as printed live (the bag may hold a few more: the graph ran on
+    # while it was being stopped)
+    n = len(live)
+    assert rep['episodes']['steps_per_episode'][:n] == [s for _e, s, _o, _end in live]
+    assert rep['episodes']['end_steps'][:n] == [end for _e, _s, _o, end in live]
+    assert rep['steps']['missed'] == 0
+
+    # the goal change at the step the simulator announced, with the live figures
+    (change,) = rep['goal_changes']
+    assert change['step'] == goal_step
+    assert change['to'] == [3, 2] and change['from'] == [1, 5]
+    after = [e for e in live if e[3] > goal_step - 1]
+    first = next(e for e in after if e[2] == 'goal')
+    assert change['first_goal_steps_after'] == first[3] - (goal_step - 1)
+    (event,) = rep['events']
+    assert "event 'a'" in event['what']
+    in_phase = [e for e in after if e[3] <= event['step']]
+    assert change['episodes'] == len(in_phase)
+    assert change['current_pct'] == pytest.approx(
+        100.0 * sum(e[2] == 'goal' for e in in_phase) / len(in_phase))
+    first = next(e for e in live if e[3] > event['step'] and e[2] == 'goal')
+    assert event['first_goal_steps_after'] == first[3] - event['step']
+    assert rep['map']['nodes'] > 0 and 0.0 <= rep['map']['mean_reliability'] <= 1.0
