@@ -1,0 +1,66 @@
+"""Launch the TMGWR node graph on a real ROS 2 Jazzy install (Fig. 1a, DESIGN.md section 2).
+
+    ros2 launch tmgwr_agent agent.launch.py
+    ros2 launch tmgwr_agent agent.launch.py maze:=paper_13x17.txt goal:=2 seed:=1 record:=true
+
+Starts ``maze_sim`` and the four agent nodes (and, with ``record:=true``, the MCAP
+recorder first) with the parameters of ``share/tmgwr_agent/config/tmgwr_agent.yaml``.
+Then, from another shell::
+
+    ros2 service call /set_goal tmgwr_interfaces/srv/SetGoal "{goal: {x: 11.0, y: 1.0, z: 0.0}}"
+    ros2 service call /maze_sim/fire_event tmgwr_interfaces/srv/FireEvent "{event: a}"
+
+The pip-only environment has no ``launch`` package (not on PyPI): there ``./tmgwr up``
+does the same with tmgwr_agent.graph.supervisor.
+"""
+
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.conditions import IfCondition
+from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
+from launch_ros.substitutions import FindPackageShare
+
+#: (package, executable) of the graph in data-flow order; the names are a contract.
+GRAPH = (
+    ('maze_sim', 'maze_sim'),
+    ('tmgwr_agent', 'sensory_preprocessor'),
+    ('tmgwr_agent', 'map_learner'),
+    ('tmgwr_agent', 'motivation_estimator'),
+    ('tmgwr_agent', 'action_selector'),
+)
+
+
+def generate_launch_description():
+    params_file = PathJoinSubstitution(
+        [FindPackageShare('tmgwr_agent'), 'config', 'tmgwr_agent.yaml'])
+    arguments = [
+        DeclareLaunchArgument('maze', default_value='paper_13x17.txt',
+                              description='maze file: a path, or a file name in '
+                                          'share/tmgwr_agent/config/mazes'),
+        DeclareLaunchArgument('goal', default_value='G',
+                              description="initial goal: a goal name ('G', '1'-'9') or 'row,col'"),
+        DeclareLaunchArgument('seed', default_value='0',
+                              description='seed of the simulator and the exploration policy'),
+        DeclareLaunchArgument('record', default_value='false',
+                              description='record every topic to MCAP (tmgwr_agent recorder)'),
+        DeclareLaunchArgument('output_dir', default_value='',
+                              description="recorder bag directory ('' = runs/<UTC timestamp>/)"),
+    ]
+    seed = ParameterValue(LaunchConfiguration('seed'), value_type=int)
+    overrides = {
+        'maze_sim': {'maze': LaunchConfiguration('maze'), 'goal': LaunchConfiguration('goal'),
+                     'seed': seed},
+        'action_selector': {'seed': seed},
+    }
+    recorder = Node(
+        package='tmgwr_agent', executable='recorder', name='recorder', output='screen',
+        parameters=[{'output_dir': LaunchConfiguration('output_dir')}],
+        condition=IfCondition(LaunchConfiguration('record')))
+    nodes = [
+        Node(package=package, executable=executable, name=executable, output='screen',
+             parameters=[params_file, overrides.get(executable, {})])
+        for package, executable in GRAPH
+    ]
+    return LaunchDescription(arguments + [recorder] + nodes)
