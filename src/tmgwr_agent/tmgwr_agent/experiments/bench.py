@@ -125,11 +125,17 @@ def cpu_to_convergence(trials: int, seed: int, jobs: int) -> dict:
 
 
 def _optional(module: str, args) -> dict | None:
+    """``module.run(args)`` when the module exists; a failure is recorded, not fatal, so
+    the figures measured so far are still written."""
     if importlib.util.find_spec(module.rsplit(".", 1)[0]) is None or \
             importlib.util.find_spec(module) is None:
         print(f"bench: {module} not present, skipped", file=sys.stderr)
         return None
-    return importlib.import_module(module).run(args)
+    try:
+        return importlib.import_module(module).run(args)
+    except Exception as exc:  # noqa: BLE001 -- keep the core figures
+        print(f"bench: {module} failed: {exc!r}", file=sys.stderr)
+        return {"error": repr(exc)}
 
 
 def run(args) -> int:

@@ -42,13 +42,17 @@ def table(result: dict) -> str:
 
 
 def bench_table(result: dict) -> str:
-    rows = []
-    for key, val in result.items():
-        if isinstance(val, dict):
+    """Every leaf of the (nested) bench dict as ``a.b.c  value``; a STAT is one leaf."""
+    rows: list[list[str]] = []
+
+    def walk(prefix: str, val) -> None:
+        if isinstance(val, dict) and "mean" not in val:
             for k, v in val.items():
-                rows.append([f"{key}.{k}", _short(v)])
+                walk(f"{prefix}.{k}" if prefix else str(k), v)
         else:
-            rows.append([key, _short(val)])
+            rows.append([prefix, _short(val)])
+
+    walk("", result)
     return _table(["measure", "value"], rows)
 
 
