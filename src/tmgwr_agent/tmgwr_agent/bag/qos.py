@@ -69,9 +69,24 @@ def profile_to_dict(qos) -> dict[str, Any]:
     }
 
 
+DEFAULT_PROFILE = {
+    'history': 'unknown', 'depth': 0, 'reliability': 'reliable', 'durability': 'volatile',
+    'deadline': INFINITE, 'lifespan': INFINITE, 'liveliness': 'automatic',
+    'liveliness_lease_duration': INFINITE, 'avoid_ros_namespace_conventions': False,
+}
+
+
+def complete(profile: dict[str, Any]) -> dict[str, Any]:
+    """A profile with every key rosbag2 (and rosbags) expect; missing keys get defaults."""
+    out = {k: (dict(v) if isinstance(v, dict) else v) for k, v in DEFAULT_PROFILE.items()}
+    out.update(profile)
+    return out
+
+
 def dump_profiles(profiles: Iterable[dict[str, Any]]) -> str:
     """The YAML text of ``offered_qos_profiles`` (MCAP channel metadata)."""
-    return yaml.safe_dump(list(profiles), default_flow_style=False, sort_keys=False)
+    return yaml.safe_dump([complete(p) for p in profiles], default_flow_style=False,
+                          sort_keys=False)
 
 
 def load_profiles(text: str) -> list[dict[str, Any]]:
