@@ -2,9 +2,9 @@
 
 * goal-change: grouped bars of % visits to the current (and previous) goal per
   transition and agent, error bars = std over trials (Tables 3-5 as one chart);
-* env-change: bars of the steps to reach the goal after the event per agent, with the
-  ``oracle_steps`` lower bound as a dashed line; failed trials (``null``) are marked
-  "never" above the agent's slot (Table 6, Fig. 5);
+* env-change: bars of the mean steps to reach the goal after the event per agent, every
+  trial as a dot (log scale), the ``oracle_steps`` lower bound as a dashed line; failed
+  trials (``null``) are counted, "never" when all failed (Table 6, Fig. 5);
 * sample-complexity: one panel per goal, mean steps per episode every 5th episode,
   log scale (Fig. 6 a-d);
 * timing: grouped bars of CPU seconds for training, goal adaptation and recovery from
@@ -68,26 +68,30 @@ def plot_goal_change(result: dict, path: str | Path) -> None:
 
 
 def plot_env_change(result: dict, path: str | Path) -> None:
+    """Mean steps per agent as bars, every trial as a dot (log scale: the spread can be
+    wide), failed trials counted above the bar, the oracle bound as a dashed line."""
     agents = result["agents"]
     fig, ax = plt.subplots(figsize=(8, 4.5))
     names = list(agents)
-    vals = [_mean_std(agents[a]["steps"]) for a in names]
-    means = np.array([m for m, _ in vals])
-    ax.bar(range(len(names)), np.nan_to_num(means), yerr=[s for _, s in vals], capsize=3,
-           color="tab:blue")
-    for i, (a, m) in enumerate(zip(names, means)):
-        failed = agents[a]["steps"].get("failed", 0)
-        if np.isnan(m):
+    for i, a in enumerate(names):
+        s = agents[a]["steps"]
+        ok = [v for v in s["values"] if v is not None]
+        if s["mean"] is None:
             ax.text(i, 0.02, "never (∞)", rotation=90, ha="center", va="bottom",
                     transform=ax.get_xaxis_transform())
-        elif failed:
-            ax.text(i, m, f"{failed} failed", ha="center", va="bottom", fontsize=7)
+            continue
+        ax.bar(i, s["mean"], 0.6, color="tab:blue", alpha=0.6)
+        ax.plot([i] * len(ok), ok, "k.", ms=4)
+        if s.get("failed"):
+            ax.text(i, max(ok), f"{s['failed']} failed", ha="center", va="bottom",
+                    fontsize=7)
     ax.axhline(result["oracle_steps"], color="k", ls="--",
                label=f"oracle_steps = {result['oracle_steps']}")
+    ax.set_yscale("log")
     ax.set_xticks(range(len(names)), names, rotation=20)
     ax.set_ylabel("steps to reach the goal after the event")
     ax.set_title(f"Changing environment, event {result['event']!r} "
-                 f"({result['trials']} trials) -- Table 6 / Fig. 5")
+                 f"({result['trials']} trials; bar = mean, dots = trials) -- Table 6 / Fig. 5")
     ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=120)
