@@ -206,6 +206,12 @@ def run(args) -> int:
         code = code or 1
     if graph.record_dir:
         say(f"recording: {graph.record_dir}  (./tmgwr report {graph.record_dir})")
+    out_dir = getattr(args, "out", None)      # the experiments demo's results directory
+    if out_dir:
+        path = Path(out_dir) / "graph_demo.json"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(report, indent=2) + "\n")
+        say(f"written: {path}")
     say("DEMO " + json.dumps(report))
     return int(code)
 
