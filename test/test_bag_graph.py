@@ -169,3 +169,10 @@ def test_report_states_the_runs_own_figures(graph_run, tmp_path):
     first = next(e for e in live if e[3] > event['step'] and e[2] == 'goal')
     assert event['first_goal_steps_after'] == first[3] - event['step']
     assert rep['map']['nodes'] > 0 and 0.0 <= rep['map']['mean_reliability'] <= 1.0
+    # shortest paths of the maze in force (from /maze_grid): G 4 steps from S, goal 1 3 steps
+    # (before and after event a, which only blocks the top corridor)
+    assert rep['start_cell'] == [1, 1]
+    assert rep['learning']['optimal_steps'] == 4
+    assert change['optimal_steps'] == 3 and event['optimal_steps'] == 3
+    k = change['episodes_to_optimal']
+    assert k is None or change['steps_per_episode'][k - 1] == 3

@@ -15,6 +15,10 @@ summarise a run:
   steps from the change until the goal is first reached;
 * **events** (``/maze_events`` lines about events and cells): the steps from the event to
   the first time the goal is reached (the env-change scenario's ``steps``);
+* for the initial learning and after every change: the shortest path in the maze then in
+  force (``/maze_grid``, start cell of the first episode), the episodes until one takes it
+  (``episodes_to_optimal``, counted on the run's own episodes: the graph runs no greedy
+  probes) and until 3 in a row take at most 1.5 x it (the demo's "reliable");
 * **map** growth from ``/map`` (``tmgwr_interfaces/SensorimotorMap``): nodes, links, mean
   link reliability E (Eq. 1-2) per snapshot;
 * the **final map** drawn over the maze (``/maze_grid``): every node at the cell where it
@@ -70,7 +74,7 @@ def read_bag(bag: str | Path) -> dict[str, Any]:
     bag = Path(bag)
     data: dict[str, Any] = {'topics': {}, 'goals': [], 'events': [], 'map': [],
                             'winners': {}, 'cells': {}, 'grid': None, 'motivation': None,
-                            'first_goal': None}
+                            'first_goal': None, 'grids': [], 'start_cell': None}
     monitor = EpisodeMonitor()
     obs_times: dict[int, int] = {}
     last_raw: dict[str, tuple[Any, bytes]] = {}
@@ -79,13 +83,15 @@ def read_bag(bag: str | Path) -> dict[str, Any]:
             entry = data['topics'].setdefault(c.topic, {'type': c.msgtype, 'count': 0})
             entry['count'] += c.msgcount
         data['start_ns'], data['end_ns'] = reader.start_time, reader.end_time
-        wanted = {T.OBSERVATION, T.SENSORIMOTOR_STATE, T.MAP, T.GOAL, T.EVENTS}
+        wanted = {T.OBSERVATION, T.SENSORIMOTOR_STATE, T.MAP, T.GOAL, T.EVENTS, T.GRID}
         conns = [c for c in reader.connections if c.topic in wanted]
         for conn, t, raw in reader.messages(connections=conns):
             msg = reader.deserialize(raw, conn.msgtype)
             if conn.topic == T.OBSERVATION:
                 monitor.on_observation(msg)
                 sid = int(msg.step_id)
+                if msg.episode_start and data.get('start_cell') is None:
+                    data['start_cell'] = (int(msg.row), int(msg.col))
                 obs_times.setdefault(sid, t)
                 data['cells'][sid] = (int(msg.row), int(msg.col))
             elif conn.topic == T.SENSORIMOTOR_STATE:
@@ -101,7 +107,12 @@ def read_bag(bag: str | Path) -> dict[str, Any]:
                                                        int(round(msg.point.x)))})
             elif conn.topic == T.EVENTS:
                 data['events'].append({'t': t, 'text': str(msg.data)})
-        for topic in (T.MOTIVATION, T.GRID):    # only the newest of these is needed
+            elif conn.topic == T.GRID:
+                walls = np.asarray(msg.data, dtype=np.int16).reshape(
+                    int(msg.info.height), int(msg.info.width)) >= 50
+                data['grids'].append((t, walls))
+                last_raw[T.GRID] = (conn, raw)
+        for topic in (T.MOTIVATION,):           # only the newest of these is needed
             cs = [c for c in reader.connections if c.topic == topic]
             for conn, _t, raw in reader.messages(connections=cs):
                 last_raw[topic] = (conn, raw)
@@ -166,6 +177,36 @@ def after(episodes, after_step: int, until_step: int | None = None) -> dict:
     }
 
 
+STREAK, SLACK = 3, 1.5        # the demo's "reliable": 3 episodes in a row <= 1.5 x optimal
+
+
+def optimal_steps(data: dict, goal, at_ns: int) -> int | None:
+    """Shortest path from the start cell to ``goal`` in the maze in force at ``at_ns``
+    (the newest ``/maze_grid`` recorded by then)."""
+    from maze_sim.maze import bfs_distances
+    grids = [w for t, w in data['grids'] if t <= at_ns] or [w for _t, w in data['grids'][:1]]
+    if not grids or goal is None or data.get('start_cell') is None:
+        return None
+    d = int(bfs_distances(grids[-1], tuple(data['start_cell']))[tuple(goal)])
+    return d if d >= 0 else None
+
+
+def convergence(eps: list, optimal: int | None) -> dict:
+    """Episodes (1 = the first one counted) until one takes the shortest path, and until
+    ``STREAK`` in a row reach the goal within ``SLACK`` x the shortest path."""
+    first_opt = reliable = None
+    if optimal:
+        for k, e in enumerate(eps, 1):
+            if first_opt is None and e.outcome == 'goal' and e.steps == optimal:
+                first_opt = k
+            last = eps[max(0, k - STREAK):k]
+            if reliable is None and len(last) == STREAK and all(
+                    x.outcome == 'goal' and x.steps <= SLACK * optimal for x in last):
+                reliable = k
+    return {'optimal_steps': optimal, 'episodes_to_optimal': first_opt,
+            'episodes_to_reliable': reliable}
+
+
 def summarise(data: dict, bag: Path) -> dict:
     mon = data['monitor']
     eps = mon.episodes
@@ -177,16 +218,35 @@ def summarise(data: dict, bag: Path) -> dict:
     def next_boundary(step):
         return next((b for b in boundaries if b > step), None)
 
+    times = data['obs_times']
+    end_ns = data.get('end_ns') or 0
+
+    def goal_at(step):
+        cell = list(initial_goal) if initial_goal else None
+        for c in changes:
+            if c['step'] <= step:
+                cell = c['cell']
+        return cell
+
+    def phase(after_step):
+        until = next_boundary(after_step)
+        res = after(eps, after_step, until)
+        in_phase = [e for e in eps if e.end_step > after_step
+                    and (until is None or e.end_step <= until)]
+        at = times.get(after_step + 1, end_ns)
+        res.update(convergence(in_phase, optimal_steps(data, goal_at(after_step + 1), at)))
+        return res
+
     transitions = []
     previous = list(initial_goal) if initial_goal else None
     for c in changes:
         # the new goal is sensed from step c['step']: step c['step'] - 1 is the last one
         # under the old goal (the demo's "at_step" of the /set_goal call)
-        res = after(eps, c['step'] - 1, next_boundary(c['step'] - 1))
-        transitions.append({'step': c['step'], 'from': previous, 'to': c['cell'], **res})
+        transitions.append({'step': c['step'], 'from': previous, 'to': c['cell'],
+                            **phase(c['step'] - 1)})
         previous = c['cell']
-    event_rows = [{'step': e['step'], 'what': e['what'],
-                   **after(eps, e['step'], next_boundary(e['step']))} for e in events]
+    event_rows = [{'step': e['step'], 'what': e['what'], **phase(e['step'])} for e in events]
+    first_phase = phase(mon.first_step_id - 1) if eps else None
     seconds = (data['end_ns'] - data['start_ns']) / 1e9 if data.get('end_ns') else 0.0
     steps_total = mon.last_step_id - mon.first_step_id + 1 if mon.first_step_id >= 0 else 0
     final = data['map'][-1] if data['map'] else None
@@ -204,6 +264,11 @@ def summarise(data: dict, bag: Path) -> dict:
             'outcomes': dict(Counter(e.outcome for e in eps)),
         },
         'initial_goal': initial_goal,
+        'start_cell': list(data['start_cell']) if data.get('start_cell') else None,
+        'learning': ({k: first_phase[k] for k in ('episodes', 'optimal_steps',
+                                                   'episodes_to_optimal',
+                                                   'episodes_to_reliable')}
+                     if first_phase else None),
         'goal_changes': transitions,
         'events': event_rows,
         'map': ({'snapshots': len(data['map']), 'nodes': final['nodes'],
