@@ -122,3 +122,24 @@ def test_sigint_stops_every_node(graph):
         time.sleep(0.1)
         alive = [n for n, pid in pids.items() if os.path.exists(f"/proc/{pid}")]
     assert not alive, f"still running after up stopped: {alive}\n{out}"
+
+
+def test_up_reports_a_node_that_dies_and_stops_the_rest(ros_domain):
+    proc = spawn_module("tmgwr_agent.cli", "up", "--no-record", "--quiet", domain=ros_domain,
+                        name="tmgwr up")
+    with proc:
+        line = proc.wait_for_line(r"^graph up in ROS_DOMAIN_ID=", timeout=120)
+        pids = {name: int(pid) for name, pid in re.findall(r"(\w+) \(pid (\d+)\)", line)}
+        os.kill(pids["map_learner"], signal.SIGKILL)
+        proc.proc.wait(timeout=60)
+        proc._reader.join(timeout=5)
+    out = proc.output
+    assert proc.proc.returncode == 1, out
+    assert re.search(r"node 'map_learner' died \(exit code -9\)", out), out
+    # the others were stopped cleanly, in reverse order
+    stopped = re.search(r"^graph stopped: (.*)$", out, re.M).group(1)
+    assert "map_learner exit -9" in stopped, out
+    for name in ("action_selector", "motivation_estimator", "sensory_preprocessor", "maze_sim"):
+        assert f"{name} exit 0" in stopped, out
+    time.sleep(0.5)
+    assert not [n for n, pid in pids.items() if os.path.exists(f"/proc/{pid}")], out
