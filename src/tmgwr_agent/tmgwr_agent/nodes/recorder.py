@@ -102,7 +102,7 @@ class Recorder(Node):
             'max_bag_duration': (0.0, desc('split into a new file after this many seconds '
                                            '(0: never)', D, 0.0, 1e9)),
             'discovery_period': (0.2, desc('seconds between topic discoveries', D, 0.05, 60.0)),
-            'flush_period': (0.5, desc('seconds between flushes of the open chunk to disk '
+            'flush_period': (0.2, desc('seconds between flushes of the open chunk to disk '
                                        '(bounds what a kill -9 loses; 0: only full chunks)',
                                        D, 0.0, 3600.0)),
             'queue_depth': (1000, desc('minimum subscription history depth', I, 1, 1000000)),
