@@ -210,8 +210,10 @@ class Recorder(Node):
                    for t in meta['topics_with_message_count']}
         total_r, total_w = sum(self.received.values()), sum(written.values())
         for topic in sorted(self.received):
+            failed = self.failed.get(topic, 0)
             self.get_logger().info(f'  {topic}: received {self.received[topic]}, written '
-                                   f'{written.get(topic, 0)}')
+                                   f'{written.get(topic, 0)}'
+                                   + (f', {failed} FAILED to write' if failed else ''))
         files = ', '.join(str(p) for p in self.writer.file_paths())
         self.get_logger().info(
             f'recorded: received {total_r}, written {total_w} messages on '
