@@ -172,9 +172,6 @@ def test_goal_change_by_service_and_same_cells_as_in_process(ros_domain, tmp_pat
         summary = parse_json_line(sim.wait(timeout=180), "SUMMARY ")
     finally:
         stop_graph(procs)
-        import os
-        if os.environ.get("B1_DEBUG"):
-            print(procs["motivation_estimator"].output[-3000:]); print(sim.output[-3000:])
     assert summary["steps"] == steps
     assert procs["motivation_estimator"].proc.returncode in (0, -2), \
         procs["motivation_estimator"].describe("estimator did not stop cleanly")

@@ -46,6 +46,7 @@ from .maze import N_ACTIONS, Maze, MazeError
 from .world import GridWorld
 
 FRAME = "maze"
+WARMUP_STEPS = 200    # the SUMMARY's steady rate leaves out discovery and the first steps
 
 SPECS = (
     Param("maze", "config/mazes/paper_13x17.txt", "maze file (DESIGN.md section 4): "
@@ -125,6 +126,7 @@ class MazeSimNode(Node):
         self.goals_reached = 0
         self.episode_len = 0
         self.t_start = None
+        self.t_warm = None
         self.timer = CallbackTimer()
 
         self.publish_grid()
@@ -178,6 +180,8 @@ class MazeSimNode(Node):
             self.finish()
             return
         self.step_id += 1
+        if self.step_id == WARMUP_STEPS:
+            self.t_warm = time.perf_counter()
         if self.pending_goal is not None:   # a goal change lands on this observation
             self.apply_goal(self.pending_goal)
             self.pending_goal = None
@@ -215,6 +219,9 @@ class MazeSimNode(Node):
         steps = self.step_id + 1
         summary = {"steps": steps, "seconds": round(elapsed, 3),
                    "steps_per_s": round(steps / elapsed, 1) if elapsed > 0 else None,
+                   "steady_steps_per_s": (
+                       round((steps - WARMUP_STEPS) / (time.perf_counter() - self.t_warm), 1)
+                       if self.t_warm and steps > WARMUP_STEPS else None),
                    "goals_reached": self.goals_reached, "episode": self.world.episode,
                    "goal_changes": [[s, list(c)] for s, c in self.goal_changes],
                    "sim_callback": self.timer.summary()}

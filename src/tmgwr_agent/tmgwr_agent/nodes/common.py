@@ -16,7 +16,7 @@
 * Arrays: per-step messages carry flat numeric arrays; :func:`f64` etc. build the
   ``array.array`` rclpy stores from a numpy array in one memcpy, :func:`np_f64` etc. read
   them back without a Python loop.
-* :func:`run`: the Jazzy ``main()`` idiom (init, spin a SingleThreadedExecutor, shutdown
+* :func:`run`: the Jazzy ``main()`` idiom (init, spin an executor (:func:`make_executor`), shutdown
   hook, destroy, try_shutdown), exiting 2 with the error when the node cannot start.
 """
 
@@ -192,27 +192,55 @@ def np_bool(a) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- timing
 class CallbackTimer:
-    """Wall time spent in a node's per-step callback (for 'where the time goes')."""
+    """Time spent in a node's per-step callback (for 'where the time goes'): wall time,
+    and the thread's CPU time (the difference is time the OS gave to other processes)."""
 
     def __init__(self):
         self.n = 0
         self.total = 0.0
-        self._t0 = 0.0
+        self.cpu = 0.0
+        self._t0 = self._c0 = 0.0
 
     def __enter__(self):
         self._t0 = time.perf_counter()
+        self._c0 = time.thread_time()
         return self
 
     def __exit__(self, *exc):
         self.total += time.perf_counter() - self._t0
+        self.cpu += time.thread_time() - self._c0
         self.n += 1
 
     def summary(self) -> str:
         mean = 1e6 * self.total / self.n if self.n else 0.0
-        return f"{self.n} step callbacks, mean {mean:.0f} us, total {self.total:.2f} s"
+        cpu = 1e6 * self.cpu / self.n if self.n else 0.0
+        return (f"{self.n} step callbacks, mean {mean:.0f} us, total {self.total:.2f} s, "
+                f"cpu mean {cpu:.0f} us")
 
 
 # ----------------------------------------------------------------------------- main
+EXECUTORS = ("single", "events")
+
+
+def make_executor():
+    """The executor every node spins, chosen by ``TMGWR_EXECUTOR`` (default ``events``: measured faster here).
+
+    ``single``: rclpy's SingleThreadedExecutor (rebuilds its wait set in Python on every
+    spin; the parameter and type-description services of a node are part of it).
+    ``events``: rclpy.experimental.EventsExecutor (C++ event queue; Jazzy ships it as
+    experimental).
+    """
+    import os
+    kind = os.environ.get("TMGWR_EXECUTOR", "events")
+    if kind not in EXECUTORS:
+        raise ParamError(f"TMGWR_EXECUTOR={kind!r}: expected one of {list(EXECUTORS)}")
+    if kind == "events":
+        from rclpy.experimental import EventsExecutor
+        return EventsExecutor()
+    from rclpy.executors import SingleThreadedExecutor
+    return SingleThreadedExecutor()
+
+
 def run(factory: Callable[[], Any], name: str, args=None) -> int:
     """Init rclpy, build the node, spin it; exit code 2 when it cannot start.
 
@@ -221,7 +249,7 @@ def run(factory: Callable[[], Any], name: str, args=None) -> int:
     stops when it becomes true).
     """
     import rclpy
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.executors import ExternalShutdownException
 
     rclpy.init(args=args if args is not None else sys.argv)
     node = None
@@ -232,7 +260,7 @@ def run(factory: Callable[[], Any], name: str, args=None) -> int:
         except (ParamError, ValueError, OSError) as exc:
             print(f"[{name}] cannot start: {exc}", file=sys.stderr, flush=True)
             return 2
-        executor = SingleThreadedExecutor()
+        executor = make_executor()
         executor.add_node(node)
         try:
             # spin() is spin_once() in a loop; looping ourselves lets a node finish.

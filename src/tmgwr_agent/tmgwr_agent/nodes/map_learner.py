@@ -98,9 +98,11 @@ class MapLearnerNode(Node):
         self.map_pub = self.create_publisher(MapMsg, topics.MAP, LATCHED_QOS)
         self.marker_pub = self.create_publisher(MarkerArray, topics.MAP_MARKERS, LATCHED_QOS)
         self.create_subscription(Features, topics.FEATURES, self.on_features, STEP_QOS)
-        # Marker colours only: the newest field is enough, never stall its publisher.
+        # Marker colours only: the newest field is enough (best effort, depth 1, never
+        # stalls its publisher), kept serialized and decoded only when markers are drawn.
         self.create_subscription(MotivationField, topics.MOTIVATION, self.on_motivation,
-                                 SENSOR_QOS)
+                                 SENSOR_QOS, raw=True)
+        self.motivation_raw: bytes | None = None
         self.create_service(SaveMap, topics.SAVE_MAP, self.on_save)
         self.create_service(LoadMap, topics.LOAD_MAP, self.on_load)
         self.create_timer(1.0 / self.p["publish_rate"], self.publish_map)
@@ -157,8 +159,16 @@ class MapLearnerNode(Node):
         s.terminal = f.terminal
         return s
 
-    def on_motivation(self, msg: MotivationField):
-        self.V = np_f64(msg.potentials)
+    def on_motivation(self, raw: bytes):
+        self.motivation_raw = raw
+
+    def potentials(self) -> np.ndarray:
+        """V of the newest MotivationField (zeros before the first one)."""
+        if self.motivation_raw is not None:
+            from rclpy.serialization import deserialize_message
+            self.V = np_f64(deserialize_message(self.motivation_raw, MotivationField).potentials)
+            self.motivation_raw = None
+        return self.V
 
     # ------------------------------------------------------------------ latched map
     def publish_map(self):
@@ -189,7 +199,8 @@ class MapLearnerNode(Node):
         nodes.header.stamp, nodes.header.frame_id = stamp, "maze"
         nodes.pose.orientation.w = 1.0
         nodes.scale.x = nodes.scale.y = nodes.scale.z = 0.35
-        V = self.V if len(self.V) >= self.map.n else np.zeros(self.map.n)
+        V = self.potentials()
+        V = V if len(V) >= self.map.n else np.zeros(self.map.n)
         vmax = float(V[ids].max()) if len(ids) and V[ids].max() > 0 else 1.0
         for i in ids:
             nodes.points.append(self.position(i))

@@ -8,10 +8,11 @@ when it changes the potentials restart from 0 (Algorithm 1 line 5), exactly as
 :meth:`TMGWRAgent.set_goal` does in-process.
 
 ``/set_goal`` (``tmgwr_interfaces/SetGoal``, x = column, y = row) changes the goal of the
-whole system in one call: a non-finite goal is refused here; otherwise the request goes to
-the simulator (``/maze_sim/set_goal``), which refuses a cell outside the maze or in a wall
-and otherwise moves its terminal cell from its next observation on, whose goal sensation
-then reaches this node. The node stays up whatever the request.
+whole system in one call: a goal that is not finite, outside the maze or in a wall (per the
+simulator's latched grid) is refused with a message; otherwise the cell goes to the
+simulator (``/maze_sim/set_goal``), which moves its terminal cell from its next observation
+on, and that observation's goal sensation reaches this node. The node stays up whatever the
+request.
 """
 
 from __future__ import annotations
@@ -19,9 +20,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 
+from nav_msgs.msg import OccupancyGrid
 from tmgwr_interfaces.msg import MotivationField, SensorimotorState
 from tmgwr_interfaces.srv import SetGoal
 
@@ -29,15 +30,10 @@ from maze_sim.maze import ACTION_VECTORS
 
 from .. import motivation, topics
 from ..motivation import MotivationEstimator
-from ..params import Param
 from ..tmgwr_map import SensorimotorMap
-from .common import (STEP_QOS, CallbackTimer, config_defaults, declare_specs, f64, i32,
+from .common import (LATCHED_QOS, STEP_QOS, CallbackTimer, config_defaults, declare_specs, f64, i32,
                      np_bool, np_f64, np_i64, run)
 
-NODE_SPECS = (
-    Param("set_goal_timeout", 5.0, "seconds /set_goal waits for the simulator's answer",
-          low=0.01, high=600.0),
-)
 
 
 def map_view(m: SensorimotorMap | None, s: SensorimotorState) -> SensorimotorMap:
@@ -60,7 +56,6 @@ class MotivationEstimatorNode(Node):
     def __init__(self):
         super().__init__("motivation_estimator")
         p = declare_specs(self, motivation.SPECS, config_defaults(), section="tmgwr")
-        self.p = declare_specs(self, NODE_SPECS)
         self.core = MotivationEstimator(**p)
         self.view: SensorimotorMap | None = None
         self.goal_x: np.ndarray | None = None
@@ -71,12 +66,12 @@ class MotivationEstimatorNode(Node):
         self.pub = self.create_publisher(MotivationField, topics.MOTIVATION, STEP_QOS)
         self.create_subscription(SensorimotorState, topics.SENSORIMOTOR_STATE, self.on_state,
                                  STEP_QOS)
-        # /set_goal awaits the simulator's answer: service and client in groups of their
-        # own so the per-step callbacks and the client's response run meanwhile.
-        self.sim_goal = self.create_client(SetGoal, topics.SIM_SET_GOAL,
-                                           callback_group=MutuallyExclusiveCallbackGroup())
-        self.create_service(SetGoal, topics.SET_GOAL, self.on_set_goal,
-                            callback_group=MutuallyExclusiveCallbackGroup())
+        # /set_goal checks the cell against the simulator's grid (latched: it arrives
+        # whenever this node starts) and hands it to the simulator's own service.
+        self.walls: np.ndarray | None = None
+        self.create_subscription(OccupancyGrid, topics.GRID, self.on_grid, LATCHED_QOS)
+        self.sim_goal = self.create_client(SetGoal, topics.SIM_SET_GOAL)
+        self.create_service(SetGoal, topics.SET_GOAL, self.on_set_goal)
         self.timer = CallbackTimer()
         self.get_logger().info(f"motivation_estimator ready: {p}")
 
@@ -119,37 +114,49 @@ class MotivationEstimatorNode(Node):
             self.pub.publish(out)
 
     # ------------------------------------------------------------------ runtime goal
-    async def on_set_goal(self, req, resp):
+    def on_grid(self, grid: OccupancyGrid):
+        self.walls = (np.asarray(grid.data, dtype=np.int16) >= 50).reshape(
+            grid.info.height, grid.info.width)
+
+    def on_set_goal(self, req, resp):
+        """Validate against the simulator's latched grid, then hand the cell to maze_sim.
+
+        Answers at once (no nested wait on another service, so any executor can run it);
+        maze_sim checks the cell again when it applies it at its next observation.
+        """
         g = req.goal
+        resp.accepted = False
         if not all(math.isfinite(v) for v in (g.x, g.y, g.z)):
-            resp.accepted = False
             resp.message = f"goal (x={g.x}, y={g.y}, z={g.z}) refused: not finite"
-            self.get_logger().warn(resp.message)
-            return resp
-        if not self.sim_goal.service_is_ready():
-            resp.accepted = False
-            resp.message = (f"goal (x={g.x}, y={g.y}) refused: the simulator's "
-                            f"{topics.SIM_SET_GOAL} is not available")
-            self.get_logger().warn(resp.message)
-            return resp
-        future = self.sim_goal.call_async(SetGoal.Request(goal=g))
-        timer = self.create_timer(self.p["set_goal_timeout"], lambda: future.cancel())
-        try:
-            answer = await future
-        finally:
-            timer.cancel()
-            self.destroy_timer(timer)
-        if answer is None or future.cancelled():
-            resp.accepted = False
-            resp.message = (f"goal (x={g.x}, y={g.y}) refused: no answer from "
-                            f"{topics.SIM_SET_GOAL} within {self.p['set_goal_timeout']} s")
+        elif self.walls is None or not self.sim_goal.service_is_ready():
+            resp.message = (f"goal (x={g.x}, y={g.y}) refused: the simulator is not "
+                            f"available ({topics.GRID} / {topics.SIM_SET_GOAL})")
         else:
-            resp.accepted, resp.message = answer.accepted, answer.message
+            col, row = int(math.floor(g.x + 0.5)), int(math.floor(g.y + 0.5))
+            rows, cols = self.walls.shape
+            if not (0 <= row < rows and 0 <= col < cols):
+                resp.message = (f"goal (x={g.x}, y={g.y}) refused: cell (row {row}, col "
+                                f"{col}) is outside the {rows}x{cols} maze")
+            elif self.walls[row, col]:
+                resp.message = (f"goal (x={g.x}, y={g.y}) refused: cell (row {row}, col "
+                                f"{col}) is a wall")
+            else:
+                future = self.sim_goal.call_async(SetGoal.Request(goal=g))
+                future.add_done_callback(self.on_sim_goal)
+                resp.accepted = True
+                resp.message = (f"goal set to row {row}, col {col} (x={col}, y={row}); the "
+                                "simulator applies it at its next observation")
         if resp.accepted:
             self.get_logger().info(resp.message)
         else:
             self.get_logger().warn(resp.message)
         return resp
+
+    def on_sim_goal(self, future):
+        answer = future.result()
+        if answer is None or not answer.accepted:
+            self.get_logger().error("maze_sim dropped the goal: "
+                                    f"{answer.message if answer else 'no answer'}")
 
     def on_shutdown(self):
         print(f"motivation_estimator: {self.timer.summary()}", flush=True)
