@@ -169,6 +169,7 @@ def test_goal_change_by_service_and_same_cells_as_in_process(ros_domain, tmp_pat
         assert "outside" in res[0]["message"]
         assert "wall" in res[1]["message"]
         assert "not finite" in res[2]["message"]
+        assert procs["motivation_estimator"].running()   # refusals leave the node up
         summary = parse_json_line(sim.wait(timeout=180), "SUMMARY ")
     finally:
         stop_graph(procs)

@@ -223,7 +223,8 @@ EXECUTORS = ("single", "events")
 
 
 def make_executor():
-    """The executor every node spins, chosen by ``TMGWR_EXECUTOR`` (default ``events``: measured faster here).
+    """The executor every node spins, chosen by ``TMGWR_EXECUTOR`` (default ``events``,
+    measured faster here).
 
     ``single``: rclpy's SingleThreadedExecutor (rebuilds its wait set in Python on every
     spin; the parameter and type-description services of a node are part of it).
