@@ -2,14 +2,15 @@
 
 ``./tmgwr up`` starts the five nodes and the recorder as separate processes on a small maze;
 the test changes the goal with ``./tmgwr goal`` and fires an event with ``./tmgwr event``
-while the graph runs, and keeps every episode the run printed live. Then:
+while the graph runs, and keeps every episode the simulator logged live (its own ``episode N: goal ... reached in
+S steps (step E)`` lines, forwarded by ``up``). Then:
 
 * the bag is complete: each per-step topic holds every step id from 0 to the last without
   a gap, the recorder wrote everything it received, and rosbags and Foxglove's own readers
   decode every message of every topic (custom tmgwr_interfaces types, OccupancyGrid,
   MarkerArray, ...);
-* ``./tmgwr report`` states the run's own figures: the same episodes (steps and outcome)
-  as printed live, the goal change at the step the simulator announced, the steps to the
+* ``./tmgwr report`` states the run's own figures: the same episodes (steps, end step)
+  as logged live, the goal change at the step the simulator logged, the steps to the
   goal after the goal change and after the event as computed from the live episodes.
 """
 
@@ -36,18 +37,20 @@ MAZE = """\
 #.1...#
 #######
 """
-EPISODE = re.compile(r'^episode (\d+): (\d+) steps, (.+?) \(step (\d+),')
-OUTCOMES = {'reached the goal': 'goal', 'ended at the previous goal': 'previous_goal',
-            'cut short': 'cut'}
+# The simulator's own log line for every episode that reaches the goal (forwarded by up);
+# on this maze every episode ends at the goal (no step cap, no kept previous goal).
+EPISODE = re.compile(r'\[maze_sim\].*episode (\d+): goal \(\d+, \d+\) reached in (\d+) steps '
+                     r'\(step (\d+)\)')
 PER_STEP = ('/observation', '/features', '/sensorimotor_state', '/motivation', '/action')
 
 
 def live_episodes(up: RosProcess) -> list[tuple[int, int, str, int]]:
+    """(episode, steps, outcome, end step) as the simulator logged them while running."""
     out = []
     for line in up.lines:
-        m = EPISODE.match(line)
+        m = EPISODE.search(line)
         if m:
-            out.append((int(m.group(1)), int(m.group(2)), OUTCOMES[m.group(3)], int(m.group(4))))
+            out.append((int(m.group(1)), int(m.group(2)), 'goal', int(m.group(3))))
     return out
 
 
@@ -77,7 +80,9 @@ def graph_run(tmp_path_factory):
             wait_episodes(up, 4, timeout=90)
             goal = tmgwr_cli('goal', '2', '3', '--domain-id', str(domain), domain=domain)
             assert goal.returncode == 0 and 'accepted' in goal.stdout, goal.stdout + goal.stderr
-            goal_step = int(re.search(r'applies from step (\d+)', goal.stdout).group(1))
+            # the simulator's own log line (forwarded by up) says where the change landed
+            line = up.wait_for_line(r'step \d+: goal -> row 3, col 2', timeout=30)
+            goal_step = int(re.search(r'step (\d+): goal ->', line).group(1))
             n = len(live_episodes(up))
             wait_episodes(up, n + 4, timeout=90)
             event = tmgwr_cli('event', 'a', '--domain-id', str(domain), domain=domain)
@@ -138,7 +143,9 @@ def test_recorder_lost_nothing(graph_run):
 
 def test_report_states_the_runs_own_figures(graph_run, tmp_path):
     bag, live, goal_step, _out = graph_run
-    proc = tmgwr_cli('report', str(bag), '-o', str(tmp_path / 'report'))
+    maze = tmp_path / 'small.txt'
+    maze.write_text(MAZE)
+    proc = tmgwr_cli('report', str(bag), '-o', str(tmp_path / 'report'), '--maze', str(maze))
     assert proc.returncode == 0, proc.stdout + proc.stderr
     rep = json.loads((tmp_path / 'report' / 'report.json').read_text())
     for name in ('steps_per_episode', 'goal_change_visits', 'steps_to_goal', 'map_over_time',
@@ -146,17 +153,21 @@ def test_report_states_the_runs_own_figures(graph_run, tmp_path):
         png = tmp_path / 'report' / f'{name}.png'
         assert png.is_file() and png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
 
-    # the same episodes as printed live (the bag may hold a few more: the graph ran on
-    # while it was being stopped)
+    # the same episodes as logged live (the bag may hold more: the simulator's last lines
+    # can be cut off by the stop)
     n = len(live)
+    assert n >= 11
     assert rep['episodes']['steps_per_episode'][:n] == [s for _e, s, _o, _end in live]
     assert rep['episodes']['end_steps'][:n] == [end for _e, _s, _o, end in live]
+    assert rep['episodes']['outcomes'] == {'goal': rep['episodes']['count']}
     assert rep['steps']['missed'] == 0
 
     # the goal change at the step the simulator announced, with the live figures
     (change,) = rep['goal_changes']
     assert change['step'] == goal_step
     assert change['to'] == [3, 2] and change['from'] == [1, 5]
+    assert (change['from_name'], change['to_name']) == ('G', '1')
+    assert f'goal change at step {goal_step} [1, 5] -> [3, 2]' in proc.stdout
     after = [e for e in live if e[3] > goal_step - 1]
     first = next(e for e in after if e[2] == 'goal')
     assert change['first_goal_steps_after'] == first[3] - (goal_step - 1)

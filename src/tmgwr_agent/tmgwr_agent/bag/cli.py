@@ -46,6 +46,8 @@ def register(subparsers) -> None:
     p.add_argument('bag', metavar='BAG', help='.mcap file or bag directory')
     p.add_argument('-o', '--output', metavar='DIR',
                    help='output directory (default BAG/report or BAG_report/)')
+    p.add_argument('--maze', metavar='FILE',
+                   help="the run's maze file: name the goal cells (G, 1-9) in the report")
     p.set_defaults(func=_report)
 
 
@@ -75,13 +77,29 @@ def _replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _pct(v) -> str:
+    return 'n/a' if v is None else f'{v:.0f}%'
+
+
 def _report(args: argparse.Namespace) -> int:
     from .report import report
     try:
-        res = report(args.bag, args.output)
+        res = report(args.bag, args.output, maze=args.maze)
     except (OSError, ValueError) as exc:
         print(f'report: {exc}', file=sys.stderr)
         return 1
+    eps = res['episodes']
+    print(f'report: {res["steps"]["count"]} steps, {eps["count"]} episodes '
+          f'({", ".join(f"{k} {v}" for k, v in sorted(eps["outcomes"].items()))}); '
+          f'steps per episode: {" ".join(map(str, eps["steps_per_episode"]))}')
+    for t in res['goal_changes']:
+        print(f'  goal change at step {t["step"]} {t["from"]} -> {t["to"]}: {t["episodes"]} '
+              f'episodes, {_pct(t["previous_pct"])} at the previous goal, '
+              f'{_pct(t["current_pct"])} at the current one; goal first reached '
+              f'{t["first_goal_steps_after"]} steps later (shortest path {t["optimal_steps"]})')
+    for e in res['events']:
+        print(f'  {e["what"]} at step {e["step"]}: goal first reached '
+              f'{e["first_goal_steps_after"]} steps later (shortest path {e["optimal_steps"]})')
     print(f'report: {res["output"]["json"]} and {len(res["output"]["figures"])} figures in '
           f'{res["output"]["dir"]}')
     return 0

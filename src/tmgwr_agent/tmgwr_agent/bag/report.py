@@ -474,14 +474,33 @@ def _save(fig, path: Path) -> str:
 
 
 # ----------------------------------------------------------------------------- entry
-def report(bag: str | Path, output: str | Path | None = None, figures: bool = True) -> dict:
-    """Read ``bag``, write ``report.json`` and the figures; returns the summary."""
+def name_goals(summary: dict, maze_path: str | Path) -> None:
+    """Add the maze's goal names (``G``, ``1``-``9``) beside the goal cells, as the
+    experiments CLI names its transitions."""
+    from maze_sim.maze import Maze
+    names = {tuple(c): n for n, c in Maze.from_file(str(maze_path)).goals.items()}
+
+    def name(cell):
+        return names.get(tuple(cell)) if cell is not None else None
+
+    summary['maze'] = str(maze_path)
+    summary['initial_goal_name'] = name(summary['initial_goal'])
+    for t in summary['goal_changes']:
+        t['from_name'], t['to_name'] = name(t['from']), name(t['to'])
+
+
+def report(bag: str | Path, output: str | Path | None = None, figures: bool = True,
+           maze: str | Path | None = None) -> dict:
+    """Read ``bag``, write ``report.json`` and the figures; returns the summary.
+    ``maze`` (the run's maze file, optional) names the goal cells."""
     bag = Path(bag)
     data = read_bag(bag)
     if T.OBSERVATION not in data['topics']:
         raise ValueError(f'{bag} has no {T.OBSERVATION} topic: not a recording of the graph '
                          f'(topics: {", ".join(sorted(data["topics"])) or "none"})')
     summary = summarise(data, bag)
+    if maze:
+        name_goals(summary, maze)
     out = Path(output) if output else default_output(bag)
     out.mkdir(parents=True, exist_ok=True)
     summary['output'] = {'dir': str(out), 'json': str(out / 'report.json'),

@@ -30,11 +30,25 @@ from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescr
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
+from tmgwr_agent import topics
 from tmgwr_agent.bag import definitions
 from tmgwr_agent.bag import qos as bag_qos
 from tmgwr_agent.bag.writer import COMPRESSIONS, BagWriter, TopicInfo
 
 _BIG = 2 ** 62
+
+# The per-step topics of the lockstep ring (topics.py, all reliable volatile: STEP_QOS of
+# nodes/common.py). A node publishes its first message as soon as the ring turns, possibly
+# before periodic discovery has seen its publisher; subscribing to these at start (the
+# ``expect`` parameter) means the recorder is matched as soon as DDS discovers the
+# publisher, so step 0 is recorded on every topic.
+GRAPH_STEP_TOPICS = (
+    f'{topics.OBSERVATION}=tmgwr_interfaces/msg/Observation',
+    f'{topics.FEATURES}=tmgwr_interfaces/msg/Features',
+    f'{topics.SENSORIMOTOR_STATE}=tmgwr_interfaces/msg/SensorimotorState',
+    f'{topics.MOTIVATION}=tmgwr_interfaces/msg/MotivationField',
+    f'{topics.ACTION}=tmgwr_interfaces/msg/Action',
+)
 
 
 def default_output_dir(now: datetime | None = None) -> Path:
@@ -65,10 +79,17 @@ class Recorder(Node):
         self.received: dict[str, int] = {}
         self.failed: dict[str, int] = {}
         self.subscriptions_by_topic: dict[str, object] = {}
+        self.early: set[str] = set()          # subscribed before a publisher was seen
         self._warned: set[str] = set()
         self.get_logger().info(
             f'recording {"all topics" if not self.topic_list else ", ".join(self.topic_list)} '
             f'to {self.writer.directory.resolve()} (compression {p["compression"]})')
+        for topic, type_name in p['expect'].items():
+            if self._wanted(topic):
+                try:
+                    self._subscribe(topic, type_name, infos=None)
+                except definitions.DefinitionError as exc:
+                    self._warn_once(topic, f'{topic} not recorded: {exc}')
         self.discover()
         # Discovery and flushing run on timers in the same single-threaded executor as the
         # subscriptions, so the writer is never used by two threads at once.
@@ -106,6 +127,10 @@ class Recorder(Node):
                                        '(bounds what a kill -9 loses; 0: only full chunks)',
                                        D, 0.0, 3600.0)),
             'queue_depth': (1000, desc('minimum subscription history depth', I, 1, 1000000)),
+            'expect': (list(GRAPH_STEP_TOPICS), desc(
+                'topics (NAME=pkg/msg/Type) subscribed at start, reliable and volatile, '
+                'before any publisher is seen, so their first messages are not missed '
+                '(only those the topics/exclude parameters record)', SA)),
             'drain_max': (100, desc('messages taken directly after each callback before '
                                     'returning to the executor (0: one per callback)',
                                     I, 0, 100000)),
@@ -129,6 +154,15 @@ class Recorder(Node):
         for t in values['topics']:
             if not re.fullmatch(r'/?[A-Za-z~][\w/~{}]*', t):
                 raise ValueError(f"parameter 'topics': {t!r} is not a valid topic name")
+        expect = {}
+        for entry in values['expect']:
+            if not entry:
+                continue
+            name, _, type_name = entry.partition('=')
+            if not (name.startswith('/') and type_name.count('/') == 2):
+                raise ValueError(f"parameter 'expect': {entry!r} is not NAME=pkg/msg/Type")
+            expect[name] = type_name
+        values['expect'] = expect
         return values
 
     # ------------------------------------------------------------------ discovery
@@ -141,6 +175,8 @@ class Recorder(Node):
 
     def discover(self) -> None:
         for topic, types in self.get_topic_names_and_types():
+            if topic in self.early and self.received[topic] == 0:
+                self._check_early(topic)
             if topic in self.subscriptions_by_topic or not self._wanted(topic):
                 continue
             if len(types) != 1:
@@ -159,23 +195,50 @@ class Recorder(Node):
             self._warned.add(topic)
             self.get_logger().warning(text)
 
-    def _subscribe(self, topic: str, type_name: str, infos) -> None:
-        msg_class = definitions.import_message(type_name)
+    def _topic_info(self, topic: str, type_name: str, infos) -> TopicInfo:
+        """What the bag stores about ``topic``: definition, offered QoS, type hash."""
         offered = [bag_qos.profile_to_dict(i.qos_profile) for i in infos]
         hashes = {str(i.topic_type_hash) for i in infos}
-        type_hash = sorted(hashes)[0] if len(hashes) == 1 else definitions.type_hash(type_name)
+        type_hash = sorted(hashes)[0] if len(hashes) == 1 else ''
         if not type_hash.startswith('RIHS'):
             type_hash = definitions.type_hash(type_name)
-        info = TopicInfo(name=topic, type=type_name,
+        return TopicInfo(name=topic, type=type_name,
                          definition=definitions.ros2msg_definition(type_name),
                          offered_qos=offered, type_hash=type_hash)
-        self.writer.add_topic(info)
+
+    def _check_early(self, topic: str) -> None:
+        """An expected topic whose publisher is not reliable would never match the reliable
+        early subscription: subscribe again the ordinary way."""
+        infos = self.get_publishers_info_by_topic(topic)
+        if infos and any(bag_qos.profile_to_dict(i.qos_profile)['reliability'] != 'reliable'
+                         for i in infos):
+            self.get_logger().info(f'{topic}: a publisher is not reliable, subscribing again')
+            self.destroy_subscription(self.subscriptions_by_topic.pop(topic))
+            self.early.discard(topic)
+            del self.received[topic]
+
+    def _subscribe(self, topic: str, type_name: str, infos) -> None:
+        """Raw subscription to ``topic``. ``infos`` (the publishers) None: an expected topic,
+        subscribed before any publisher exists; the topic is added to the bag with its
+        publishers' QoS when its first message arrives."""
+        msg_class = definitions.import_message(type_name)
+        definitions.ros2msg_definition(type_name)          # fail now if it is unknown
+        if infos is None:
+            self.early.add(topic)
+            sub_qos = bag_qos.subscription_qos([{'reliability': 'reliable',
+                                                 'durability': 'volatile'}], self.queue_depth)
+        else:
+            info = self._topic_info(topic, type_name, infos)
+            self.writer.add_topic(info)
+            sub_qos = bag_qos.subscription_qos(info.offered_qos, self.queue_depth)
         self.received[topic] = 0
-        sub_qos = bag_qos.subscription_qos(offered, self.queue_depth)
         write = self.writer.write
         received = self.received
 
         def store(data: bytes, msg_info: dict) -> None:
+            if topic not in self.writer.topics:             # first message of an early one
+                self.writer.add_topic(self._topic_info(
+                    topic, type_name, self.get_publishers_info_by_topic(topic)))
             received[topic] += 1
             try:
                 write(topic, data, msg_info['received_timestamp'],
@@ -201,7 +264,8 @@ class Recorder(Node):
         self.subscriptions_by_topic[topic] = sub
         self.get_logger().info(
             f'subscribed to {topic} [{type_name}] ({sub_qos.reliability.name.lower()}, '
-            f'{sub_qos.durability.name.lower()}, depth {sub_qos.depth})')
+            f'{sub_qos.durability.name.lower()}, depth {sub_qos.depth})'
+            + (' before its publisher appeared' if infos is None else ''))
 
     # ------------------------------------------------------------------ end
     def finish(self) -> None:
