@@ -30,8 +30,10 @@ CALL = r'''
 import json, sys, time
 import rclpy
 from geometry_msgs.msg import Point
-from tmgwr_interfaces.srv import SetGoal, FireEvent, SaveMap
-types = {"SetGoal": SetGoal, "FireEvent": FireEvent, "SaveMap": SaveMap}
+from std_srvs.srv import Trigger
+from tmgwr_interfaces.srv import SetGoal, FireEvent, SaveMap, SetCell
+types = {"SetGoal": SetGoal, "FireEvent": FireEvent, "SaveMap": SaveMap, "SetCell": SetCell,
+         "Trigger": Trigger}
 rclpy.init()
 node = rclpy.create_node("test_client")
 results = []
@@ -198,8 +200,14 @@ def test_detour_after_event_and_learner_restart_from_saved_map(ros_domain, tmp_p
     echo = None
     try:
         wait_until(lambda: len(goals_reached(sim)) >= 10, 120, "goal 2 x10", procs)
-        [res] = call(ros_domain, [["/maze_sim/fire_event", "FireEvent", {"event": "a"}]])
-        assert res["accepted"], res
+        res = call(ros_domain, [
+            ["/maze_sim/set_cell", "SetCell", {"row": 20, "col": 1, "blocked": True}],
+            ["/maze_sim/set_cell", "SetCell", {"row": 11, "col": 5, "blocked": True}],
+            ["/maze_sim/set_cell", "SetCell", {"row": 11, "col": 5, "blocked": False}],
+            ["/maze_sim/fire_event", "FireEvent", {"event": "q"}],
+            ["/maze_sim/fire_event", "FireEvent", {"event": "a"}]])
+        assert [r["accepted"] for r in res] == [False, True, True, False, True], res
+        assert "outside" in res[0]["message"] and "no event named 'q'" in res[3]["message"]
         fired_at = int(sim.wait_for_line(r"event 'a' fired").split("step ")[1].split(":")[0])
         # the old path is cut at (6, 3); the agent finds the detour (>= 46 steps)
         wait_until(lambda: len([s for s in goals_reached(sim) if s > fired_at]) >= 2, 90,
