@@ -2,5 +2,48 @@
 
 One module per node; :mod:`.common` holds what they share (QoS, parameters, flat arrays,
 ``main``). Each per-step callback calls the same core objects, in the same order, as
-:class:`tmgwr_agent.agent.TMGWRAgent` does in-process (see :mod:`tmgwr_agent.reference`).
+:class:`tmgwr_agent.agent.TMGWRAgent` does in-process (:mod:`.reference` is that loop).
+
+One lockstep step goes once around the ring (names in :mod:`tmgwr_agent.topics`)::
+
+    maze_sim            --/observation (Observation)------------> sensory_preprocessor
+    sensory_preprocessor --/features (Features)-----------------> map_learner
+    map_learner          --/sensorimotor_state (SensorimotorState: winner + this
+                           step's map as flat arrays)-----------> motivation_estimator
+    motivation_estimator --/motivation (MotivationField: V + the winner's links)
+                                                       ---------> action_selector
+    action_selector      --/action (Action, NONE after a terminal observation)
+                                                       ---------> maze_sim
+
+Every per-step message carries the ``step_id`` of its observation; the simulator steps only
+on the action for its current step id and resends the observation when none comes
+(``resend_period``); every node answers a step id it already handled with its cached
+output, so a resend never changes what is learnt.
+
+Inspection and control:
+
+=====================  ==================================  ==========================
+name                   type                                by / QoS
+=====================  ==================================  ==========================
+/maze_grid             nav_msgs/OccupancyGrid              maze_sim, latched
+/goal                  geometry_msgs/PointStamped          maze_sim, latched
+/agent_pose            geometry_msgs/PoseStamped           maze_sim, best effort
+/maze_events           std_msgs/String                     maze_sim, latched (last)
+/map                   tmgwr_interfaces/SensorimotorMap    map_learner, latched
+/map_markers           visualization_msgs/MarkerArray      map_learner, latched
+/set_goal              tmgwr_interfaces/srv/SetGoal        motivation_estimator
+/maze_sim/set_goal     tmgwr_interfaces/srv/SetGoal        maze_sim (used by /set_goal)
+/maze_sim/set_cell     tmgwr_interfaces/srv/SetCell        maze_sim
+/maze_sim/fire_event   tmgwr_interfaces/srv/FireEvent      maze_sim
+/maze_sim/reset        std_srvs/srv/Trigger                maze_sim
+/map_learner/save_map  tmgwr_interfaces/srv/SaveMap        map_learner
+/map_learner/load_map  tmgwr_interfaces/srv/LoadMap        map_learner
+=====================  ==================================  ==========================
+
+Coordinates: cell (row, col) is the point x = col, y = row in frame ``maze``.
+Parameters: every core hyperparameter (``config/tmgwr_agent.yaml``, section ``tmgwr``) is
+a read-only ROS parameter of the node that uses it, with its range in the descriptor;
+``--params-file config/tmgwr_agent.yaml`` and ``-p name:=value`` both work; an invalid
+value stops the node at start (exit code 2) naming the parameter. ``TMGWR_EXECUTOR``
+(``events`` default, or ``single``) picks the executor.
 """
