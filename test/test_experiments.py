@@ -228,3 +228,13 @@ def test_malformed_maze_names_line_and_column(tmp_path):
     proc = cli("experiment", "env-change", "--maze", bad, check=False)
     assert proc.returncode == 2
     assert f"{bad}:3:" in proc.stderr
+
+
+# ------------------------------------------------------------------ bench
+def test_bench_times_core_steps_after_convergence():
+    from tmgwr_agent.experiments.bench import bench_default
+    r = bench_default(seed=0, steps=300)
+    assert r["steps"] == 300 and r["free_cells"] == 99
+    assert r["trained_episodes"] is not None          # converged before timing
+    assert 0 < r["p10_us"] <= r["median_us"] <= r["p90_us"] <= r["p99_us"] <= r["max_us"]
+    assert 0 < r["nodes"] <= 2 * 99
