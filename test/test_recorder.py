@@ -314,8 +314,8 @@ def test_replay_rerecorded_is_byte_identical_with_timing(ros_domain, tmp_path):
                              '--wait-subscribers', '1', '--delay', '0.2'],
                             ros_env(ros_domain), name='replay-loop')
         with player:
-            rec.wait_for_line(r'subscribed to /observation', timeout=30)
-            time.sleep(1.0 + 2 * 2.0 / 4)          # two passes of a 2 s recording at 4x
+            player.wait_for_line(r'^replay: 1 topics', timeout=30)
+            time.sleep(0.2 + 1.0 + 2 * 2.0 / 4)    # delay, matching, two passes at 4x
             player.stop()
         rec.stop()
     c = messages(third)['/observation']

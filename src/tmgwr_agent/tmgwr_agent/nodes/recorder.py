@@ -4,7 +4,14 @@ rosbag2 is not installable from the registries here, so the project records itse
 (notes/mcap-recording.md). The node subscribes to every topic (or the ``topics`` list) with
 *raw* subscriptions, which hand over the CDR bytes as they came off the wire, and writes
 those bytes unchanged with :class:`tmgwr_agent.bag.writer.BagWriter` (no second
-serialization). New topics are discovered every ``discovery_period`` seconds.
+serialization). New topics are discovered every ``discovery_period`` seconds; the ring's
+per-step topics (``expect``) are subscribed at start, before their publishers exist, so the
+first step of a starting graph is recorded on every topic.
+
+Throughput: the executor's per-message round trip (wait set, task) is what limits an rclpy
+recorder (notes/mcap-recording.md: ~2k msg/s lossless); each callback therefore also takes
+whatever else is queued on its subscription (``drain_max``), which about doubles the
+lossless rate (``./tmgwr bench``, part ``bag``).
 
 QoS: each topic is subscribed with a profile compatible with all its publishers
 (:func:`tmgwr_agent.bag.qos.subscription_qos`): reliable when they all are, transient local
@@ -81,9 +88,6 @@ class Recorder(Node):
         self.subscriptions_by_topic: dict[str, object] = {}
         self.early: set[str] = set()          # subscribed before a publisher was seen
         self._warned: set[str] = set()
-        self.get_logger().info(
-            f'recording {"all topics" if not self.topic_list else ", ".join(self.topic_list)} '
-            f'to {self.writer.directory.resolve()} (compression {p["compression"]})')
         for topic, type_name in p['expect'].items():
             if self._wanted(topic):
                 try:
@@ -91,6 +95,11 @@ class Recorder(Node):
                 except definitions.DefinitionError as exc:
                     self._warn_once(topic, f'{topic} not recorded: {exc}')
         self.discover()
+        # The line the graph supervisor waits for: the writer is open and the expected
+        # topics are subscribed.
+        self.get_logger().info(
+            f'recording {"all topics" if not self.topic_list else ", ".join(self.topic_list)} '
+            f'to {self.writer.directory.resolve()} (compression {p["compression"]})')
         # Discovery and flushing run on timers in the same single-threaded executor as the
         # subscriptions, so the writer is never used by two threads at once.
         self.create_timer(p['discovery_period'], self.discover)
