@@ -10,6 +10,7 @@ continues with the same map; every node refuses an invalid parameter, naming it.
 
 from __future__ import annotations
 
+import ast
 import json
 import re
 import time
@@ -61,6 +62,7 @@ rclpy.shutdown()
 
 # Prints the latched map (node count, link count, weights) once it arrives.
 MAP_ECHO = r'''
+import ast
 import json
 import rclpy
 from rclpy.qos import QoSProfile, DurabilityPolicy, ReliabilityPolicy
@@ -143,6 +145,27 @@ def test_each_node_refuses_an_invalid_parameter(ros_domain):
             assert p.proc.returncode == 2, p.describe(f"{exe} did not exit with code 2")
             assert f"'{param}'" in out and "cannot start" in out, out
             assert "ready" not in out
+
+
+def test_parameters_default_to_config_and_follow_params_file_and_overrides(ros_domain,
+                                                                           tmp_path):
+    from tmgwr_agent.params import load_yaml
+    config = load_yaml(ROOT / "config" / "tmgwr_agent.yaml", "tmgwr")
+    params_file = tmp_path / "p.yaml"
+    params_file.write_text("/**:\n  ros__parameters:\n    tmgwr:\n      gamma: 0.5\n"
+                           "      beta: 0.25\n")
+    runs = {"default": [], "file": ["--params-file", str(params_file)],
+            "both": ["--params-file", str(params_file), "-p", "gamma:=0.9"]}
+    procs = {k: ros2_run("tmgwr_agent", "motivation_estimator", "--ros-args", *a,
+                         domain=ros_domain, name=k) for k, a in runs.items()}
+    seen = {}
+    for k, p in procs.items():
+        with p:
+            line = p.wait_for_line("motivation_estimator ready", timeout=60)
+            seen[k] = ast.literal_eval(line.split("ready: ", 1)[1])   # its parameter dict
+    assert seen["default"] == {k: config[k] for k in seen["default"]}
+    assert (seen["file"]["gamma"], seen["file"]["beta"]) == (0.5, 0.25)
+    assert (seen["both"]["gamma"], seen["both"]["beta"]) == (0.9, 0.25)
 
 
 # --------------------------------------------------------------------------- the run
