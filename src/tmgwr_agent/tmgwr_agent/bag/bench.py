@@ -122,6 +122,10 @@ def run(args=None) -> dict:
         os.close(lock)
     return {
         'recorder_lossless_msg_per_s': best,
+        # to compare with graph.graph_steps_per_s: the recorder must take 5 messages a step
+        'graph_messages_per_step': 5,
+        'cpus': os.cpu_count(),
+        'load_avg_1min': round(os.getloadavg()[0], 2),
         'method': f'one publisher process, reliable Observation messages, {seconds:g} s per '
                   f'rate, rates doubling from {start:g} (then one bisection step); '
                   f'lossless = every step id in the bag. The graph publishes 5 '
