@@ -28,6 +28,8 @@ from . import qos as bag_qos
 from .writer import (COMPRESSIONS, FileStats, McapFile, TopicInfo, bag_metadata,
                      write_metadata_yaml)
 
+MAGIC = b'\x89MCAP0\r\n'     # MCAP version 0 magic, at the start of every file
+
 
 @dataclass
 class FileRecovery:
@@ -50,6 +52,10 @@ def recover_file(source: Path, output: Path, compression: str = 'zstd',
                  chunk_size: int = 1 << 20) -> tuple[FileRecovery, list[TopicInfo], FileStats]:
     """Stream-read ``source`` and write everything readable into the new file ``output``."""
     source, output = Path(source), Path(output)
+    with open(source, 'rb') as f:
+        head = f.read(8)
+    if head and not MAGIC.startswith(head[:len(MAGIC)]):
+        raise ValueError(f'{source} is not an MCAP file (it starts with {head!r})')
     result = FileRecovery(source=source, output=output, size=source.stat().st_size)
     out = McapFile(output, compression, chunk_size, library='tmgwr_agent recover (mcap-python)')
     schemas: dict[int, Schema] = {}
