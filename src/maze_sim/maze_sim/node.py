@@ -201,7 +201,8 @@ class MazeSimNode(Node):
         m.terminal = bool(terminal)
         m.row, m.col = (int(v) for v in self.world.cell)
         self.current = m
-        self.trajectory.append((self.step_id, self.world.episode, m.row, m.col))
+        if self.p["trajectory_path"]:       # kept only when asked for (runs may be long)
+            self.trajectory.append((self.step_id, self.world.episode, m.row, m.col))
         self.obs_pub.publish(m)
         self.sent_at = time.monotonic()
 
