@@ -28,7 +28,7 @@ import yaml
 from ros_helpers import ROOT, RosProcess, ros_env
 from test_recorder import foxglove_decoder, mcap_files, tmgwr_cli  # noqa: F401 (fixture)
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 MAZE = """\
 #######

@@ -23,7 +23,7 @@ import yaml
 
 from ros_helpers import ROOT, RosProcess, base_env, ros2_run, ros_env, spawn_python
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 JS_DIR = ROOT / 'test' / 'js'
 NODE = os.environ.get('TMGWR_NODE', '/usr/bin/node')
