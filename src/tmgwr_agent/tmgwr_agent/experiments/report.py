@@ -8,9 +8,9 @@ from .stats import fmt
 def _table(header: list[str], rows: list[list[str]]) -> str:
     widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h)
               for i, h in enumerate(header)]
-    line = "  ".join(h.ljust(w) for h, w in zip(header, widths))
+    line = "  ".join(h.ljust(w) for h, w in zip(header, widths)).rstrip()
     out = [line, "  ".join("-" * w for w in widths)]
-    out += ["  ".join(c.ljust(w) for c, w in zip(r, widths)) for r in rows]
+    out += ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
     return "\n".join(out)
 
 
@@ -42,7 +42,8 @@ def table(result: dict) -> str:
 
 
 def bench_table(result: dict) -> str:
-    """Every leaf of the (nested) bench dict as ``a.b.c  value``; a STAT is one leaf."""
+    """Every leaf of the (nested) bench dict as ``a.b.c  value``; a STAT is one leaf; long
+    values are cut at 90 characters (the JSON has them whole)."""
     rows: list[list[str]] = []
 
     def walk(prefix: str, val) -> None:
@@ -50,7 +51,8 @@ def bench_table(result: dict) -> str:
             for k, v in val.items():
                 walk(f"{prefix}.{k}" if prefix else str(k), v)
         else:
-            rows.append([prefix, _short(val)])
+            text = _short(val)
+            rows.append([prefix, text if len(text) <= 90 else text[:87] + "..."])
 
     walk("", result)
     return _table(["measure", "value"], rows)
