@@ -32,9 +32,9 @@ import json, sys, time
 import rclpy
 from geometry_msgs.msg import Point
 from std_srvs.srv import Trigger
-from tmgwr_interfaces.srv import SetGoal, FireEvent, SaveMap, SetCell
-types = {"SetGoal": SetGoal, "FireEvent": FireEvent, "SaveMap": SaveMap, "SetCell": SetCell,
-         "Trigger": Trigger}
+from tmgwr_interfaces.srv import SetGoal, FireEvent, SaveMap, LoadMap, SetCell
+types = {"SetGoal": SetGoal, "FireEvent": FireEvent, "SaveMap": SaveMap, "LoadMap": LoadMap,
+         "SetCell": SetCell, "Trigger": Trigger}
 rclpy.init()
 node = rclpy.create_node("test_client")
 results = []
@@ -257,6 +257,13 @@ def test_detour_after_event_and_learner_restart_from_saved_map(ros_domain, tmp_p
         # the learner continues the ring with the same map
         wait_until(lambda: len(goals_reached(sim)) >= before + 2, 90, "goal after restart",
                    procs)
+        res = call(ros_domain, [
+            ["/map_learner/save_map", "SaveMap", {"path": str(tmp_path / "on_request.npz")}],
+            ["/map_learner/load_map", "LoadMap", {"path": str(tmp_path / "missing.npz")}]])
+        assert res[0]["success"] and res[0]["path"] == str(tmp_path / "on_request.npz"), res
+        assert not res[1]["success"] and "missing.npz" in res[1]["message"], res
+        with np.load(tmp_path / "on_request.npz") as d:
+            assert int(d["step_id"]) > int(saved["step_id"])    # it went on learning
     finally:
         stop_graph(procs)
         if echo is not None:
