@@ -175,6 +175,7 @@ def test_report_states_the_runs_own_figures(graph_run, tmp_path):
     assert "event 'a'" in event['what']
     in_phase = [e for e in after if e[3] <= event['step']]
     assert change['episodes'] == len(in_phase)
+    assert change['previous_pct'] <= change['previous_visit_pct'] <= 100.0
     assert change['current_pct'] == pytest.approx(
         100.0 * sum(e[2] == 'goal' for e in in_phase) / len(in_phase))
     first = next(e for e in live if e[3] > event['step'] and e[2] == 'goal')

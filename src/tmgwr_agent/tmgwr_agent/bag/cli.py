@@ -94,7 +94,8 @@ def _report(args: argparse.Namespace) -> int:
           f'steps per episode: {" ".join(map(str, eps["steps_per_episode"]))}')
     for t in res['goal_changes']:
         print(f'  goal change at step {t["step"]} {t["from"]} -> {t["to"]}: {t["episodes"]} '
-              f'episodes, {_pct(t["previous_pct"])} at the previous goal, '
+              f'episodes, {_pct(t["previous_pct"])} ended at the previous goal '
+              f'({_pct(t.get("previous_visit_pct"))} passed its cell), '
               f'{_pct(t["current_pct"])} at the current one; goal first reached '
               f'{t["first_goal_steps_after"]} steps later (shortest path {t["optimal_steps"]})')
     for e in res['events']:

@@ -11,8 +11,10 @@ summarise a run:
 * **goal changes** (``/maze_events`` lines ``step N: goal -> row R, col C``, the step whose
   observation first carries the new goal; else ``/goal`` messages): for each change, the
   episodes until the next change and the % of them that ended at the previous and at the
-  current goal (the goal-change scenario's ``previous_pct`` / ``current_pct``), and the
-  steps from the change until the goal is first reached;
+  current goal (the goal-change scenario's ``previous_pct`` / ``current_pct``), the % whose
+  path stood on the previous goal's cell at all (``previous_visit_pct``: in the graph the
+  previous goal does not end an episode), and the steps from the change until the goal is
+  first reached;
 * **events** (``/maze_events`` lines about events and cells): the steps from the event to
   the first time the goal is reached (the env-change scenario's ``steps``);
 * for the initial learning and after every change: the shortest path in the maze then in
@@ -228,13 +230,24 @@ def summarise(data: dict, bag: Path) -> dict:
                 cell = c['cell']
         return cell
 
-    def phase(after_step):
+    # first step of every episode: the step after the previous episode's end
+    starts = {id(e): (eps[k - 1].end_step + 1 if k else mon.first_step_id)
+              for k, e in enumerate(eps)}
+
+    def phase(after_step, previous_cell=None):
         until = next_boundary(after_step)
         res = after(eps, after_step, until)
         in_phase = [e for e in eps if e.end_step > after_step
                     and (until is None or e.end_step <= until)]
         at = times.get(after_step + 1, end_ns)
         res.update(convergence(in_phase, optimal_steps(data, goal_at(after_step + 1), at)))
+        if previous_cell is not None:
+            # the previous goal need not end an episode (the graph's /set_goal drops it):
+            # count the episodes whose path stood on its cell at all
+            cell = tuple(previous_cell)
+            passed = sum(any(data['cells'].get(s) == cell
+                             for s in range(starts[id(e)], e.end_step + 1)) for e in in_phase)
+            res['previous_visit_pct'] = 100.0 * passed / len(in_phase) if in_phase else None
         return res
 
     transitions = []
@@ -243,7 +256,7 @@ def summarise(data: dict, bag: Path) -> dict:
         # the new goal is sensed from step c['step']: step c['step'] - 1 is the last one
         # under the old goal (the demo's "at_step" of the /set_goal call)
         transitions.append({'step': c['step'], 'from': previous, 'to': c['cell'],
-                            **phase(c['step'] - 1)})
+                            **phase(c['step'] - 1, previous)})
         previous = c['cell']
     event_rows = [{'step': e['step'], 'what': e['what'], **phase(e['step'])} for e in events]
     first_phase = phase(mon.first_step_id - 1) if eps else None
@@ -332,18 +345,21 @@ def _figures(data: dict, summary: dict, out: Path) -> list[str]:
     fig, ax = plt.subplots(figsize=(max(4, 1.6 * len(tr) + 2), 3.5))
     if tr:
         x = np.arange(len(tr))
-        ax.bar(x - 0.2, [t['previous_pct'] or 0 for t in tr], 0.4, label='previous goal',
-               color='tab:orange')
-        ax.bar(x + 0.2, [t['current_pct'] or 0 for t in tr], 0.4, label='current goal',
-               color='tab:green')
+        ax.bar(x - 0.27, [t['previous_pct'] or 0 for t in tr], 0.27,
+               label='ended at the previous goal', color='tab:orange')
+        ax.bar(x, [t.get('previous_visit_pct') or 0 for t in tr], 0.27,
+               label="passed the previous goal's cell", color='navajowhite')
+        ax.bar(x + 0.27, [t['current_pct'] or 0 for t in tr], 0.27,
+               label='ended at the current goal', color='tab:green')
+        ax.legend(fontsize=7, loc='upper center', ncol=1)
         ax.set_xticks(x, [f'{tuple(t["from"]) if t["from"] else "?"}->{tuple(t["to"])}\n'
                           f'step {t["step"]}, {t["episodes"]} ep.' for t in tr], fontsize=7)
-        ax.legend(fontsize=8)
     else:
         ax.text(0.5, 0.5, 'no goal change recorded', ha='center', va='center',
                 transform=ax.transAxes)
-    ax.set_ylim(0, 100)
-    ax.set_ylabel('% of episodes ending there')
+    ax.set_ylim(0, 140)                     # room for the legend above the bars
+    ax.set_yticks(range(0, 101, 20))
+    ax.set_ylabel('% of the episodes after the change')
     ax.set_title('Visits after each goal change')
     files.append(_save(fig, out / 'goal_change_visits.png'))
 
