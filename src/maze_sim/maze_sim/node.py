@@ -203,7 +203,7 @@ class MazeSimNode(Node):
         self.current = m
         if self.p["trajectory_path"]:       # kept only when asked for (runs may be long)
             self.trajectory.append((self.step_id, self.world.episode, m.row, m.col))
-        self.obs_pub.publish(m)
+        self.timer.publish(self.obs_pub, m)
         self.sent_at = time.monotonic()
 
     def check_resend(self):

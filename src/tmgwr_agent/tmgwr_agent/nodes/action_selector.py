@@ -79,7 +79,7 @@ class ActionSelectorNode(Node):
                 a.action = int(action)
                 a.motor = f64(ACTION_VECTORS[action])
             self.last_step, self.last_out = f.step_id, a
-            self.pub.publish(a)
+            self.timer.publish(self.pub, a)
 
     def on_shutdown(self):
         print(f"action_selector: {self.timer.summary()}", flush=True)

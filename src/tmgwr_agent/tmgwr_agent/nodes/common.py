@@ -199,6 +199,7 @@ class CallbackTimer:
         self.n = 0
         self.total = 0.0
         self.cpu = 0.0
+        self.pub = 0.0
         self._t0 = self._c0 = 0.0
 
     def __enter__(self):
@@ -211,11 +212,18 @@ class CallbackTimer:
         self.cpu += time.thread_time() - self._c0
         self.n += 1
 
+    def publish(self, publisher, msg) -> None:
+        """publisher.publish(msg), its wall time counted apart (conversion to C,
+        serialization and the middleware's write)."""
+        t0 = time.perf_counter()
+        publisher.publish(msg)
+        self.pub += time.perf_counter() - t0
+
     def summary(self) -> str:
-        mean = 1e6 * self.total / self.n if self.n else 0.0
-        cpu = 1e6 * self.cpu / self.n if self.n else 0.0
-        return (f"{self.n} step callbacks, mean {mean:.0f} us, total {self.total:.2f} s, "
-                f"cpu mean {cpu:.0f} us")
+        k = 1e6 / self.n if self.n else 0.0
+        return (f"{self.n} step callbacks, mean {k * self.total:.0f} us, total "
+                f"{self.total:.2f} s, cpu mean {k * self.cpu:.0f} us, of which publish "
+                f"{k * self.pub:.0f} us")
 
 
 # ----------------------------------------------------------------------------- main

@@ -129,7 +129,7 @@ class MapLearnerNode(Node):
             self.map.step(x, None if f.episode_start else np_f64(f.motor), learn=True)
             self.last_step = f.step_id
             self.last_out = self.make_state(f)
-            self.state_pub.publish(self.last_out)
+            self.timer.publish(self.state_pub, self.last_out)
 
     def make_state(self, f: Features) -> SensorimotorState:
         m = self.map

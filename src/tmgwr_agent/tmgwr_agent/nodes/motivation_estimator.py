@@ -111,7 +111,7 @@ class MotivationEstimatorNode(Node):
             out.goal_reached = s.goal_reached
             out.terminal = s.terminal
             self.last_step, self.last_out = s.step_id, out
-            self.pub.publish(out)
+            self.timer.publish(self.pub, out)
 
     # ------------------------------------------------------------------ runtime goal
     def on_grid(self, grid: OccupancyGrid):

@@ -50,7 +50,7 @@ class SensoryPreprocessorNode(Node):
             f.goal_reached = m.goal_reached
             f.terminal = m.terminal
             self.last_step, self.last_out = m.step_id, f
-            self.pub.publish(f)
+            self.timer.publish(self.pub, f)
 
     def on_shutdown(self):
         print(f"sensory_preprocessor: {self.timer.summary()}", flush=True)
