@@ -376,6 +376,13 @@ def _figures(data: dict, summary: dict, out: Path) -> list[str]:
             ax.annotate('not reached' if v is None else str(v), (b.get_x() + b.get_width() / 2,
                         b.get_height()), ha='center', va='bottom', fontsize=8)
         ax.set_xticks(range(len(rows)), [label for label, _v in rows], fontsize=7)
+        optimal = [t['optimal_steps'] for t in tr] + [e['optimal_steps']
+                                                      for e in summary['events']]
+        xs = [k for k, o in enumerate(optimal) if o]
+        if xs:
+            ax.scatter(xs, [optimal[k] for k in xs], marker='_', s=900, c='k', zorder=3,
+                       label='shortest path')
+            ax.legend(fontsize=8, loc='upper left', markerscale=0.4)
     else:
         ax.text(0.5, 0.5, 'no goal change or event recorded', ha='center', va='center',
                 transform=ax.transAxes)
