@@ -87,6 +87,7 @@ class Recorder(Node):
         self.failed: dict[str, int] = {}
         self.subscriptions_by_topic: dict[str, object] = {}
         self.early: set[str] = set()          # subscribed before a publisher was seen
+        self.early_types: dict[str, str] = {}
         self._warned: set[str] = set()
         for topic, type_name in p['expect'].items():
             if self._wanted(topic):
@@ -185,7 +186,7 @@ class Recorder(Node):
     def discover(self) -> None:
         for topic, types in self.get_topic_names_and_types():
             if topic in self.early and self.received[topic] == 0:
-                self._check_early(topic)
+                self._check_early(topic, types)
             if topic in self.subscriptions_by_topic or not self._wanted(topic):
                 continue
             if len(types) != 1:
@@ -215,13 +216,18 @@ class Recorder(Node):
                          definition=definitions.ros2msg_definition(type_name),
                          offered_qos=offered, type_hash=type_hash)
 
-    def _check_early(self, topic: str) -> None:
-        """An expected topic whose publisher is not reliable would never match the reliable
-        early subscription: subscribe again the ordinary way."""
+    def _check_early(self, topic: str, types: list[str]) -> None:
+        """An expected topic whose publisher is not reliable, or of another type, would never
+        match the early subscription: subscribe again the ordinary way."""
         infos = self.get_publishers_info_by_topic(topic)
-        if infos and any(bag_qos.profile_to_dict(i.qos_profile)['reliability'] != 'reliable'
-                         for i in infos):
-            self.get_logger().info(f'{topic}: a publisher is not reliable, subscribing again')
+        if not infos:
+            return
+        unreliable = any(bag_qos.profile_to_dict(i.qos_profile)['reliability'] != 'reliable'
+                         for i in infos)
+        if unreliable or types != [self.early_types[topic]]:
+            why = 'a publisher is not reliable' if unreliable else f'types {types}'
+            self.get_logger().info(f'{topic}: {why}: the early subscription does not match, '
+                                   f'subscribing again')
             self.destroy_subscription(self.subscriptions_by_topic.pop(topic))
             self.early.discard(topic)
             del self.received[topic]
@@ -234,6 +240,7 @@ class Recorder(Node):
         definitions.ros2msg_definition(type_name)          # fail now if it is unknown
         if infos is None:
             self.early.add(topic)
+            self.early_types[topic] = type_name
             sub_qos = bag_qos.subscription_qos([{'reliability': 'reliable',
                                                  'durability': 'volatile'}], self.queue_depth)
         else:
