@@ -23,22 +23,28 @@ import numpy as np  # noqa: E402
 
 
 def _mean_std(s):
+    """(mean, std, failed trials) of a STAT; NaN mean when every trial failed."""
+    failed = (s or {}).get("failed", 0)
     if not s or s.get("mean") is None:
-        return np.nan, 0.0
-    return s["mean"], s["std"]
+        return np.nan, 0.0, failed
+    return s["mean"], s["std"], failed
 
 
 def _grouped(ax, groups, series, title, ylabel, log=False):
-    """Bars: ``series = {label: [(mean, std) per group]}``."""
+    """Bars: ``series = {label: [(mean, std, failed) per group]}``; "never" where every
+    trial failed, "k failed" above a bar where some did."""
     n = max(len(series), 1)
     width = 0.8 / n
     x = np.arange(len(groups))
     for i, (label, vals) in enumerate(series.items()):
-        means = np.array([m for m, _ in vals], dtype=float)
-        stds = np.array([s for _, s in vals], dtype=float)
+        means = np.array([v[0] for v in vals], dtype=float)
+        stds = np.array([v[1] for v in vals], dtype=float)
         pos = x - 0.4 + width * (i + 0.5)
         ax.bar(pos, np.nan_to_num(means), width, yerr=stds, capsize=2, label=label)
-        for p, m in zip(pos, means):
+        for p, m, sd, v in zip(pos, means, stds, vals):
+            if not np.isnan(m) and v[2]:
+                ax.text(p, m + sd, f"{v[2]} failed", rotation=90, ha="center",
+                        va="bottom", fontsize=7)
             if np.isnan(m):
                 ax.text(p, 0.02, "never", rotation=90, ha="center", va="bottom", fontsize=7,
                         transform=ax.get_xaxis_transform())
@@ -47,6 +53,8 @@ def _grouped(ax, groups, series, title, ylabel, log=False):
     ax.set_ylabel(ylabel)
     if log:
         ax.set_yscale("log")
+    lo, hi = ax.get_ylim()
+    ax.set_ylim(lo, hi * (10 if log else 1.15))     # room for the "k failed" labels
     ax.legend(fontsize=7)
 
 
@@ -59,7 +67,7 @@ def plot_goal_change(result: dict, path: str | Path) -> None:
                            (axes[1], "previous_pct", "% episodes ending at the previous goal")):
         series = {a: [_mean_std(t[key]) for t in d["transitions"]] for a, d in agents.items()}
         _grouped(ax, groups, series, title, "% of episodes")
-        ax.set_ylim(0, 105)
+        ax.set_ylim(0, 118)
     fig.suptitle(f"Goal change ({result['episodes']} episodes per goal, "
                  f"{result['trials']} trials) -- Tables 3-5")
     fig.tight_layout()
