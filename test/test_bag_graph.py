@@ -2,8 +2,8 @@
 
 ``./tmgwr up`` starts the five nodes and the recorder as separate processes on a small maze;
 the test changes the goal with ``./tmgwr goal`` and fires an event with ``./tmgwr event``
-while the graph runs, and keeps every episode the simulator logged live (its own ``episode N: goal ... reached in
-S steps (step E)`` lines, forwarded by ``up``). Then:
+while the graph runs, and keeps every episode the simulator logged live (its own
+``episode N: goal ... reached in S steps (step E)`` lines, forwarded by ``up``). Then:
 
 * the bag is complete: each per-step topic holds every step id from 0 to the last without
   a gap, the recorder wrote everything it received, and rosbags and Foxglove's own readers
@@ -18,9 +18,7 @@ from __future__ import annotations
 
 import json
 import re
-import subprocess
 import time
-from pathlib import Path
 
 import pytest
 import yaml

@@ -122,7 +122,8 @@ def foxglove_decoder():
                               capture_output=True, text=True, timeout=120)
         assert proc.stdout, f'decode.js printed nothing:\n{proc.stderr}'
         result = json.loads(proc.stdout)
-        assert proc.returncode == 0, f'Foxglove readers failed:\n{json.dumps(result)[:4000]}\n{proc.stderr}'
+        assert proc.returncode == 0, \
+            f'Foxglove readers failed:\n{json.dumps(result)[:4000]}\n{proc.stderr}'
         return result
     return decode
 

@@ -61,7 +61,8 @@ def _recover(args: argparse.Namespace) -> int:
     for r in results:
         print(r.describe())
     total = sum(r.messages for r in results)
-    print(f'recover: {total} messages saved into {results[0].output if len(results) == 1 else results[0].output.parent}')
+    where = results[0].output if len(results) == 1 else results[0].output.parent
+    print(f'recover: {total} messages saved into {where}')
     return 0
 
 

@@ -76,7 +76,7 @@ def read_bag(bag: str | Path) -> dict[str, Any]:
     bag = Path(bag)
     data: dict[str, Any] = {'topics': {}, 'goals': [], 'events': [], 'map': [],
                             'winners': {}, 'cells': {}, 'grid': None, 'motivation': None,
-                            'first_goal': None, 'grids': [], 'start_cell': None}
+                            'grids': [], 'start_cell': None}
     monitor = EpisodeMonitor()
     obs_times: dict[int, int] = {}
     last_raw: dict[str, tuple[Any, bytes]] = {}
