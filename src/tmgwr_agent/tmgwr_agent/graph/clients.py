@@ -96,6 +96,23 @@ def reset_request():
 
 
 # ----------------------------------------------------------------------- episodes
+MONITOR_DEPTH = 10000
+"""Observations the monitor's reader keeps before the oldest is dropped: 20 s of the
+lockstep graph at 500 steps/s. The ring's own STEP_QOS depth (10) is enough for a node that
+answers every step, but the observer is a bystander that can fall behind by hundreds of
+steps while it prints or waits for a service (measured: 266 lost at 510 steps/s on 2 cores
+with depth 10). A reliable keep-last reader never slows the publisher down, so a deep
+history costs only memory (about 1 MB here)."""
+
+
+def monitor_qos():
+    """STEP_QOS (reliable, volatile) with a :data:`MONITOR_DEPTH` history."""
+    from rclpy.qos import QoSProfile
+    from tmgwr_agent.nodes.common import STEP_QOS
+    return QoSProfile(history=STEP_QOS.history, depth=MONITOR_DEPTH,
+                      reliability=STEP_QOS.reliability, durability=STEP_QOS.durability)
+
+
 @dataclass
 class EpisodeRecord:
     episode: int
@@ -129,12 +146,11 @@ class EpisodeMonitor:
     _closed: bool = True
     on_episode: object = None  # callable(EpisodeRecord) or None
 
-    def subscribe(self, node, depth_qos=None):
+    def subscribe(self, node, qos=None):
+        """Follow the Observation topic from ``node`` (default QoS: :func:`monitor_qos`)."""
         from tmgwr_interfaces.msg import Observation
-        if depth_qos is None:
-            from tmgwr_agent.nodes.common import STEP_QOS as depth_qos
         return node.create_subscription(Observation, topics.OBSERVATION,
-                                        self.on_observation, depth_qos)
+                                        self.on_observation, qos or monitor_qos())
 
     def on_observation(self, msg) -> None:
         now = time.perf_counter()
