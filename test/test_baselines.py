@@ -100,6 +100,13 @@ def test_dyna_q_plus_planning_update_adds_kappa_sqrt_tau():
     target = -29.0 + 10.0 * np.sqrt(8.0) + 0.86 * 0.0
     assert ag.Q[1 * 7 + 1][RIGHT] == pytest.approx(q_before + 0.39 * (target - q_before))
     assert ag.Q[1 * 7 + 1][RIGHT] == pytest.approx(-7.178234, abs=1e-6)
+    # the bonus-free twin Q0 (read by the greedy probe) got the same update without it
+    q0 = -11.31 + 0.39 * (-29.0 + 0.86 * 0.0 + 11.31)
+    assert ag.Q0[1 * 7 + 1][RIGHT] == pytest.approx(q0)
+    ag.Q[1 * 7 + 1] = [-100.0, -100.0, -100.0, 50.0]      # bonus-inflated: right
+    ag.Q0[1 * 7 + 1] = [-1.0, -100.0, -100.0, -100.0]     # what it knows: up
+    ag.begin_episode(obs((1, 1)), (1, 1))
+    assert ag.act(explore=False) == UP                     # the probe reads Q0
 
 
 # ------------------------------------------------------------------ behaviour

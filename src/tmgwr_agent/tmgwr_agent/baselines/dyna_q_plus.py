@@ -18,6 +18,17 @@ bootstrap 0). In addition, after every real step (tabular Dyna-Q, steps (e)-(f))
   state may be drawn: its model leads back to the same state with reward 0, and its tau
   counts from the first visit of the state.
 
+Exploitation reads a bonus-free table. The bonus lives in ``Q`` (the book's Dyna-Q+), so
+the greedy policy of ``Q`` keeps chasing whatever pair is stale: it is an exploration
+policy and, measured on the paper's maze, a greedy rollout on it loops between two cells
+forever even when the maze has been learnt (every sample-complexity trial hit its cap). What
+the agent *knows* is a second table ``Q0`` learnt from the same real steps, the same model
+and the same planning draws without the bonus (Dyna-Q; a draw of a never-tried pair leaves
+it alone). ``act(explore=True)`` -- training -- acts epsilon-greedily on ``Q`` exactly as
+the book; ``act(explore=False)`` -- the experimenter's greedy probe -- on ``Q0``. The
+behaviour of the agent is unchanged; only the probe now measures its knowledge and not
+its curiosity. Cost: a second update per planning draw.
+
 Default kappa = 0.1 (the book's 0.001 is for a reward of 1 at the goal and 0 elsewhere).
 Scaled to rewards of tens to hundreds: a pair untried for tau = 10^4 real steps gets
 ``kappa sqrt(tau) = 10``, a third of one step's cost (29), so an old detour is worth
@@ -77,6 +88,29 @@ class DynaQPlusAgent(QLearningAgent):
         self.visited: list[int] = []   # states in order of first visit
         self.is_visited = [False] * (self.rows * self.cols)
         self.t = 0                     # global clock: real learning steps
+        # bonus-free twin of Q (Dyna-Q), read by act(explore=False)
+        self.Q0: list[list[float]] = [[0.0] * N_ACTIONS for _ in range(self.rows * self.cols)]
+
+    def greedy0(self, s: int) -> int | None:
+        """argmax_a Q0(s, a): the learnt route without the exploration bonus."""
+        if s < 0 or not self.tried[s]:
+            return None
+        q = self.Q0[s]
+        top = max(q)
+        best = [a for a in range(N_ACTIONS) if q[a] == top]
+        if len(best) == 1:
+            return best[0]
+        return best[int(self.rng.integers(len(best)))]
+
+    def act(self, explore: bool = True) -> int:
+        if explore:
+            return super().act(explore=True)
+        a = self.greedy0(self.state)
+        if a is None:
+            self.last_explored = True
+            return self.policy.walk.action()
+        self.last_explored = False
+        return a
 
     def learn(self, s: int, a: int, r: float, s2: int, terminal: bool) -> None:
         self.t += 1
@@ -87,8 +121,11 @@ class DynaQPlusAgent(QLearningAgent):
             base = s * N_ACTIONS
             for b in range(N_ACTIONS):       # untried actions: tau counts from here
                 self.m_time[base + b] = t
-        # (d) direct RL
+        # (d) direct RL, on Q and on its bonus-free twin Q0
         self.q_update(s, a, r, s2, terminal)
+        q0 = self.Q0[s]
+        target0 = r if terminal else r + self.gamma * max(self.Q0[s2])
+        q0[a] += self.beta * (target0 - q0[a])
         # (e) model learning
         sa = s * N_ACTIONS + a
         self.m_next[sa] = s2
@@ -100,7 +137,7 @@ class DynaQPlusAgent(QLearningAgent):
             self.plan(self.n_planning)
 
     def plan(self, n: int) -> None:
-        Q, visited = self.Q, self.visited
+        Q, Q0, visited = self.Q, self.Q0, self.visited
         m_next, m_reward, m_terminal, m_time = (self.m_next, self.m_reward,
                                                 self.m_terminal, self.m_time)
         gamma, beta, kappa, t = self.gamma, self.beta, self.kappa, self.t
@@ -116,6 +153,9 @@ class DynaQPlusAgent(QLearningAgent):
                 s2, r, terminal = s, 0.0, False
             else:
                 r, terminal = m_reward[sa], m_terminal[sa]
+                q0 = Q0[s]                    # Dyna-Q on the bonus-free twin
+                target0 = r if terminal else r + gamma * max(Q0[s2])
+                q0[a] += beta * (target0 - q0[a])
             r += kappa * sqrt(t - m_time[sa])
             q = Q[s]
             target = r if terminal else r + gamma * max(Q[s2])
