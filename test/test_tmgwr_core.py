@@ -169,6 +169,27 @@ def test_eq6_picks_link_with_highest_E_times_V_and_breaks_ties_by_rng():
     assert sel.greedy(m, 0, np.zeros(m.n + 1)) is None   # no motivation: no opinion
 
 
+def test_goal_search_walks_for_the_rest_of_the_episode_after_the_goal_node():
+    m = SensorimotorMap(dim=2, alpha_c=0.0, insert_at=1.0)
+    m.step(np.array([0.0, 0.0]), None)
+    m.h[:m.n] = 0.5
+    m.step(np.array([0.0, 0.1]), ACTION_VECTORS[RIGHT])
+    V = np.array([0.5, 0.9, 0.0])                         # node 1 is the most motivating
+    sel = ActionSelector(np.random.default_rng(0), eps_start=0.0, eps_min=0.0)
+    assert sel.select(m, 0, V) == (RIGHT, False)          # Eq. 6 while not at the goal node
+    # standing on the goal node with the episode still running: the map does not know
+    # the way, the random walk acts, also back on node 0, until the episode ends
+    assert sel.select(m, 1, V, at_goal_node=True)[1] is True
+    assert all(sel.select(m, 0, V)[1] for _ in range(20))
+    assert sel.select(m, 0, V, explore=False) == (RIGHT, False)   # the probe never searches
+    sel.begin_episode()
+    assert sel.select(m, 0, V) == (RIGHT, False)
+    off = ActionSelector(np.random.default_rng(0), eps_start=0.0, eps_min=0.0,
+                         goal_search=False)                # the paper's selector
+    off.select(m, 1, V, at_goal_node=True)
+    assert off.select(m, 0, V) == (RIGHT, False)
+
+
 # ---------------------------------------------------------------- Eq. 7 and section 5.1
 def test_epsilon_schedule():
     s = EpsilonSchedule(1.0, 0.1, 0.1)

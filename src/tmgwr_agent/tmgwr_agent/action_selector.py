@@ -10,6 +10,19 @@ link that has become unreliable, e.g. into a new wall, would keep being chosen).
 broken by the agent's generator. The chosen action vector is mapped to the nearest motor
 primitive of the action map (the four unit moves). A node with no outgoing link, or whose
 neighbours have no motivation yet, has no greedy opinion: the random walk acts.
+
+Search at the goal node (``goal_search``, our addition, on by default; off = the paper's
+selector). Eq. 6 climbs the potentials to the goal node ``g = argmax_i sim(i, g)``. When
+the goal's sensation is not yet represented in the map (a goal moved into a part of the
+maze never visited), ``g`` is only the node *most like* the goal, often a dead end behind
+a wall from it; reaching it without the episode ending tells the agent that its map does
+not know the way. Eq. 6 would then keep it oscillating around ``g`` (only epsilon's random
+steps leave), and measured on the paper's maze some trials never reached the new goal.
+With ``goal_search`` the selector switches to the random walk of section 5.1 for the rest
+of the episode once it has stood on the goal node without the episode ending; the map
+grows where the walk goes, and once the goal has been sensed its node exists and Eq. 6
+leads there directly from the next episode on. Only the map's own goal node is used
+(no maze knowledge), and the greedy probe (``explore=False``) never searches.
 """
 
 from __future__ import annotations
@@ -25,9 +38,14 @@ from .tmgwr_map import SensorimotorMap
 
 class ActionSelector:
     def __init__(self, rng: np.random.Generator, *, p_turn=0.3, eps_start=1.0, eps_decay=0.1,
-                 eps_min=0.1):
+                 eps_min=0.1, goal_search=True):
         self.rng = rng
         self.policy = EpsilonGreedy(rng, p_turn, eps_start, eps_decay, eps_min)
+        self.goal_search = bool(goal_search)
+        self.searching = False      # stood on the goal node this episode, goal not there
+
+    def begin_episode(self) -> None:
+        self.searching = False
 
     def greedy(self, m: SensorimotorMap, i: int, V: np.ndarray) -> int | None:
         """Eq. 6 at node i: the discrete action of a_{i k_max}, or None without opinion."""
@@ -45,10 +63,14 @@ class ActionSelector:
         d = ACTION_VECTORS - a
         return int(np.argmin(np.einsum("ij,ij->i", d, d)))
 
-    def select(self, m: SensorimotorMap, i: int, V: np.ndarray, explore: bool = True
-               ) -> tuple[int, bool]:
-        """(action, explored): the random walk with probability epsilon, else Eq. 6."""
-        if self.policy.explores(explore):
+    def select(self, m: SensorimotorMap, i: int, V: np.ndarray, explore: bool = True,
+               at_goal_node: bool = False) -> tuple[int, bool]:
+        """(action, explored): the random walk with probability epsilon, else Eq. 6;
+        the random walk for the rest of the episode once the agent stood on the goal node
+        (``at_goal_node``, the episode still running) when ``goal_search`` is on."""
+        if explore and self.goal_search and at_goal_node:
+            self.searching = True
+        if self.policy.explores(explore) or (explore and self.searching):
             return self.policy.walk.action(), True
         a = self.greedy(m, i, V)
         if a is None:

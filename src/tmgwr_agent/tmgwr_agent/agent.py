@@ -36,6 +36,9 @@ EXPLORATION_SPECS = (
     Param("eps_decay", 0.1, "Eq. 7: decrease of epsilon per goal attained", low=0.0,
           high=1.0),
     Param("eps_min", 0.1, "Eq. 7: floor of epsilon", low=0.0, high=1.0),
+    Param("goal_search", True, "random walk for the rest of an episode once the agent "
+          "stood on the goal node without reaching the goal (action_selector.py; "
+          "false: the paper's Eq. 6 selector)"),
 )
 
 SPECS = preprocessor.SPECS + tmgwr_map.SPECS + motivation.SPECS + EXPLORATION_SPECS
@@ -80,14 +83,16 @@ class TMGWRAgent:
     def begin_episode(self, obs: np.ndarray, cell: Cell | None = None,
                       learn: bool = True) -> None:
         self.map.begin_episode()
+        self.selector.begin_episode()
         x = self.preprocessor(obs, episode_start=True)
         self.winner = self.map.step(x, None, learn=learn)
         if learn:
             self.motivation.update(self.map)
 
     def act(self, explore: bool = True) -> int:
+        at_goal_node = self.winner >= 0 and self.winner == self.motivation.goal_node
         a, self.last_explored = self.selector.select(self.map, self.winner,
-                                                     self.motivation.V, explore)
+                                                     self.motivation.V, explore, at_goal_node)
         self.last_action = a
         return a
 

@@ -56,7 +56,9 @@ class ActionSelectorNode(Node):
             return
         with self.timer:
             policy = self.core.policy
-            if not f.episode_start:         # TMGWRAgent.observe / goal_attained
+            if f.episode_start:             # TMGWRAgent.begin_episode
+                self.core.begin_episode()
+            else:                           # TMGWRAgent.observe / goal_attained
                 policy.walk.observe(f.action, f.bumped)
                 if f.goal_reached:
                     policy.schedule.goal_attained()
@@ -75,7 +77,9 @@ class ActionSelectorNode(Node):
                     a=np_f64(f.winner_link_actions).reshape(1, K, f.action_dim or 1))
                 V = np.append(np_f64(f.potentials), 0.0)    # V[n] = 0: empty link slots
                 i = 0 if f.winner >= 0 else -1
-                action, a.explored = self.core.select(links, i, V, self.p["explore"])
+                at_goal_node = f.winner >= 0 and f.winner == f.goal_node
+                action, a.explored = self.core.select(links, i, V, self.p["explore"],
+                                                      at_goal_node)
                 a.action = int(action)
                 a.motor = f64(ACTION_VECTORS[action])
             self.last_step, self.last_out = f.step_id, a
