@@ -135,6 +135,55 @@ def test_value_iteration_matches_fixed_point_on_a_chain():
     np.testing.assert_allclose(V, [0.97 * (R1 + 0.97), R1 + 0.97, 1.0], rtol=1e-8)
 
 
+def test_node_where_an_episode_ended_short_of_the_goal_is_absorbing(tmp_path):
+    m = chain_map()
+    m.mark_terminal(1)                  # an episode ended on node 1 without the goal
+    mo = MotivationEstimator(vi_tol=1e-10, vi_max_sweeps=100000)
+    mo.set_goal(np.array([0.0, 0.2]))
+    R1 = np.exp(-0.01 / (2 * 0.03 ** 2))
+    # node 1 has no successor: V(1) = R_1, and node 0 only sees that through it
+    np.testing.assert_allclose(mo.update(m), [0.97 * R1, R1, 1.0], rtol=1e-8)
+    m.save(tmp_path / "map.npz")        # the flag is part of the map
+    m2 = SensorimotorMap(dim=2)
+    m2.load(tmp_path / "map.npz")
+    assert list(m2.terminal[:3]) == [False, True, False]
+    off = MotivationEstimator(vi_tol=1e-10, vi_max_sweeps=100000, absorbing_terminals=False)
+    off.set_goal(np.array([0.0, 0.2]))
+    np.testing.assert_allclose(off.update(m)[1], R1 + 0.97, rtol=1e-8)   # Eq. 5 as printed
+    # walking on from node 1 within an episode clears the flag: it is not an end any more
+    m.begin_episode()
+    m.step(np.array([0.0, 0.1]), None)
+    m.step(np.array([0.0, 0.2]), ACTION_VECTORS[RIGHT])
+    assert not m.terminal[1]
+    mo.set_goal(np.array([0.0, 0.2]))
+    assert mo.update(m)[1] == pytest.approx(R1 + 0.97, rel=1e-3)   # (weights adapted)
+
+
+def test_agent_marks_episode_ends_short_of_the_goal_only():
+    maze = Maze.from_text("#######\n#S.1.G#\n#######\n")
+    world = GridWorld(maze, "1")
+
+    def walk_right(agent):
+        o, _ = world.reset()
+        agent.begin_episode(o, world.cell)
+        while True:
+            o, _, term, _, inf = world.step(RIGHT)
+            agent.observe(o, inf)
+            if term:
+                return inf
+
+    ag = TMGWRAgent(maze, np.random.default_rng(0))
+    ag.set_goal(world.goal, world.goal_observation())
+    assert walk_right(ag).reached_goal                  # ends at the goal: no flag
+    assert not ag.map.terminal[: ag.map.n].any()
+    world.set_goal("G", keep_previous=True)             # goal 1 still ends episodes
+    ag.set_goal(world.goal, world.goal_observation())
+    inf = walk_right(ag)
+    assert inf.reached_previous_goal and not inf.reached_goal
+    assert list(np.flatnonzero(ag.map.terminal[: ag.map.n])) == [ag.winner]
+    assert tuple(np.round(ag.map.w[ag.winner] / 0.1).astype(int)) == (1, 3)
+
+
 def test_value_iteration_without_a_path_gives_no_motivation():
     m = chain_map()
     mo = MotivationEstimator()

@@ -171,11 +171,12 @@ class MazeSimNode(Node):
             self.publish_observation(obs, action=msg.action, motor=msg.motor,
                                      bumped=info.bumped, goal_reached=info.reached_goal,
                                      previous_goal_reached=info.reached_previous_goal,
-                                     terminal=terminated or truncated)
+                                     terminal=terminated or truncated,
+                                     truncated=truncated and not terminated)
 
     def publish_observation(self, obs, episode_start=False, action=Action.NONE, motor=(),
                             bumped=False, goal_reached=False, previous_goal_reached=False,
-                            terminal=False):
+                            terminal=False, truncated=False):
         if self.p["max_steps"] and self.step_id + 1 >= self.p["max_steps"]:
             self.finish()
             return
@@ -199,6 +200,7 @@ class MazeSimNode(Node):
         m.goal_reached = bool(goal_reached)
         m.previous_goal_reached = bool(previous_goal_reached)
         m.terminal = bool(terminal)
+        m.truncated = bool(truncated)
         m.row, m.col = (int(v) for v in self.world.cell)
         self.current = m
         if self.p["trajectory_path"]:       # kept only when asked for (runs may be long)

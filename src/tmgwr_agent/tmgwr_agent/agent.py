@@ -99,6 +99,8 @@ class TMGWRAgent:
     def observe(self, obs: np.ndarray, info: StepInfo, learn: bool = True) -> None:
         x = self.preprocessor(obs)
         self.winner = self.map.step(x, ACTION_VECTORS[info.action], learn=learn)
+        if learn and info.terminated and not info.reached_goal:
+            self.map.mark_terminal(self.winner)     # ended here, short of the goal
         self.selector.policy.walk.observe(info.action, info.bumped)
         if learn:
             self.motivation.update(self.map)

@@ -83,11 +83,12 @@ def goal_rewards(w, alive, n, g, sigma, floor, R):
 
 
 @njit(cache=True)
-def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps):
+def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, absorbing):
     """Synchronous sweeps of Eq. 4-5 until every |beta Delta_V(i)| <= tol V(i) + v_floor.
 
-    ``V`` has n + 1 entries, ``V[n] == 0`` (the target of empty link slots). Returns the
-    number of sweeps. Potentials below ``v_floor`` are set to exactly 0 at the end.
+    ``V`` has n + 1 entries, ``V[n] == 0`` (the target of empty link slots). A node with
+    ``absorbing[i]`` has no successor (a terminal state: Delta_V(i) = R_i - V(i)). Returns
+    the number of sweeps. Potentials below ``v_floor`` are set to exactly 0 at the end.
     """
     K = out.shape[1]
     new = np.empty(n)
@@ -96,7 +97,7 @@ def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps):
         done = True
         for i in range(n):
             best = 0.0
-            for s in range(K):
+            for s in range(K if not absorbing[i] else 0):
                 j = out[i, s]
                 if j >= 0:
                     ev = E[i, s] * V[j]

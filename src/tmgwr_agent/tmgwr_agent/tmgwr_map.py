@@ -130,13 +130,15 @@ class SensorimotorMap:
         self.E = np.zeros((cap, degree))            # reliability E[i, j]
         self.a = np.zeros((cap, degree, self.action_dim))       # action vectors a_ij
         self.age = np.zeros((cap, degree), dtype=np.int64)
+        self.terminal = np.zeros(cap, dtype=bool)   # an episode ended on the node
 
     def _grow_nodes(self) -> None:
-        old = (self.w, self.c, self.h, self.alive, self.out, self.E, self.a, self.age)
+        old = (self.w, self.c, self.h, self.alive, self.out, self.E, self.a, self.age,
+               self.terminal)
         cap = 2 * len(self.w)
         self._alloc(cap, self.out.shape[1])
         for new, arr in zip((self.w, self.c, self.h, self.alive, self.out, self.E, self.a,
-                             self.age), old):
+                             self.age, self.terminal), old):
             new[: len(arr)] = arr
 
     def _grow_degree(self) -> None:
@@ -201,6 +203,17 @@ class SensorimotorMap:
         """The agent was moved, not walked: no link from the last winner."""
         self.prev = -1
 
+    def mark_terminal(self, i: int) -> None:
+        """An episode ended on node i short of the goal (the agent is moved back to the
+        start next without having reached it).
+
+        The flag is the map's memory that i is a terminal state of the task; it is cleared
+        as soon as the agent walks on from i within an episode (:meth:`step`), e.g. when a
+        goal moved away and its old cell became an ordinary one. The motivation estimator
+        treats flagged nodes as absorbing (no successor in Eq. 5)."""
+        if 0 <= i < self.n:
+            self.terminal[i] = True
+
     def step(self, x: np.ndarray, action: np.ndarray | None, learn: bool = True) -> int:
         """Present input x reached by motor vector ``action``; returns the winner.
 
@@ -226,6 +239,7 @@ class SensorimotorMap:
                 winner = b
                 self._adapt(b, x, C)
         if learn and self.prev >= 0 and action is not None:
+            self.terminal[self.prev] = False    # walked on from prev: not an episode end
             self._update_links(self.prev, winner, np.asarray(action, dtype=float))
         self.prev = self.winner = winner
         return winner
@@ -240,6 +254,7 @@ class SensorimotorMap:
             r = self.n
             self.n += 1
         self.w[r], self.c[r], self.h[r], self.alive[r] = w, c, 1.0, True
+        self.terminal[r] = False
         self.out[r] = -1
         self.E[r] = 0.0
         self.age[r] = 0
@@ -289,6 +304,7 @@ class SensorimotorMap:
         return {"w": self.w[:n].copy(), "c": self.c[:n].copy(), "h": self.h[:n].copy(),
                 "alive": self.alive[:n].copy(), "out": self.out[:n].copy(),
                 "E": self.E[:n].copy(), "a": self.a[:n].copy(), "age": self.age[:n].copy(),
+                "terminal": self.terminal[:n].copy(),
                 "meta": np.array([self.version, self.prev, self.winner], dtype=np.int64)}
 
     def load_state_dict(self, s: dict[str, np.ndarray]) -> None:
@@ -299,6 +315,8 @@ class SensorimotorMap:
         self._alloc(max(_INITIAL_CAPACITY, 1 << max(n - 1, 1).bit_length()), k)
         for name in ("w", "c", "h", "alive", "out", "E", "a", "age"):
             getattr(self, name)[:n] = s[name]
+        if "terminal" in s:                 # maps saved before the flag have none set
+            self.terminal[:n] = s["terminal"]
         self.n = n
         self.version, self.prev, self.winner = (int(v) for v in s["meta"])
 

@@ -127,6 +127,8 @@ class MapLearnerNode(Node):
                 self.map.begin_episode()
             self.prev_winner = int(self.map.prev)
             self.map.step(x, None if f.episode_start else np_f64(f.motor), learn=True)
+            if f.terminal and not (f.truncated or f.goal_reached):  # TMGWRAgent.observe
+                self.map.mark_terminal(self.map.winner)
             self.last_step = f.step_id
             self.last_out = self.make_state(f)
             self.timer.publish(self.state_pub, self.last_out)
@@ -145,6 +147,7 @@ class MapLearnerNode(Node):
         s.inserted = bool(m.inserted)
         s.n_slots, s.degree, s.dim = n, K, m.dim
         s.alive = u8(m.alive[:n])
+        s.terminal_nodes = u8(m.terminal[:n])
         s.weights = f64(m.w[:n])
         s.link_targets = i32(m.out[:n])
         s.link_reliability = f64(m.E[:n])

@@ -44,6 +44,7 @@ def map_view(m: SensorimotorMap | None, s: SensorimotorState) -> SensorimotorMap
         m = SensorimotorMap(dim=dim, action_dim=s.action_dim or ACTION_VECTORS.shape[1])
     m.n = n
     m.alive = np_bool(s.alive)
+    m.terminal = np_bool(s.terminal_nodes)
     m.w = np_f64(s.weights).reshape(n, dim)
     m.out = np_i64(s.link_targets).reshape(n, K)
     m.E = np_f64(s.link_reliability).reshape(n, K)

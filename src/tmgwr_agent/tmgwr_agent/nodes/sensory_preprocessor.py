@@ -49,6 +49,7 @@ class SensoryPreprocessorNode(Node):
             f.bumped = m.bumped
             f.goal_reached = m.goal_reached
             f.terminal = m.terminal
+            f.truncated = m.truncated
             self.last_step, self.last_out = m.step_id, f
             self.timer.publish(self.pub, f)
 
