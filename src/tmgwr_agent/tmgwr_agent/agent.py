@@ -22,20 +22,14 @@ import numpy as np
 from maze_sim.maze import ACTION_VECTORS, Cell, Maze
 from maze_sim.world import StepInfo
 
-from . import motivation, preprocessor, tmgwr_map
+from . import exploration, motivation, preprocessor, tmgwr_map
 from .action_selector import ActionSelector
 from .motivation import MotivationEstimator
 from .params import Param, config_params
 from .preprocessor import SensoryPreprocessor
 from .tmgwr_map import SensorimotorMap
 
-EXPLORATION_SPECS = (
-    Param("p_turn", 0.3, "random walk: probability of turning when not blocked (5.1)",
-          low=0.0, high=1.0),
-    Param("eps_start", 1.0, "Eq. 7: initial exploration probability", low=0.0, high=1.0),
-    Param("eps_decay", 0.1, "Eq. 7: decrease of epsilon per goal attained", low=0.0,
-          high=1.0),
-    Param("eps_min", 0.1, "Eq. 7: floor of epsilon", low=0.0, high=1.0),
+EXPLORATION_SPECS = exploration.SPECS + (
     Param("goal_search", True, "random walk for the rest of an episode once the agent "
           "stood on the goal node without reaching the goal (action_selector.py; "
           "false: the paper's Eq. 6 selector)"),

@@ -12,9 +12,23 @@
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 
+from .params import Param
+
 N_ACTIONS = 4
+
+#: The exploration parameters every agent shares (same names, defaults and ranges).
+SPECS = (
+    Param("p_turn", 0.3, "random walk: probability of turning when not blocked (5.1)",
+          low=0.0, high=1.0),
+    Param("eps_start", 1.0, "Eq. 7: initial exploration probability", low=0.0, high=1.0),
+    Param("eps_decay", 0.1, "Eq. 7: decrease of epsilon per goal attained", low=0.0,
+          high=1.0),
+    Param("eps_min", 0.1, "Eq. 7: floor of epsilon", low=0.0, high=1.0),
+)
 
 
 class RandomWalk:
@@ -77,8 +91,14 @@ class EpsilonGreedy:
         """Draw whether this step explores (always draws when ``explore``, for determinism)."""
         return explore and self.rng.random() < self.schedule.eps
 
-    def choose(self, greedy_action: int | None, explore: bool = True) -> tuple[int, bool]:
-        """(action, explored). ``greedy_action`` None means the agent has no opinion yet."""
-        if self.explores(explore) or greedy_action is None:
+    def choose(self, greedy: Callable[[], int | None], explore: bool = True
+               ) -> tuple[int, bool]:
+        """(action, explored): the walk with probability epsilon, else ``greedy()``, the
+        agent's choice, called only then (its tie-breaks draw after the epsilon draw);
+        None from it means the agent has no opinion yet and the walk acts."""
+        if self.explores(explore):
             return self.walk.action(), True
-        return int(greedy_action), False
+        a = greedy()
+        if a is None:
+            return self.walk.action(), True
+        return int(a), False

@@ -16,18 +16,11 @@ Defaults live in ``config/baselines.yaml`` (sections ``q_learning``, ``model_bas
 
 from __future__ import annotations
 
-from ..params import Param
+from ..exploration import SPECS
 
 #: Exploration parameters shared by every agent (section 5.1, Eq. 7); the same names,
 #: defaults and ranges as the TMGWR agent's.
-EXPLORATION_SPECS = (
-    Param("p_turn", 0.3, "random walk: probability of turning when not blocked (5.1)",
-          low=0.0, high=1.0),
-    Param("eps_start", 1.0, "Eq. 7: initial exploration probability", low=0.0, high=1.0),
-    Param("eps_decay", 0.1, "Eq. 7: decrease of epsilon per goal attained", low=0.0,
-          high=1.0),
-    Param("eps_min", 0.1, "Eq. 7: floor of epsilon", low=0.0, high=1.0),
-)
+EXPLORATION_SPECS = SPECS
 
 
 def exploration_kwargs(p) -> dict:

@@ -103,13 +103,8 @@ class DynaQPlusAgent(QLearningAgent):
         return best[int(self.rng.integers(len(best)))]
 
     def act(self, explore: bool = True) -> int:
-        if explore:
-            return super().act(explore=True)
-        a = self.greedy0(self.state)
-        if a is None:
-            self.last_explored = True
-            return self.policy.walk.action()
-        self.last_explored = False
+        greedy = self.greedy if explore else self.greedy0
+        a, self.last_explored = self.policy.choose(lambda: greedy(self.state), explore)
         return a
 
     def learn(self, s: int, a: int, r: float, s2: int, terminal: bool) -> None:

@@ -125,15 +125,7 @@ class QLearningAgent:
         self.state = self.index(cell)
 
     def act(self, explore: bool = True) -> int:
-        policy = self.policy
-        if policy.explores(explore):
-            self.last_explored = True
-            return policy.walk.action()
-        a = self.greedy(self.state)
-        if a is None:
-            self.last_explored = True
-            return policy.walk.action()
-        self.last_explored = False
+        a, self.last_explored = self.policy.choose(lambda: self.greedy(self.state), explore)
         return a
 
     def observe(self, obs: np.ndarray, info: StepInfo, learn: bool = True) -> None:
