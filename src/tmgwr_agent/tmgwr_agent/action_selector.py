@@ -60,8 +60,7 @@ class ActionSelector:
     @staticmethod
     def action_index(a: np.ndarray) -> int:
         """The motor primitive nearest the action vector (the action map's codebook)."""
-        d = ACTION_VECTORS - a
-        return int(np.argmin(np.einsum("ij,ij->i", d, d)))
+        return int(kernels.nearest_row(ACTION_VECTORS, a))
 
     def select(self, m: SensorimotorMap, i: int, V: np.ndarray, explore: bool = True,
                at_goal_node: bool = False) -> tuple[int, bool]:

@@ -83,14 +83,19 @@ def goal_rewards(w, alive, n, g, sigma, floor, R):
 
 
 @njit(cache=True)
-def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, absorbing):
+def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, absorbing,
+                    alive):
     """Synchronous sweeps of Eq. 4-5 until every |beta Delta_V(i)| <= tol V(i) + v_floor.
 
     ``V`` has n + 1 entries, ``V[n] == 0`` (the target of empty link slots). A node with
-    ``absorbing[i]`` has no successor (a terminal state: Delta_V(i) = R_i - V(i)). Returns
-    the number of sweeps. Potentials below ``v_floor`` are set to exactly 0 at the end.
+    ``absorbing[i]`` has no successor (a terminal state: Delta_V(i) = R_i - V(i)); a dead
+    slot (``alive[i]`` false) has V = 0. Returns the number of sweeps. Potentials below
+    ``v_floor`` are set to exactly 0 at the end.
     """
     K = out.shape[1]
+    for i in range(n):
+        if not alive[i]:
+            V[i] = 0.0
     new = np.empty(n)
     sweeps = 0
     for sweeps in range(1, max_sweeps + 1):
@@ -114,6 +119,20 @@ def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, abso
         if V[i] < v_floor:
             V[i] = 0.0
     return sweeps
+
+
+@njit(cache=True)
+def nearest_row(table, a):
+    """argmin_r |table[r] - a|^2 (first on ties)."""
+    best, best_d = 0, np.inf
+    for r in range(table.shape[0]):
+        d = 0.0
+        for k in range(a.shape[0]):
+            t = table[r, k] - a[k]
+            d += t * t
+        if d < best_d:
+            best, best_d = r, d
+    return best
 
 
 @njit(cache=True)

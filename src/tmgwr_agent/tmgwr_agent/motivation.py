@@ -119,19 +119,17 @@ class MotivationEstimator:
             V[:k] = self.V[:k]
             self.V = V
         self.sweeps = 0
-        if self.goal_x is None or m.size == 0:
-            self.goal_node = -1
+        g = m.nearest_by_weight(self.goal_x) if self.goal_x is not None else -1
+        self.goal_node = g
+        if g < 0:                                     # no goal yet, or an empty map
             self.V[:] = 0.0
             return self.V[:n]
-        g = m.nearest_by_weight(self.goal_x)
-        self.goal_node = g
         if self._scale_version != m.version:          # links only change with the version
             self._scale = self.link_scale(m) or 1.0
             self._scale_version = m.version
         R = self.rewards(m, g, self._scale)
-        self.V[:n][~m.alive[:n]] = 0.0
         absorbing = m.terminal if self.absorbing_terminals else _NONE_ABSORBING(n)
         self.sweeps = kernels.value_iteration(m.out, m.E, R, self.V, n, self.beta,
                                               self.gamma, self.vi_tol, V_FLOOR,
-                                              self.vi_max_sweeps, absorbing)
+                                              self.vi_max_sweeps, absorbing, m.alive)
         return self.V[:n]

@@ -287,8 +287,9 @@ class SensorimotorMap:
             self.eta_a, self.E_init, self.E_min, self.max_age, self.link_rule == "credit")
         if created or len(ends):
             self.version += 1
-        for k in np.unique(ends):
-            self._remove_if_isolated(int(k))
+        if len(ends):
+            for k in np.unique(ends):
+                self._remove_if_isolated(int(k))
 
     def _remove_if_isolated(self, k: int) -> None:
         if k in (self.prev, self.winner) or not self.alive[k]:
