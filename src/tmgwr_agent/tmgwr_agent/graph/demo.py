@@ -144,7 +144,7 @@ def run(args) -> int:
         say(f"{what}: " + (f"goal first reached {first} steps later; " if first is not None
                              else "goal not reached; ")
               + (f"reliable (last {streak} episodes <= {slack:g} x {optimal[name]} steps) "
-                 if res["reliable"] else f"not yet reliable ")
+                 if res["reliable"] else "not yet reliable ")
               + f"after {res['episodes']} episodes, {res['steps']} steps, {res['seconds']} s")
 
     try:
@@ -166,7 +166,7 @@ def run(args) -> int:
         if not resp.accepted:
             raise GraphError(f"/set_goal refused the demo's goal: {resp.message}")
         res = wait_phase("goal", mon.last_step_id)
-        describe("goal", res, f"after the goal change")
+        describe("goal", res, "after the goal change")
         if stop["now"]:
             raise KeyboardInterrupt
         code |= res["first_goal_steps_after"] is None
