@@ -185,7 +185,8 @@ class MapLearnerNode(Node):
         msg.map_version, msg.step_id = int(m.version), max(self.last_step, 0)
         ids = m.node_ids()
         msg.nodes = [MapNode(id=int(i), weight=f64(m.w[i]), context=f64(m.c[i]),
-                             habituation=float(m.h[i])) for i in ids]
+                             habituation=float(m.h[i]), terminal=bool(m.terminal[i]))
+                     for i in ids]
         src, tgt, act, E, age = m.links()
         msg.links = [MapLink(source=int(s), target=int(t), action=f64(a), reliability=float(e),
                              age=int(g)) for s, t, a, e, g in zip(src, tgt, act, E, age)]
