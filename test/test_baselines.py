@@ -14,20 +14,10 @@ from tmgwr_agent.baselines.q_learning import QLearningAgent
 from tmgwr_agent.experiments.runner import Caps, make_world, run_episode, set_goal, \
     train_until_converged
 
+from small_mazes import CORRIDOR, SMALL
+
 UP, DOWN, LEFT, RIGHT = range(4)
 
-# S at (1,1); G at (1,5): a corridor of 5 cells.
-CORRIDOR = "#######\n#S...G#\n#######\n"
-
-# Shortest S->G path 10 along the bottom; event a blocks (5,3) on it, leaving the
-# 14-step path over the top.
-SMALL = ("#########\n"
-         "#S..#..1#\n"
-         "#.#.#.#.#\n"
-         "#.#...#.#\n"
-         "#.#####.#\n"
-         "#2.a...G#\n"
-         "#########\n")
 
 
 def info(cell, action, bumped=False, goal=False, step=1):

@@ -18,15 +18,7 @@ from tmgwr_agent.params import CONFIG_DIR
 
 DEFAULT_MAZE = CONFIG_DIR / "mazes" / "paper_13x17.txt"
 
-# Shortest S->G path: 10 steps along the left column and the bottom row. Event a blocks
-# (5,3) on it; the detour over the top is 14 steps. Goals 1 (1,7) and 2 (5,1).
-SMALL = ("#########\n"
-         "#S..#..1#\n"
-         "#.#.#.#.#\n"
-         "#.#...#.#\n"
-         "#.#####.#\n"
-         "#2.a...G#\n"
-         "#########\n")
+from small_mazes import SMALL
 
 
 @pytest.fixture(scope="module")
