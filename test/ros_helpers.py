@@ -39,7 +39,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import signal
 import subprocess
 import sys
 import tempfile
@@ -215,17 +214,8 @@ class RosProcess:
 
     def stop(self, grace: float = 5.0) -> int | None:
         """SIGINT (rclpy shuts down cleanly), then SIGTERM, then SIGKILL, to the process group."""
-        for sig, wait_s in ((signal.SIGINT, grace), (signal.SIGTERM, 3.0), (signal.SIGKILL, 3.0)):
-            if self.proc.poll() is not None:
-                break
-            try:
-                os.killpg(self.proc.pid, sig)
-            except ProcessLookupError:
-                break
-            try:
-                self.proc.wait(timeout=wait_s)
-            except subprocess.TimeoutExpired:
-                continue
+        from tmgwr_agent.graph.supervisor import stop_process_group
+        stop_process_group(self.proc, grace, 3.0, 3.0)
         self._reader.join(timeout=5)
         return self.proc.returncode
 

@@ -83,6 +83,26 @@ class NodeSpec:
         return cmd + (["--ros-args", *ros_args] if ros_args else [])
 
 
+def stop_process_group(proc: subprocess.Popen, sigint_timeout: float = 8.0,
+                       sigterm_timeout: float = 4.0, sigkill_timeout: float = 5.0) -> int | None:
+    """Stop a process started in its own session: SIGINT to its process group (rclpy
+    shuts down cleanly), then SIGTERM, then SIGKILL, each after the previous one's timeout.
+    Returns the exit code (None if even SIGKILL did not end it in time)."""
+    for sig, timeout in ((signal.SIGINT, sigint_timeout), (signal.SIGTERM, sigterm_timeout),
+                         (signal.SIGKILL, sigkill_timeout)):
+        if proc.poll() is not None:
+            break
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            break
+        try:
+            proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            continue
+    return proc.poll()
+
+
 def format_param(value: object) -> str:
     """A value as the ``-p name:=value`` syntax reads it (YAML)."""
     if isinstance(value, bool):
@@ -203,18 +223,7 @@ class ManagedProcess:
 
     def stop(self, sigint_timeout: float = 8.0, sigterm_timeout: float = 4.0) -> int | None:
         """SIGINT, then SIGTERM, then SIGKILL (to the process group) after the timeouts."""
-        for sig, timeout in ((signal.SIGINT, sigint_timeout), (signal.SIGTERM, sigterm_timeout),
-                             (signal.SIGKILL, 5.0)):
-            if self.proc.poll() is not None:
-                break
-            try:
-                os.killpg(self.proc.pid, sig)
-            except ProcessLookupError:
-                break
-            try:
-                self.proc.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                continue
+        stop_process_group(self.proc, sigint_timeout, sigterm_timeout)
         self._reader.join(timeout=2.0)
         return self.proc.poll()
 
