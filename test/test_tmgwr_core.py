@@ -224,7 +224,8 @@ def test_goal_search_walks_for_the_rest_of_the_episode_after_the_goal_node():
     m.h[:m.n] = 0.5
     m.step(np.array([0.0, 0.1]), ACTION_VECTORS[RIGHT])
     V = np.array([0.5, 0.9, 0.0])                         # node 1 is the most motivating
-    sel = ActionSelector(np.random.default_rng(0), eps_start=0.0, eps_min=0.0)
+    sel = ActionSelector(np.random.default_rng(0), eps_start=0.0, eps_min=0.0,
+                         try_untried=False)
     assert sel.select(m, 0, V) == (RIGHT, False)          # Eq. 6 while not at the goal node
     # standing on the goal node with the episode still running: the map does not know
     # the way, the random walk acts, also back on node 0, until the episode ends
@@ -234,9 +235,35 @@ def test_goal_search_walks_for_the_rest_of_the_episode_after_the_goal_node():
     sel.begin_episode()
     assert sel.select(m, 0, V) == (RIGHT, False)
     off = ActionSelector(np.random.default_rng(0), eps_start=0.0, eps_min=0.0,
-                         goal_search=False)                # the paper's selector
+                         goal_search=False, try_untried=False)   # the paper's selector
     off.select(m, 1, V, at_goal_node=True)
     assert off.select(m, 0, V) == (RIGHT, False)
+
+
+def test_each_primitive_is_tried_once_from_a_node_before_eq6():
+    m = SensorimotorMap(dim=2, alpha_c=0.0, insert_at=1.0)
+    m.step(np.array([0.0, 0.0]), None)
+    m.h[:m.n] = 0.5
+    m.step(np.array([0.0, 0.1]), ACTION_VECTORS[RIGHT])
+    V = np.array([0.5, 0.9, 0.0])
+    sel = ActionSelector(np.random.default_rng(0), eps_start=0.0, eps_min=0.0)
+    sel.observe(0, RIGHT)                                 # right was taken from node 0
+    seen = []
+    for _ in range(3):                                    # up, down, left, once each
+        a, explored = sel.select(m, 0, V)
+        assert explored and a != RIGHT
+        sel.observe(0, a)
+        seen.append(a)
+    assert sorted(seen) == [UP, DOWN, LEFT]
+    assert sel.select(m, 0, V) == (RIGHT, False)          # then Eq. 6
+    assert sel.select(m, 0, V, explore=False) == (RIGHT, False)   # the probe: Eq. 6 only
+    fresh = ActionSelector(np.random.default_rng(0), eps_start=0.0, eps_min=0.0)
+    assert fresh.select(m, 0, V, explore=False) == (RIGHT, False)
+    # a view holding the winner in row 0 (the ROS selector) names the node by its id
+    fresh.observe(7, UP)
+    fresh.observe(7, DOWN)
+    fresh.observe(7, LEFT)
+    assert fresh.select(m, 0, V, node=7) == (RIGHT, True)
 
 
 # ---------------------------------------------------------------- Eq. 7 and section 5.1

@@ -23,6 +23,15 @@ of the episode once it has stood on the goal node without the episode ending; th
 grows where the walk goes, and once the goal has been sensed its node exists and Eq. 6
 leads there directly from the next episode on. Only the map's own goal node is used
 (no maze knowledge), and the greedy probe (``explore=False``) never searches.
+
+Untried actions first (``try_untried``, our addition, on by default). Eq. 6 only knows
+the links the agent has made; an action never taken from a node has no link and so no
+say, and with epsilon at its floor a side corridor glimpsed once may never be entered
+again. The selector remembers which motor primitives it has taken from each node and,
+where Eq. 6 would act, first takes one it has not (uniformly among them), once each: a
+bump or a new link then records the outcome. This is the optimism Q-learning gets from its
+zero-initialised table under negative rewards, at most four extra steps per node. Measured
+on the paper's maze: env-change b 212 -> 97 steps (the detour is mapped before the block).
 """
 
 from __future__ import annotations
@@ -38,11 +47,26 @@ from .tmgwr_map import SensorimotorMap
 
 class ActionSelector:
     def __init__(self, rng: np.random.Generator, *, p_turn=0.3, eps_start=1.0, eps_decay=0.1,
-                 eps_min=0.1, goal_search=True):
+                 eps_min=0.1, goal_search=True, try_untried=True):
         self.rng = rng
         self.policy = EpsilonGreedy(rng, p_turn, eps_start, eps_decay, eps_min)
         self.goal_search = bool(goal_search)
         self.searching = False      # stood on the goal node this episode, goal not there
+        self.try_untried = bool(try_untried)
+        self.tried: dict[int, int] = {}   # node id -> bitmask of primitives taken from it
+
+    def observe(self, node: int, action: int) -> None:
+        """The agent took ``action`` from ``node`` (its winner when it acted)."""
+        if node >= 0:
+            self.tried[node] = self.tried.get(node, 0) | (1 << int(action))
+
+    def untried(self, node: int) -> int | None:
+        """A primitive never taken from ``node`` (uniform among them), or None."""
+        mask = self.tried.get(node, 0)
+        free = [a for a in range(len(ACTION_VECTORS)) if not mask >> a & 1]
+        if not free:
+            return None
+        return free[0] if len(free) == 1 else free[int(self.rng.integers(len(free)))]
 
     def begin_episode(self) -> None:
         self.searching = False
@@ -63,14 +87,20 @@ class ActionSelector:
         return int(kernels.nearest_row(ACTION_VECTORS, a))
 
     def select(self, m: SensorimotorMap, i: int, V: np.ndarray, explore: bool = True,
-               at_goal_node: bool = False) -> tuple[int, bool]:
-        """(action, explored): the random walk with probability epsilon, else Eq. 6;
-        the random walk for the rest of the episode once the agent stood on the goal node
-        (``at_goal_node``, the episode still running) when ``goal_search`` is on."""
+               at_goal_node: bool = False, node: int | None = None) -> tuple[int, bool]:
+        """(action, explored): the random walk with probability epsilon, else an untried
+        primitive of the winner (``try_untried``), else Eq. 6; the random walk for the
+        rest of the episode once the agent stood on the goal node (``at_goal_node``, the
+        episode still running) when ``goal_search`` is on. ``node`` is the winner's id when
+        ``m`` is a view holding it in row ``i`` (the ROS selector); default ``i``."""
         if explore and self.goal_search and at_goal_node:
             self.searching = True
         if self.policy.explores(explore) or (explore and self.searching):
             return self.policy.walk.action(), True
+        if explore and self.try_untried and i >= 0:
+            u = self.untried(i if node is None else node)
+            if u is not None:
+                return u, True
         a = self.greedy(m, i, V)
         if a is None:
             return self.policy.walk.action(), True

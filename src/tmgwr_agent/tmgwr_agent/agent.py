@@ -33,6 +33,8 @@ EXPLORATION_SPECS = exploration.SPECS + (
     Param("goal_search", True, "random walk for the rest of an episode once the agent "
           "stood on the goal node without reaching the goal (action_selector.py; "
           "false: the paper's Eq. 6 selector)"),
+    Param("try_untried", True, "take each motor primitive once from every node before "
+          "following Eq. 6 there (action_selector.py; false: the paper's Eq. 6 selector)"),
 )
 
 SPECS = preprocessor.SPECS + tmgwr_map.SPECS + motivation.SPECS + EXPLORATION_SPECS
@@ -92,6 +94,8 @@ class TMGWRAgent:
 
     def observe(self, obs: np.ndarray, info: StepInfo, learn: bool = True) -> None:
         x = self.preprocessor(obs)
+        if learn:
+            self.selector.observe(self.winner, info.action)
         self.winner = self.map.step(x, ACTION_VECTORS[info.action], learn=learn)
         if learn and info.terminated and not info.reached_goal:
             self.map.mark_terminal(self.winner)     # ended here, short of the goal

@@ -43,6 +43,7 @@ class ActionSelectorNode(Node):
         self.core = ActionSelector(np.random.default_rng(self.p["seed"]), **p)
         self.last_step = -1
         self.last_out: Action | None = None
+        self.prev_winner = -1               # the winner this selector last acted from
         self.pub = self.create_publisher(Action, topics.ACTION, STEP_QOS)
         self.create_subscription(MotivationField, topics.MOTIVATION, self.on_motivation,
                                  STEP_QOS)
@@ -59,6 +60,7 @@ class ActionSelectorNode(Node):
             if f.episode_start:             # TMGWRAgent.begin_episode
                 self.core.begin_episode()
             else:                           # TMGWRAgent.observe / goal_attained
+                self.core.observe(self.prev_winner, f.action)
                 policy.walk.observe(f.action, f.bumped)
                 if f.goal_reached:
                     policy.schedule.goal_attained()
@@ -79,9 +81,10 @@ class ActionSelectorNode(Node):
                 i = 0 if f.winner >= 0 else -1
                 at_goal_node = f.winner >= 0 and f.winner == f.goal_node
                 action, a.explored = self.core.select(links, i, V, self.p["explore"],
-                                                      at_goal_node)
+                                                      at_goal_node, node=int(f.winner))
                 a.action = int(action)
                 a.motor = f64(ACTION_VECTORS[action])
+            self.prev_winner = int(f.winner)
             self.last_step, self.last_out = f.step_id, a
             self.timer.publish(self.pub, a)
 
