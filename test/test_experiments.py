@@ -8,6 +8,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from maze_sim import Maze
@@ -196,10 +197,22 @@ def test_caps_follow_the_maze_size():
                                        budget_steps=99000)
 
 
+def test_agent_options_combine():
+    from tmgwr_agent.agents import make_agent
+    ag = make_agent("tmgwr:literal+paper", Maze.from_text(SMALL), np.random.default_rng(0))
+    assert ag.map.link_rule == "literal"
+    assert not (ag.motivation.absorbing_terminals or ag.selector.goal_search
+                or ag.selector.try_untried)
+    default = make_agent("tmgwr", Maze.from_text(SMALL), np.random.default_rng(0))
+    assert default.selector.try_untried and default.motivation.absorbing_terminals
+
+
 # ------------------------------------------------------------------ errors
 @pytest.mark.parametrize("args, message", [
     (["experiment", "env-change", "--agents", "tmgwr,sarsa"], "unknown agent 'sarsa'"),
     (["experiment", "env-change", "--agents", "q_learning:credit"], "takes no option"),
+    (["experiment", "env-change", "--agents", "tmgwr:credit+fast"],
+     "unknown tmgwr option 'fast'"),
     (["experiment", "env-change", "--event", "z"], "no event named 'z'"),
     (["experiment", "goal-change", "--goals", "1,9"], "no goal named '9'"),
     (["experiment", "timing", "--goals", "1,2,3"], "two goals"),

@@ -1,8 +1,10 @@
 """Agent names of the experiments CLI (DESIGN.md section 5) and their factory.
 
-``make_agent("tmgwr:credit", maze, rng)``: a name, optionally followed by ``:option``.
-Options: ``tmgwr:literal`` / ``tmgwr:credit`` choose the sensorimotor-link rule (plain
-``tmgwr`` uses the configured default); the baselines take no option.
+``make_agent("tmgwr:credit", maze, rng)``: a name, optionally followed by ``:options``
+joined by ``+``. TMGWR options: ``literal`` / ``credit`` choose the sensorimotor-link rule
+(plain ``tmgwr`` uses the configured default); ``paper`` turns our three additions off
+(``absorbing_terminals``, ``goal_search``, ``try_untried``: the agent of Eq. 1-7 as
+printed), e.g. ``tmgwr:literal+paper``. The baselines take no option.
 """
 
 from __future__ import annotations
@@ -18,27 +20,35 @@ from .agent_api import Agent
 AGENT_NAMES = ("tmgwr", "q_learning", "model_based", "dyna_q_plus")
 
 
-def parse_spec(spec: str) -> tuple[str, str | None]:
-    name, _, option = spec.partition(":")
+TMGWR_OPTIONS = {
+    "literal": {"link_rule": "literal"},
+    "credit": {"link_rule": "credit"},
+    "paper": {"absorbing_terminals": False, "goal_search": False, "try_untried": False},
+}
+
+
+def parse_spec(spec: str) -> tuple[str, dict[str, Any]]:
+    """(agent name, parameter overrides of its options)."""
+    name, _, options = spec.partition(":")
     if name not in AGENT_NAMES:
         raise ValueError(f"unknown agent {name!r} in {spec!r}; agents: {', '.join(AGENT_NAMES)}")
-    if option and name != "tmgwr":
+    if options and name != "tmgwr":
         raise ValueError(f"agent {name!r} takes no option (got {spec!r})")
-    if option and option not in ("literal", "credit"):
-        raise ValueError(f"unknown tmgwr option {option!r} in {spec!r}; "
-                         "options: literal, credit")
-    return name, option or None
+    overrides: dict[str, Any] = {}
+    for option in options.split("+") if options else ():
+        if option not in TMGWR_OPTIONS:
+            raise ValueError(f"unknown tmgwr option {option!r} in {spec!r}; "
+                             f"options: {', '.join(TMGWR_OPTIONS)}")
+        overrides.update(TMGWR_OPTIONS[option])
+    return name, overrides
 
 
 def make_agent(spec: str, maze: Maze, rng: np.random.Generator,
                overrides: Mapping[str, Any] | None = None) -> Agent:
-    name, option = parse_spec(spec)
+    name, options = parse_spec(spec)
     if name == "tmgwr":
         from .agent import TMGWRAgent
-        params = dict(overrides or {})
-        if option:
-            params["link_rule"] = option
-        return TMGWRAgent(maze, rng, params)
+        return TMGWRAgent(maze, rng, {**(overrides or {}), **options})
     if name == "q_learning":
         from .baselines.q_learning import QLearningAgent
         return QLearningAgent(maze, rng, overrides)

@@ -33,7 +33,8 @@ def register(subparsers) -> None:
         "experiment", help="run one of the paper's experiments (Tables 3-6, Figs 5-7)",
         description="Run a scenario of the paper over several trials and write its JSON "
                     "(DESIGN.md section 5). Agents: tmgwr, tmgwr:literal, tmgwr:credit, "
-                    "q_learning, model_based, dyna_q_plus.")
+                    "q_learning, model_based, dyna_q_plus; tmgwr options join with + and "
+                    "'paper' turns our three additions off (tmgwr:credit+paper).")
     p.add_argument("scenario", choices=SCENARIOS, metavar="SCENARIO",
                    help=f"one of {', '.join(SCENARIOS)}")
     p.add_argument("--maze", default=None,
