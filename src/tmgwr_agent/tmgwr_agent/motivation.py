@@ -70,7 +70,7 @@ SPECS = (
 )
 
 
-def _NONE_ABSORBING(n: int) -> np.ndarray:
+def _no_absorbing(n: int) -> np.ndarray:
     return np.zeros(n, dtype=bool)
 
 
@@ -128,7 +128,7 @@ class MotivationEstimator:
             self._scale = self.link_scale(m) or 1.0
             self._scale_version = m.version
         R = self.rewards(m, g, self._scale)
-        absorbing = m.terminal if self.absorbing_terminals else _NONE_ABSORBING(n)
+        absorbing = m.terminal if self.absorbing_terminals else _no_absorbing(n)
         self.sweeps = kernels.value_iteration(m.out, m.E, R, self.V, n, self.beta,
                                               self.gamma, self.vi_tol, V_FLOOR,
                                               self.vi_max_sweeps, absorbing, m.alive)

@@ -91,20 +91,9 @@ class DynaQPlusAgent(QLearningAgent):
         # bonus-free twin of Q (Dyna-Q), read by act(explore=False)
         self.Q0: list[list[float]] = [[0.0] * N_ACTIONS for _ in range(self.rows * self.cols)]
 
-    def greedy0(self, s: int) -> int | None:
-        """argmax_a Q0(s, a): the learnt route without the exploration bonus."""
-        if s < 0 or not self.tried[s]:
-            return None
-        q = self.Q0[s]
-        top = max(q)
-        best = [a for a in range(N_ACTIONS) if q[a] == top]
-        if len(best) == 1:
-            return best[0]
-        return best[int(self.rng.integers(len(best)))]
-
     def act(self, explore: bool = True) -> int:
-        greedy = self.greedy if explore else self.greedy0
-        a, self.last_explored = self.policy.choose(lambda: greedy(self.state), explore)
+        Q = self.Q if explore else self.Q0      # the probe reads the bonus-free twin
+        a, self.last_explored = self.policy.choose(lambda: self.greedy(self.state, Q), explore)
         return a
 
     def learn(self, s: int, a: int, r: float, s2: int, terminal: bool) -> None:

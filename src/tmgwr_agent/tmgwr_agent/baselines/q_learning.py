@@ -95,11 +95,12 @@ class QLearningAgent:
             return self.r_wall
         return self.r_empty
 
-    def greedy(self, s: int) -> int | None:
-        """argmax_a Q(s, a), ties broken by the generator; None for an untried state."""
+    def greedy(self, s: int, Q: list[list[float]] | None = None) -> int | None:
+        """argmax_a Q(s, a) (of table ``Q``, default ``self.Q``), ties broken by the
+        generator; None for an untried state."""
         if s < 0 or not self.tried[s]:
             return None
-        q = self.Q[s]
+        q = (self.Q if Q is None else Q)[s]
         top = max(q)
         best = [a for a in range(N_ACTIONS) if q[a] == top]
         if len(best) == 1:
