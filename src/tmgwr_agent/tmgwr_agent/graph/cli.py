@@ -137,7 +137,6 @@ def cmd_reset(args) -> int:
 def cmd_up(args) -> int:
     _apply_domain(args)
     from .run import GraphRun, describe_exit
-    from .supervisor import GraphError
 
     run = GraphRun(maze=args.maze, seed=args.seed, goal=args.goal,
                    record=not args.no_record, record_dir=args.record_dir,
@@ -153,14 +152,9 @@ def cmd_up(args) -> int:
     stop = {"now": False}
     if run.record_note:
         say(f"up: {run.record_note}")
-    try:
-        run.start(on_stop_signal=lambda: stop.update(now=True))
-    except GraphError as exc:
-        say(f"up: the graph did not start: {exc}", sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        say("up: interrupted during start-up; nodes stopped", sys.stderr)
-        return 130
+    code = run.start_or_exit_code("up", on_stop_signal=lambda: stop.update(now=True))
+    if code is not None:
+        return code
     domain = os.environ.get("ROS_DOMAIN_ID", "0")
     say(f"graph up in ROS_DOMAIN_ID={domain}: "
           + ", ".join(f"{k} (pid {v})" for k, v in run.supervisor.pids().items()))

@@ -90,14 +90,9 @@ def run(args) -> int:
         say(f"demo: {graph.record_note}")
     stop = {"now": False}
     t0 = time.monotonic()
-    try:
-        graph.start(on_stop_signal=lambda: stop.update(now=True))
-    except GraphError as exc:
-        say(f"demo: the graph did not start: {exc}", sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        say("demo: interrupted during start-up; nodes stopped", sys.stderr)
-        return 130
+    code = graph.start_or_exit_code("demo", on_stop_signal=lambda: stop.update(now=True))
+    if code is not None:
+        return code
     mon = graph.monitor
     say(f"graph up in {time.monotonic() - t0:.1f} s: " + ", ".join(graph.supervisor.pids()))
     if graph.record_dir:

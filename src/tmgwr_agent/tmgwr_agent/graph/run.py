@@ -14,8 +14,9 @@ from pathlib import Path
 from typing import Mapping
 
 from .clients import EpisodeMonitor, call
-from .supervisor import (GraphSupervisor, ManagedProcess, default_run_dir, graph_specs,
-                         install_stop_handlers, recorder_available)
+from .output import say
+from .supervisor import (GraphError, GraphSupervisor, ManagedProcess, default_run_dir,
+                         graph_specs, install_stop_handlers, recorder_available)
 
 
 def describe_exit(p: ManagedProcess) -> str:
@@ -64,6 +65,20 @@ class GraphRun:
             raise
         if on_stop_signal is not None:
             install_stop_handlers(on_stop_signal)
+
+    def start_or_exit_code(self, tool: str, on_stop_signal=None) -> int | None:
+        """:meth:`start`, saying why on stderr when it fails: None when the graph is up,
+        else the exit code for ``tool`` (1: the graph did not start, 130: Ctrl-C)."""
+        import sys
+        try:
+            self.start(on_stop_signal=on_stop_signal)
+        except GraphError as exc:
+            say(f"{tool}: the graph did not start: {exc}", sys.stderr)
+            return 1
+        except KeyboardInterrupt:
+            say(f"{tool}: interrupted during start-up; nodes stopped", sys.stderr)
+            return 130
+        return None
 
     def spin_once(self, timeout: float = 0.1) -> None:
         self.executor.spin_once(timeout_sec=timeout)
