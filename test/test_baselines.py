@@ -11,8 +11,13 @@ from maze_sim.world import StepInfo
 from tmgwr_agent.baselines.dyna_q_plus import DynaQPlusAgent
 from tmgwr_agent.baselines.model_based import ModelBasedAgent
 from tmgwr_agent.baselines.q_learning import QLearningAgent
-from tmgwr_agent.experiments.runner import Caps, make_world, run_episode, set_goal, \
-    train_until_converged
+from tmgwr_agent.experiments.runner import (
+    Caps,
+    make_world,
+    run_episode,
+    set_goal,
+    train_until_converged,
+)
 
 from small_mazes import CORRIDOR, SMALL
 

@@ -15,9 +15,9 @@ from maze_sim import Maze
 from tmgwr_agent.experiments.env_change import oracle_steps
 from tmgwr_agent.experiments.runner import Caps
 from tmgwr_agent.experiments.stats import stat
-from tmgwr_agent.params import CONFIG_DIR
+from maze_sim.maze import maze_file
 
-DEFAULT_MAZE = CONFIG_DIR / "mazes" / "paper_13x17.txt"
+DEFAULT_MAZE = maze_file()
 
 from small_mazes import SMALL
 
@@ -198,7 +198,7 @@ def test_caps_follow_the_maze_size():
 
 
 def test_agent_options_combine():
-    from tmgwr_agent.agents import make_agent
+    from tmgwr_agent.experiments.agent_factory import make_agent
     ag = make_agent("tmgwr:literal+paper", Maze.from_text(SMALL), np.random.default_rng(0))
     assert ag.map.link_rule == "literal"
     assert not (ag.motivation.absorbing_terminals or ag.selector.goal_search

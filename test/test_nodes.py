@@ -149,7 +149,7 @@ def test_each_node_refuses_an_invalid_parameter(ros_domain):
 
 def test_parameters_default_to_config_and_follow_params_file_and_overrides(ros_domain,
                                                                            tmp_path):
-    from tmgwr_agent.params import load_yaml
+    from tmgwr_common.params import load_yaml
     config = load_yaml(ROOT / "config" / "tmgwr_agent.yaml", "tmgwr")
     params_file = tmp_path / "p.yaml"
     params_file.write_text("/**:\n  ros__parameters:\n    tmgwr:\n      gamma: 0.5\n"
@@ -173,7 +173,7 @@ def test_parameters_default_to_config_and_follow_params_file_and_overrides(ros_d
 def test_goal_change_by_service_and_same_cells_as_in_process(ros_domain, tmp_path):
     """3000 lockstep steps over DDS, a /set_goal change on the way, cell for cell the
     in-process TMGWRAgent loop; the refused /set_goal requests leave the estimator up."""
-    from tmgwr_agent.nodes.reference import read_trajectory, run_reference
+    from tmgwr_agent.experiments.lockstep import read_trajectory, run_reference
 
     steps = 3000
     traj = tmp_path / "trajectory.txt"

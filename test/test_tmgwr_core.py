@@ -5,13 +5,13 @@ import numpy as np
 import pytest
 
 from maze_sim import GridWorld, Maze
-from maze_sim.maze import ACTION_VECTORS
-from tmgwr_agent.agent import TMGWRAgent, tmgwr_params
-from tmgwr_agent.exploration import EpsilonSchedule, RandomWalk
-from tmgwr_agent.motivation import MotivationEstimator
-from tmgwr_agent.params import CONFIG_DIR, ParamError
-from tmgwr_agent.tmgwr_map import SensorimotorMap
-from tmgwr_agent.action_selector import ActionSelector
+from maze_sim.maze import ACTION_VECTORS, maze_file
+from tmgwr_agent.core.agent import TMGWRAgent, tmgwr_params
+from tmgwr_agent.core.exploration import EpsilonSchedule, RandomWalk
+from tmgwr_agent.core.motivation import MotivationEstimator
+from tmgwr_common.params import ParamError
+from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
+from tmgwr_agent.core.action_selector import ActionSelector
 
 UP, DOWN, LEFT, RIGHT = range(4)
 
@@ -379,7 +379,7 @@ def test_learns_shortest_known_path_and_one_node_per_visited_cell(seed):
 def test_adapts_to_a_new_goal_without_further_learning():
     """Once a goal's cell is in the map, the very first greedy episode takes a shortest
     path to it (Table 4: 100 % visits to the current goal right after the change)."""
-    maze = Maze.from_file(CONFIG_DIR / "mazes" / "paper_13x17.txt")
+    maze = Maze.from_file(maze_file())
     agent, world = trained(maze, goal="G", episodes=15)
     checked = 0
     for goal in ("1", "2", "3", "4", "G"):

@@ -10,7 +10,7 @@
 #   3. colcon build of src/ into build/ install/ log/ at the repository root. Re-run only when
 #      the packaging sources changed (package.xml, setup.*, CMakeLists.txt, msg/srv, resource,
 #      launch, config/, the set of __init__.py files) or the venv changed. Python module
-#      contents are not part of it: tools/env.sh puts src/maze_sim and src/tmgwr_agent first
+#      contents are not part of it: tools/env.sh puts src/tmgwr_common, src/maze_sim and src/tmgwr_agent first
 #      on PYTHONPATH, so editing core code never needs a rebuild.
 #
 # Usage: tools/bootstrap.sh [--force] [--rebuild] [--status]
@@ -77,11 +77,11 @@ build_hash() {
     (
         cd "$ROOT"
         {
-            find src config -type f \
+            find src -type f \
                 \( -name package.xml -o -name setup.py -o -name setup.cfg \
                    -o -name CMakeLists.txt -o -name '*.cmake' -o -name '*.msg' -o -name '*.srv' \
                    -o -name '*.action' -o -path '*/resource/*' -o -path '*/launch/*' \
-                   -o -path 'config/*' \) \
+                   -o -path '*/config/*' -o -path '*/mazes/*' \) \
                 -not -path '*/__pycache__/*' -print0 2>/dev/null | sort -z | xargs -0 -r sha256sum
             # The set of Python packages (not their contents): a new subpackage such as
             # tmgwr_agent/nodes/ reaches the installed copy that `ros2 run` falls back to.

@@ -10,7 +10,7 @@
 #   maze_sim, tmgwr_agent) with `set -u` lifted while it runs;
 # - LD_LIBRARY_PATH covers the venv's ROS libraries and _ROS_WHEELS_BOOTSTRAP_COMPLETE=1,
 #   so python processes skip the wheels' self re-exec (children inherit a complete env);
-# - PYTHONPATH starts with src/maze_sim and src/tmgwr_agent: `import maze_sim, tmgwr_agent`
+# - PYTHONPATH starts with src/tmgwr_common, src/maze_sim and src/tmgwr_agent: `import maze_sim, tmgwr_agent`
 #   resolves to the source trees, so editing core code never needs a rebuild;
 # - ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST (nothing leaves the machine),
 #   RMW_IMPLEMENTATION=rmw_fastrtps_cpp, FASTRTPS_DEFAULT_PROFILES_FILE=tools/fastdds_localhost.xml
@@ -66,7 +66,7 @@ export _ROS_WHEELS_BOOTSTRAP_COMPLETE=1
 # shellcheck disable=SC1091
 . "$TMGWR_ROOT/install/setup.bash"
 
-_tmgwr_prepend PYTHONPATH "$TMGWR_ROOT/src/maze_sim" "$TMGWR_ROOT/src/tmgwr_agent"
+_tmgwr_prepend PYTHONPATH "$TMGWR_ROOT/src/tmgwr_common" "$TMGWR_ROOT/src/maze_sim" "$TMGWR_ROOT/src/tmgwr_agent"
 
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export RMW_IMPLEMENTATION=rmw_fastrtps_cpp

@@ -1,5 +1,4 @@
 from glob import glob
-import os
 
 from setuptools import find_packages, setup
 
@@ -8,13 +7,8 @@ package_name = 'maze_sim'
 data_files = [
     ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
     ('share/' + package_name, ['package.xml']),
+    ('share/' + package_name + '/mazes', sorted(glob('mazes/*.txt'))),
 ]
-# Mazes ship with the package when present (package-local first, else the repository's config/).
-for mazes in ('config/mazes', os.path.join('..', '..', 'config', 'mazes')):
-    files = sorted(f for f in glob(os.path.join(mazes, '*')) if os.path.isfile(f))
-    if files:
-        data_files.append((os.path.join('share', package_name, 'mazes'), files))
-        break
 
 setup(
     name=package_name,

@@ -13,18 +13,9 @@ def _files(pattern):
 data_files = [
     ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
     ('share/' + package_name, ['package.xml']),
+    ('share/' + package_name + '/config', _files('config/*.yaml')),
+    ('share/' + package_name + '/launch', _files('launch/*.py')),
 ]
-# Parameter files and launch files, when present. Parameters come from the package's own
-# config/ if it has one, else from the repository's config/ (the workspace keeps them there).
-repo_config = os.path.join('..', '..', 'config')
-config_dir = 'config' if _files('config/*.yaml') else repo_config
-if _files(os.path.join(config_dir, '*.yaml')):
-    data_files.append(('share/' + package_name + '/config', _files(os.path.join(config_dir, '*.yaml'))))
-if _files(os.path.join(config_dir, 'mazes', '*')):
-    data_files.append(('share/' + package_name + '/config/mazes',
-                       _files(os.path.join(config_dir, 'mazes', '*'))))
-if _files('launch/*'):
-    data_files.append(('share/' + package_name + '/launch', _files('launch/*')))
 
 setup(
     name=package_name,

@@ -231,3 +231,14 @@ def generate_maze(rows: int, cols: int, rng: np.random.Generator, loop_fraction:
     chars[1, 1] = "S"
     chars[rows - 2, cols - 2] = "G"
     return "\n".join("".join(row) for row in chars) + "\n"
+
+
+#: The paper's 13 x 17 maze (section 5.1), installed in share/maze_sim/mazes.
+DEFAULT_MAZE = "paper_13x17.txt"
+
+
+def maze_file(name_or_path: str | Path = DEFAULT_MAZE) -> Path:
+    """A maze file given as a path, or by name among the mazes maze_sim installs."""
+    from tmgwr_common.share import resolve_data_file
+
+    return resolve_data_file(name_or_path, "maze_sim", "mazes")

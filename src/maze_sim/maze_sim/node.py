@@ -37,21 +37,28 @@ from std_srvs.srv import Trigger
 from tmgwr_interfaces.msg import Action, Observation
 from tmgwr_interfaces.srv import FireEvent, SetCell, SetGoal
 
-from tmgwr_agent import topics
-from tmgwr_agent.nodes.common import (LATCHED_QOS, SENSOR_QOS, STEP_QOS, CallbackTimer,
-                                      declare_specs, f64, resolve_data_file, run)
-from tmgwr_agent.params import Param, ParamError
+from tmgwr_common import topics
+from tmgwr_common.node import (
+    LATCHED_QOS,
+    SENSOR_QOS,
+    STEP_QOS,
+    CallbackTimer,
+    declare_specs,
+    f64,
+    run,
+)
+from tmgwr_common.params import Param, ParamError
 
-from .maze import N_ACTIONS, Maze, MazeError
-from .world import GridWorld
+from maze_sim.maze import DEFAULT_MAZE, N_ACTIONS, Maze, MazeError, maze_file
+from tmgwr_common.share import DataFileError
+from maze_sim.world import GridWorld
 
 FRAME = "maze"
 WARMUP_STEPS = 200    # the SUMMARY's steady rate leaves out discovery and the first steps
 
 SPECS = (
-    Param("maze", "config/mazes/paper_13x17.txt", "maze file (DESIGN.md section 4): "
-          "absolute, relative to the working directory or the repository, or a file name "
-          "shipped in share/maze_sim/mazes"),
+    Param("maze", DEFAULT_MAZE, "maze file (DESIGN.md section 4): absolute, relative to "
+          "the working directory, or a file name shipped in share/maze_sim/mazes"),
     Param("goal", "G", "initial goal: a goal name of the maze ('G', '1'..'9') or 'row,col'"),
     Param("seed", 0, "seed of the world's sensor-noise generator", low=0, high=2 ** 63 - 1,
           integer=True),
@@ -90,8 +97,10 @@ class MazeSimNode(Node):
         super().__init__("maze_sim")
         p = declare_specs(self, SPECS)
         self.p = p
-        path = resolve_data_file(p["maze"], ("maze_sim", "mazes"),
-                                 ("tmgwr_agent", "config/mazes"))
+        try:
+            path = maze_file(p["maze"])
+        except DataFileError as exc:
+            raise ParamError(f"parameter 'maze': {exc}") from None
         maze = Maze.from_file(path)
         try:
             self.world = GridWorld(maze, parse_goal(maze, p["goal"]), p["sensor_noise"],

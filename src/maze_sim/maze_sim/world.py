@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .maze import ACTION_VECTORS, N_ACTIONS, Cell, Maze, MazeError, move
+from maze_sim.maze import ACTION_VECTORS, N_ACTIONS, Cell, Maze, MazeError, move
 
 
 @dataclass(frozen=True)

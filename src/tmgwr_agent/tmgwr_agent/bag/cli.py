@@ -52,7 +52,7 @@ def register(subparsers) -> None:
 
 
 def _recover(args: argparse.Namespace) -> int:
-    from .recover import recover
+    from tmgwr_agent.bag.recover import recover
     try:
         results = recover(args.bag, args.output, args.compression)
     except (OSError, ValueError) as exc:
@@ -67,7 +67,7 @@ def _recover(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from .replay import replay
+    from tmgwr_agent.bag.replay import replay
     try:
         res = replay(args.bag, rate=args.rate, topics=args.topics, loop=args.loop,
                      delay=args.delay, wait_subscribers=args.wait_subscribers)
@@ -83,7 +83,7 @@ def _pct(v) -> str:
 
 
 def _report(args: argparse.Namespace) -> int:
-    from .report import report
+    from tmgwr_agent.bag.report import report
     try:
         res = report(args.bag, args.output, maze=args.maze)
     except (OSError, ValueError) as exc:

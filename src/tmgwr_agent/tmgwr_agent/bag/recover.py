@@ -24,9 +24,15 @@ from mcap.exceptions import McapError
 from mcap.records import Attachment, Channel, DataEnd, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
-from . import qos as bag_qos
-from .writer import (COMPRESSIONS, FileStats, McapFile, TopicInfo, bag_metadata,
-                     write_metadata_yaml)
+from tmgwr_agent.bag import qos as bag_qos
+from tmgwr_agent.bag.writer import (
+    COMPRESSIONS,
+    FileStats,
+    McapFile,
+    TopicInfo,
+    bag_metadata,
+    write_metadata_yaml,
+)
 
 MAGIC = b'\x89MCAP0\r\n'     # MCAP version 0 magic, at the start of every file
 

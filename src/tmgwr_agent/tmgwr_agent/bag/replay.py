@@ -22,8 +22,8 @@ from typing import Iterator
 import yaml
 from mcap.reader import make_reader
 
-from . import definitions
-from . import qos as bag_qos
+from tmgwr_agent.bag import definitions
+from tmgwr_agent.bag import qos as bag_qos
 
 LATCHED_DEPTH = 1
 STREAM_DEPTH = 100

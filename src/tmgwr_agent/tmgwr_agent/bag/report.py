@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import topics as T
+from tmgwr_common import topics as T
 
 GOAL_EVENT = re.compile(r'step (\d+): goal -> row (-?\d+), col (-?\d+)')
 STEP_EVENT = re.compile(r'step (\d+): (.*)')
@@ -71,7 +71,7 @@ def read_bag(bag: str | Path) -> dict[str, Any]:
     """Everything the report needs, in plain Python/numpy form."""
     from rosbags.highlevel import AnyReader
 
-    from ..graph.clients import EpisodeMonitor
+    from tmgwr_agent.graph.clients import EpisodeMonitor
 
     bag = Path(bag)
     data: dict[str, Any] = {'topics': {}, 'goals': [], 'events': [], 'map': [],

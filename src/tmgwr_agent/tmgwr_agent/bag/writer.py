@@ -28,7 +28,7 @@ from typing import Any
 import yaml
 from mcap.writer import CompressionType, Writer
 
-from . import qos as qos_yaml
+from tmgwr_agent.bag import qos as qos_yaml
 
 PROFILE = 'ros2'
 SCHEMA_ENCODING = 'ros2msg'

@@ -7,7 +7,7 @@
   agent the paper does not have: Q-learning plus a learnt model and an exploration bonus.
 
 All of them are tabular over maze cells (the state is the cell the world reports) and
-explore exactly like the TMGWR agent: :class:`~tmgwr_agent.exploration.EpsilonGreedy` with
+explore exactly like the TMGWR agent: :class:`~tmgwr_agent.core.exploration.EpsilonGreedy` with
 one ``explores()`` draw per ``act``, the random walk of section 5.1 when exploring or when
 the agent has no greedy opinion, and ``walk.observe(action, bumped)`` after every step.
 Defaults live in ``config/baselines.yaml`` (sections ``q_learning``, ``model_based``,
@@ -16,7 +16,7 @@ Defaults live in ``config/baselines.yaml`` (sections ``q_learning``, ``model_bas
 
 from __future__ import annotations
 
-from ..exploration import SPECS
+from tmgwr_agent.core.exploration import SPECS
 
 #: Exploration parameters shared by every agent (section 5.1, Eq. 7); the same names,
 #: defaults and ranges as the TMGWR agent's.

@@ -55,9 +55,9 @@ import numpy as np
 
 from maze_sim.maze import Maze
 
-from ..params import Param
-from .q_learning import N_ACTIONS, RL_SPECS, QLearningAgent
-from . import EXPLORATION_SPECS
+from tmgwr_common.params import Param
+from tmgwr_agent.baselines.q_learning import N_ACTIONS, RL_SPECS, QLearningAgent
+from tmgwr_agent.baselines import EXPLORATION_SPECS
 
 SPECS = RL_SPECS + (
     Param("n_planning", 10, "planning updates per real step (Dyna-Q step f)", low=0,

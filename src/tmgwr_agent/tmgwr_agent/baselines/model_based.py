@@ -48,9 +48,9 @@ import numpy as np
 from maze_sim.maze import Cell, Maze, move
 from maze_sim.world import StepInfo
 
-from ..exploration import EpsilonGreedy
-from ..params import Param, config_params
-from . import EXPLORATION_SPECS, exploration_kwargs
+from tmgwr_agent.core.exploration import EpsilonGreedy
+from tmgwr_common.params import Param, config_params
+from tmgwr_agent.baselines import EXPLORATION_SPECS, exploration_kwargs
 
 N_ACTIONS = 4
 

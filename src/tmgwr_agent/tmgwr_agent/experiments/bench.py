@@ -34,12 +34,18 @@ import numpy as np
 
 from maze_sim.maze import Maze, generate_maze
 
-from ..agents import AGENT_NAMES, make_agent
-from .parallel import agent_trials, default_jobs, warm_up
-from .runner import Caps, greedy_optimal, make_world, run_episode, set_goal, \
-    train_until_converged
-from .scenarios import DEFAULT_MAZE
-from .stats import stat
+from tmgwr_agent.experiments.agent_factory import AGENT_NAMES, make_agent
+from tmgwr_agent.experiments.parallel import agent_trials, default_jobs, warm_up
+from tmgwr_agent.experiments.runner import (
+    Caps,
+    greedy_optimal,
+    make_world,
+    run_episode,
+    set_goal,
+    train_until_converged,
+)
+from tmgwr_agent.experiments.scenarios import DEFAULT_MAZE
+from tmgwr_agent.experiments.stats import stat
 
 
 def time_steps(world, agent, n: int) -> np.ndarray:
@@ -139,8 +145,8 @@ def _optional(module: str, args) -> dict | None:
 
 
 def run(args) -> int:
-    from .cli import write_json
-    from .report import bench_table
+    from tmgwr_agent.experiments.cli import write_json
+    from tmgwr_agent.experiments.report import bench_table
     if args.trials < 1 or args.steps < 1:
         print("tmgwr: error: --trials and --steps must be >= 1", file=sys.stderr)
         return 2

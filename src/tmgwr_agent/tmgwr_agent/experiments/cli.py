@@ -23,12 +23,12 @@ def _csv(text: str) -> list[str]:
 
 
 def _default_maze() -> str:
-    from ..params import CONFIG_DIR
-    return str(CONFIG_DIR / "mazes" / "paper_13x17.txt")
+    from maze_sim.maze import maze_file
+    return str(maze_file())
 
 
 def register(subparsers) -> None:
-    from .names import SCENARIOS
+    from tmgwr_agent.experiments.names import SCENARIOS
     p = subparsers.add_parser(
         "experiment", help="run one of the paper's experiments (Tables 3-6, Figs 5-7)",
         description="Run a scenario of the paper over several trials and write its JSON "
@@ -110,7 +110,7 @@ def write_json(result: dict, path: str | Path | None) -> None:
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
-    from .scenarios import UsageError, run_scenario
+    from tmgwr_agent.experiments.scenarios import UsageError, run_scenario
     try:
         result = run_scenario(args.scenario, args.maze or _default_maze(), args.agents,
                               args.trials, args.seed, args.goals, args.episodes, args.event,
@@ -119,20 +119,20 @@ def cmd_experiment(args: argparse.Namespace) -> int:
         return _fail(str(exc))
     write_json(result, args.json)
     if args.plot:
-        from .plots import plot
+        from tmgwr_agent.experiments.plots import plot
         Path(args.plot).parent.mkdir(parents=True, exist_ok=True)
         plot(result, args.plot)
     if args.json:
-        from .report import table
+        from tmgwr_agent.experiments.report import table
         print(table(result))
     return 0
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from .demo import run
+    from tmgwr_agent.experiments.demo import run
     return run(args)
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from .bench import run
+    from tmgwr_agent.experiments.bench import run
     return run(args)

@@ -29,10 +29,10 @@ RUNS = (
 
 
 def run(args) -> int:
-    from .cli import write_json
-    from .plots import plot
-    from .report import table
-    from .scenarios import DEFAULT_MAZE, UsageError, run_scenario
+    from tmgwr_agent.experiments.cli import write_json
+    from tmgwr_agent.experiments.plots import plot
+    from tmgwr_agent.experiments.report import table
+    from tmgwr_agent.experiments.scenarios import DEFAULT_MAZE, UsageError, run_scenario
     if args.trials < 1:
         print("tmgwr: error: --trials must be >= 1", file=sys.stderr)
         return 2

@@ -36,11 +36,17 @@ import numpy as np
 
 from maze_sim.maze import Maze, bfs_distances
 
-from ..agents import make_agent
-from .parallel import agent_trials
-from .runner import Caps, greedy_optimal, make_world, run_episode, set_goal, \
-    train_until_converged
-from .stats import stat
+from tmgwr_agent.experiments.agent_factory import make_agent
+from tmgwr_agent.experiments.parallel import agent_trials
+from tmgwr_agent.experiments.runner import (
+    Caps,
+    greedy_optimal,
+    make_world,
+    run_episode,
+    set_goal,
+    train_until_converged,
+)
+from tmgwr_agent.experiments.stats import stat
 
 DEFAULT_AGENTS = ("tmgwr", "tmgwr:literal", "tmgwr:credit", "q_learning", "model_based",
                   "dyna_q_plus")

@@ -45,8 +45,8 @@ def warm_up() -> None:
         return
     from maze_sim.maze import Maze
     from maze_sim.world import GridWorld
-    from ..agents import make_agent
-    from .runner import run_episode
+    from tmgwr_agent.experiments.agent_factory import make_agent
+    from tmgwr_agent.experiments.runner import run_episode
     maze = Maze.from_text("#####\n#S..#\n#.#.#\n#..G#\n#####\n", source="<warm-up>")
     world = GridWorld(maze, "G", max_episode_steps=200)
     agent = make_agent("tmgwr", maze, np.random.default_rng(0))

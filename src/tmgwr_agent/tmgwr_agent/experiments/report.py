@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from .stats import fmt
+from tmgwr_agent.experiments.stats import fmt
 
 
 def _table(header: list[str], rows: list[list[str]]) -> str:

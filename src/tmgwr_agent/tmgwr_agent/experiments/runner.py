@@ -1,6 +1,6 @@
 """Episodes, greedy rollouts and the convergence test shared by every scenario.
 
-The loop is the one of :mod:`tmgwr_agent.agent_api`: a *training episode* starts at S
+The loop is the one of :mod:`tmgwr_agent.core.protocol`: a *training episode* starts at S
 (``world.reset()``), the agent acts epsilon-greedily and learns from every step, and the
 episode ends at the current goal, at the previous goal while one is set (goal-change
 scenario), or when the episode step cap truncates it. ``goal_attained()`` (the Eq. 7
@@ -42,7 +42,7 @@ from dataclasses import dataclass
 from maze_sim.maze import Maze
 from maze_sim.world import GridWorld
 
-from ..agent_api import Agent
+from tmgwr_agent.core.protocol import Agent
 
 #: Consecutive optimal greedy rollouts that count as convergence (section 5.2.5).
 STREAK = 10

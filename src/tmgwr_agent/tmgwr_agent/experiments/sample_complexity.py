@@ -18,10 +18,10 @@ import numpy as np
 
 from maze_sim.maze import Maze
 
-from ..agents import make_agent
-from .parallel import agent_trials
-from .runner import Caps, make_world, set_goal, train_until_converged
-from .stats import mean_curve, stat
+from tmgwr_agent.experiments.agent_factory import make_agent
+from tmgwr_agent.experiments.parallel import agent_trials
+from tmgwr_agent.experiments.runner import Caps, make_world, set_goal, train_until_converged
+from tmgwr_agent.experiments.stats import mean_curve, stat
 
 DEFAULT_GOALS = ("1", "2", "3", "4")
 DEFAULT_EPISODES = 100

@@ -15,14 +15,14 @@ from typing import Sequence
 
 from maze_sim.maze import Maze, MazeError
 
-from ..agents import AGENT_NAMES, parse_spec
-from ..params import CONFIG_DIR
-from . import env_change, goal_change, sample_complexity, timing
-from .runner import Caps
+from tmgwr_agent.experiments.agent_factory import AGENT_NAMES, parse_spec
+from maze_sim.maze import maze_file
+from tmgwr_agent.experiments import env_change, goal_change, sample_complexity, timing
+from tmgwr_agent.experiments.runner import Caps
 
-DEFAULT_MAZE = CONFIG_DIR / "mazes" / "paper_13x17.txt"
+DEFAULT_MAZE = maze_file()
 DEFAULT_AGENTS = AGENT_NAMES
-from .names import SCENARIOS  # noqa: E402
+from tmgwr_agent.experiments.names import SCENARIOS
 
 #: Per scenario: default goals (None = the scenario takes a single --goal), episodes, agents.
 DEFAULTS = {

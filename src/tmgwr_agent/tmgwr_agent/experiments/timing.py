@@ -29,10 +29,16 @@ import numpy as np
 
 from maze_sim.maze import Maze
 
-from ..agents import make_agent
-from .parallel import agent_trials
-from .runner import Caps, make_world, run_episode, set_goal, train_until_converged
-from .stats import stat
+from tmgwr_agent.experiments.agent_factory import make_agent
+from tmgwr_agent.experiments.parallel import agent_trials
+from tmgwr_agent.experiments.runner import (
+    Caps,
+    make_world,
+    run_episode,
+    set_goal,
+    train_until_converged,
+)
+from tmgwr_agent.experiments.stats import stat
 
 DEFAULT_GOALS = ("4", "3")
 

@@ -27,7 +27,7 @@ import sys
 import time
 from pathlib import Path
 
-from .output import say
+from tmgwr_agent.graph.output import say
 
 CALLBACKS = re.compile(r"(\d+) step callbacks, mean (\d+) us, total ([\d.]+) s")
 
@@ -40,7 +40,7 @@ def _opt(args, name, default):
 # ------------------------------------------------------------------------------ (a) ring
 def ring(size: int, laps: int, warmup: int = 100, timeout: float = 120.0) -> dict:
     """Laps/s of an empty ring of ``size`` processes (member 0 times it)."""
-    from .supervisor import GraphError, GraphSupervisor, NodeSpec
+    from tmgwr_agent.graph.supervisor import GraphError, GraphSupervisor, NodeSpec
 
     py = sys.executable
     specs = [NodeSpec("", f"ring_{i}", name=f"ring{size}_{i}", argv=[
@@ -69,8 +69,8 @@ def ring(size: int, laps: int, warmup: int = 100, timeout: float = 120.0) -> dic
 def graph_rate(steps: int, warmup: int = 200, seed: int = 0, maze: str | None = None,
                timeout: float = 300.0) -> dict:
     """Steps/s of the lockstep graph over ``steps`` steps after ``warmup`` steps."""
-    from .run import GraphRun, describe_exit
-    from .supervisor import GraphError
+    from tmgwr_agent.graph.run import GraphRun, describe_exit
+    from tmgwr_agent.graph.supervisor import GraphError
 
     run = GraphRun(maze=maze, seed=seed, record=False, echo=False)
     run.start(ready_timeout=120.0)
@@ -116,10 +116,10 @@ def in_process_rate(steps: int, warmup: int = 200, seed: int = 0,
     from maze_sim.maze import Maze
     from maze_sim.world import GridWorld
 
-    from ..agent import TMGWRAgent
-    from .supervisor import config_dir
+    from tmgwr_agent.core.agent import TMGWRAgent
+    from maze_sim.maze import maze_file
 
-    path = Path(maze) if maze else config_dir() / "mazes" / "paper_13x17.txt"
+    path = maze_file(maze) if maze else maze_file()
     m = Maze.from_file(path)
     world = GridWorld(m, goal="G", seed=seed)
     agent = TMGWRAgent(m, np.random.default_rng(seed))

@@ -18,7 +18,7 @@ import os
 import sys
 import time
 
-from .output import say
+from tmgwr_agent.graph.output import say
 
 
 def register(subparsers) -> None:
@@ -89,7 +89,7 @@ def _apply_domain(args) -> None:
 
 # --------------------------------------------------------------------------- clients
 def _service(args, make, name: str, what: str) -> int:
-    from .clients import NoGraph, call_once
+    from tmgwr_agent.graph.clients import NoGraph, call_once
     _apply_domain(args)
     srv_type, request = make()
     try:
@@ -106,37 +106,37 @@ def _service(args, make, name: str, what: str) -> int:
 
 
 def cmd_goal(args) -> int:
-    from .. import topics
-    from .clients import set_goal_request
+    from tmgwr_common import topics
+    from tmgwr_agent.graph.clients import set_goal_request
     return _service(args, lambda: set_goal_request(args.x, args.y), topics.SET_GOAL,
                     f"goal (x={args.x:g}, y={args.y:g})")
 
 
 def cmd_cell(args) -> int:
-    from .. import topics
-    from .clients import set_cell_request
+    from tmgwr_common import topics
+    from tmgwr_agent.graph.clients import set_cell_request
     what = f"cell (row {args.row}, col {args.col}) {'block' if args.blocked else 'open'}"
     return _service(args, lambda: set_cell_request(args.row, args.col, args.blocked),
                     topics.SET_CELL, what)
 
 
 def cmd_event(args) -> int:
-    from .. import topics
-    from .clients import fire_event_request
+    from tmgwr_common import topics
+    from tmgwr_agent.graph.clients import fire_event_request
     return _service(args, lambda: fire_event_request(args.name), topics.FIRE_EVENT,
                     f"event {args.name!r}")
 
 
 def cmd_reset(args) -> int:
-    from .. import topics
-    from .clients import reset_request
+    from tmgwr_common import topics
+    from tmgwr_agent.graph.clients import reset_request
     return _service(args, reset_request, topics.RESET, "reset")
 
 
 # --------------------------------------------------------------------------- up
 def cmd_up(args) -> int:
     _apply_domain(args)
-    from .run import GraphRun, describe_exit
+    from tmgwr_agent.graph.run import GraphRun, describe_exit
 
     run = GraphRun(maze=args.maze, seed=args.seed, goal=args.goal,
                    record=not args.no_record, record_dir=args.record_dir,

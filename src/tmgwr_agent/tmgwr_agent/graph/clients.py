@@ -16,7 +16,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-from .. import topics
+from tmgwr_common import topics
 
 
 class NoGraph(RuntimeError):
@@ -108,7 +108,7 @@ history costs only memory (about 1 MB here)."""
 def monitor_qos():
     """STEP_QOS (reliable, volatile) with a :data:`MONITOR_DEPTH` history."""
     from rclpy.qos import QoSProfile
-    from tmgwr_agent.nodes.common import STEP_QOS
+    from tmgwr_common.node import STEP_QOS
     return QoSProfile(history=STEP_QOS.history, depth=MONITOR_DEPTH,
                       reliability=STEP_QOS.reliability, durability=STEP_QOS.durability)
 

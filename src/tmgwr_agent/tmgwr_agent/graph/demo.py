@@ -26,14 +26,13 @@ import sys
 import time
 from pathlib import Path
 
-from .. import topics
-from .output import say
+from tmgwr_common import topics
+from tmgwr_agent.graph.output import say
 
 #: Seed of the demo (simulator and exploration policy). The paper maze takes about 2,000
 #: steps to learn G with this seed; other seeds take 2,000-16,000 (in-process check of
 #: seeds 0-5), too many for a two-minute demo at the graph's rate on two loaded cores.
 DEMO_SEED = 1
-DEFAULT_MAZE = "mazes/paper_13x17.txt"        # under config/
 NEW_GOAL = "2"                                # the goal-change target (a named goal cell)
 EVENT = "a"
 NOISY = re.compile(r"\b(WARN|WARNING|ERROR|FATAL|Traceback|cannot)\b")
@@ -55,11 +54,13 @@ def run(args) -> int:
     from maze_sim.maze import Maze
     from maze_sim.world import GridWorld
 
-    from .clients import fire_event_request, set_goal_request
-    from .run import GraphRun, describe_exit
-    from .supervisor import GraphError, config_dir
+    from tmgwr_agent.graph.clients import fire_event_request, set_goal_request
+    from tmgwr_agent.graph.run import GraphRun, describe_exit
+    from maze_sim.maze import DEFAULT_MAZE, maze_file
 
-    maze_path = Path(_opt(args, "maze", config_dir() / DEFAULT_MAZE)).expanduser().resolve()
+    from tmgwr_agent.graph.supervisor import GraphError
+
+    maze_path = maze_file(_opt(args, "maze", DEFAULT_MAZE)).resolve()
     seed = int(_opt(args, "graph_seed", DEMO_SEED))
     streak = int(_opt(args, "streak", 3))
     slack = float(_opt(args, "slack", 1.5))

@@ -28,8 +28,8 @@ PROBE_BASE = 1 << 62       # probe ids live far above any lap id
 
 def step_qos():
     """The QoS of the graph's per-step topics: the nodes' own ``STEP_QOS``
-    (:mod:`tmgwr_agent.nodes.common`), so the ring and the graph can never drift apart."""
-    from tmgwr_agent.nodes.common import STEP_QOS
+    (:mod:`tmgwr_common.node`), so the ring and the graph can never drift apart."""
+    from tmgwr_common.node import STEP_QOS
     return STEP_QOS
 
 

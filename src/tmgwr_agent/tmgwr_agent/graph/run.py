@@ -13,10 +13,17 @@ import os
 from pathlib import Path
 from typing import Mapping
 
-from .clients import EpisodeMonitor, call
-from .output import say
-from .supervisor import (GraphError, GraphSupervisor, ManagedProcess, default_run_dir,
-                         graph_specs, install_stop_handlers, recorder_available)
+from tmgwr_agent.graph.clients import EpisodeMonitor, call
+from tmgwr_agent.graph.output import say
+from tmgwr_agent.graph.supervisor import (
+    GraphError,
+    GraphSupervisor,
+    ManagedProcess,
+    default_run_dir,
+    graph_specs,
+    install_stop_handlers,
+    recorder_available,
+)
 
 
 def describe_exit(p: ManagedProcess) -> str:

@@ -36,7 +36,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
-from .output import say
+from tmgwr_agent.graph.output import say
 
 READY = re.compile(r"\bready\b", re.IGNORECASE)
 RECORDER_READY = re.compile(r"\bready\b|\brecording\b.* to ", re.IGNORECASE)
@@ -130,16 +130,9 @@ def executable_path(package: str, executable: str) -> Path:
 
 
 def config_dir() -> Path:
-    """The parameter files: the repository's config/ in a checkout, else the installed
-    share/tmgwr_agent/config (what the nodes themselves read)."""
-    root = os.environ.get("TMGWR_ROOT")
-    candidates = [Path(root) / "config"] if root else []
-    candidates.append(Path(__file__).resolve().parents[4] / "config")
-    for c in candidates:
-        if (c / "tmgwr_agent.yaml").is_file():
-            return c
-    from ament_index_python.packages import get_package_share_directory
-    return Path(get_package_share_directory("tmgwr_agent")) / "config"
+    """The installed parameter files (share/tmgwr_agent/config), what the nodes read."""
+    from tmgwr_common.share import share_dir
+    return share_dir("tmgwr_agent") / "config"
 
 
 def params_files_for(package: str) -> list[Path]:

@@ -2,9 +2,9 @@
 
 One module per node; :mod:`.common` holds what they share (QoS, parameters, flat arrays,
 ``main``). Each per-step callback calls the same core objects, in the same order, as
-:class:`tmgwr_agent.agent.TMGWRAgent` does in-process (:mod:`.reference` is that loop).
+:class:`tmgwr_agent.core.agent.TMGWRAgent` does in-process (:mod:`.reference` is that loop).
 
-One lockstep step goes once around the ring (names in :mod:`tmgwr_agent.topics`)::
+One lockstep step goes once around the ring (names in :mod:`tmgwr_common.topics`)::
 
     maze_sim            --/observation (Observation)------------> sensory_preprocessor
     sensory_preprocessor --/features (Features)-----------------> map_learner

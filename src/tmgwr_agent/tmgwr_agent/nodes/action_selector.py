@@ -1,8 +1,8 @@
 """``ros2 run tmgwr_agent action_selector``: Eq. 6 plus the exploration of section 5.1.
 
 Per step (lockstep): ``MotivationField`` in (this step's potentials V and the winner's
-outgoing links), ``Action`` out. The core :class:`~tmgwr_agent.action_selector.ActionSelector`
-is called exactly as :class:`~tmgwr_agent.agent.TMGWRAgent` calls it in-process: first
+outgoing links), ``Action`` out. The core :class:`~tmgwr_agent.core.action_selector.ActionSelector`
+is called exactly as :class:`~tmgwr_agent.core.agent.TMGWRAgent` calls it in-process: first
 the random walk learns what the last action did (``walk.observe``), the Eq. 7 schedule
 decays when the goal was reached, and then ``select`` draws from the selector's generator
 ``numpy.random.default_rng(seed)``, the same generator the in-process agent is given, so
@@ -21,12 +21,20 @@ from tmgwr_interfaces.msg import Action, MotivationField
 
 from maze_sim.maze import ACTION_VECTORS
 
-from .. import topics
-from ..action_selector import ActionSelector
-from ..agent import EXPLORATION_SPECS
-from ..params import Param
-from .common import (STEP_QOS, CallbackTimer, config_defaults, declare_specs, f64,
-                     np_f64, np_i64, run)
+from tmgwr_common import topics
+from tmgwr_agent.core.action_selector import ActionSelector
+from tmgwr_agent.core.agent import EXPLORATION_SPECS
+from tmgwr_common.params import Param
+from tmgwr_common.node import (
+    STEP_QOS,
+    CallbackTimer,
+    config_defaults,
+    declare_specs,
+    f64,
+    np_f64,
+    np_i64,
+    run,
+)
 
 NODE_SPECS = (
     Param("seed", 0, "seed of the selector's generator (exploration and tie-breaks)",

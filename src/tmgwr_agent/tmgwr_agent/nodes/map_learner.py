@@ -2,7 +2,7 @@
 
 Per step (lockstep): ``Features`` in, :meth:`SensorimotorMap.step` with the motor vector of
 the action that was executed (``None`` at an episode start, after
-:meth:`~SensorimotorMap.begin_episode`), exactly as :class:`~tmgwr_agent.agent.TMGWRAgent`
+:meth:`~SensorimotorMap.begin_episode`), exactly as :class:`~tmgwr_agent.core.agent.TMGWRAgent`
 does in-process; ``SensorimotorState`` out. The state carries this step's map as flat
 arrays (alive mask, weights, link targets and reliabilities E, the winner's link action
 vectors): what the motivation estimator needs to run Eq. 4-5 on the map of *this* step
@@ -35,11 +35,23 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from maze_sim.maze import ACTION_VECTORS
 
-from .. import tmgwr_map, topics
-from ..params import Param
-from ..tmgwr_map import SensorimotorMap
-from .common import (LATCHED_QOS, SENSOR_QOS, STEP_QOS, CallbackTimer, config_defaults,
-                     declare_specs, f64, i32, np_f64, run, u8)
+from tmgwr_agent.core import sensorimotor_map as tmgwr_map
+from tmgwr_common import topics
+from tmgwr_common.params import Param
+from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
+from tmgwr_common.node import (
+    LATCHED_QOS,
+    SENSOR_QOS,
+    STEP_QOS,
+    CallbackTimer,
+    config_defaults,
+    declare_specs,
+    f64,
+    i32,
+    np_f64,
+    run,
+    u8,
+)
 
 NODE_SPECS = (
     Param("map_path", "~/.ros/tmgwr_map.npz", "where the map is saved on shutdown and by "

@@ -28,11 +28,23 @@ from tmgwr_interfaces.srv import SetGoal
 
 from maze_sim.maze import ACTION_VECTORS
 
-from .. import motivation, topics
-from ..motivation import MotivationEstimator
-from ..tmgwr_map import SensorimotorMap
-from .common import (LATCHED_QOS, STEP_QOS, CallbackTimer, config_defaults, declare_specs, f64, i32,
-                     np_bool, np_f64, np_i64, run)
+from tmgwr_agent.core import motivation
+from tmgwr_common import topics
+from tmgwr_agent.core.motivation import MotivationEstimator
+from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
+from tmgwr_common.node import (
+    LATCHED_QOS,
+    STEP_QOS,
+    CallbackTimer,
+    config_defaults,
+    declare_specs,
+    f64,
+    i32,
+    np_bool,
+    np_f64,
+    np_i64,
+    run,
+)
 
 
 

@@ -37,7 +37,7 @@ from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescr
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
-from tmgwr_agent import topics
+from tmgwr_common import topics
 from tmgwr_agent.bag import definitions
 from tmgwr_agent.bag import qos as bag_qos
 from tmgwr_agent.bag.writer import COMPRESSIONS, BagWriter, TopicInfo

@@ -1,6 +1,6 @@
 """``ros2 run tmgwr_agent sensory_preprocessor``: raw Observation -> Features (section 3.2).
 
-Wraps :class:`~tmgwr_agent.preprocessor.SensoryPreprocessor`: ``x = preprocessor(sensors,
+Wraps :class:`~tmgwr_agent.core.preprocessor.SensoryPreprocessor`: ``x = preprocessor(sensors,
 episode_start)`` and the goal sensation in feature space; passes the lockstep context
 (executed action, bump, terminal flags) on to the map learner.
 """
@@ -11,9 +11,18 @@ from rclpy.node import Node
 
 from tmgwr_interfaces.msg import Features, Observation
 
-from .. import preprocessor, topics
-from ..preprocessor import SensoryPreprocessor
-from .common import STEP_QOS, CallbackTimer, config_defaults, declare_specs, f64, np_f64, run
+from tmgwr_agent.core import preprocessor
+from tmgwr_common import topics
+from tmgwr_agent.core.preprocessor import SensoryPreprocessor
+from tmgwr_common.node import (
+    STEP_QOS,
+    CallbackTimer,
+    config_defaults,
+    declare_specs,
+    f64,
+    np_f64,
+    run,
+)
 
 
 class SensoryPreprocessorNode(Node):

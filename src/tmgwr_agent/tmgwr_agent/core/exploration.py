@@ -16,7 +16,7 @@ from typing import Callable
 
 import numpy as np
 
-from .params import Param
+from tmgwr_common.params import Param
 
 N_ACTIONS = 4
 

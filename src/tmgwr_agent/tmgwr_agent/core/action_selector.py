@@ -40,9 +40,9 @@ import numpy as np
 
 from maze_sim.maze import ACTION_VECTORS
 
-from . import kernels
-from .exploration import EpsilonGreedy
-from .tmgwr_map import SensorimotorMap
+from tmgwr_agent.core import kernels
+from tmgwr_agent.core.exploration import EpsilonGreedy
+from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
 
 
 class ActionSelector:

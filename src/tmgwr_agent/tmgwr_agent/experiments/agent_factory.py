@@ -15,7 +15,7 @@ import numpy as np
 
 from maze_sim.maze import Maze
 
-from .agent_api import Agent
+from tmgwr_agent.core.protocol import Agent
 
 AGENT_NAMES = ("tmgwr", "q_learning", "model_based", "dyna_q_plus")
 
@@ -47,13 +47,13 @@ def make_agent(spec: str, maze: Maze, rng: np.random.Generator,
                overrides: Mapping[str, Any] | None = None) -> Agent:
     name, options = parse_spec(spec)
     if name == "tmgwr":
-        from .agent import TMGWRAgent
+        from tmgwr_agent.core.agent import TMGWRAgent
         return TMGWRAgent(maze, rng, {**(overrides or {}), **options})
     if name == "q_learning":
-        from .baselines.q_learning import QLearningAgent
+        from tmgwr_agent.baselines.q_learning import QLearningAgent
         return QLearningAgent(maze, rng, overrides)
     if name == "model_based":
-        from .baselines.model_based import ModelBasedAgent
+        from tmgwr_agent.baselines.model_based import ModelBasedAgent
         return ModelBasedAgent(maze, rng, overrides)
-    from .baselines.dyna_q_plus import DynaQPlusAgent
+    from tmgwr_agent.baselines.dyna_q_plus import DynaQPlusAgent
     return DynaQPlusAgent(maze, rng, overrides)

@@ -22,12 +22,12 @@ import numpy as np
 from maze_sim.maze import ACTION_VECTORS, Cell, Maze
 from maze_sim.world import StepInfo
 
-from . import exploration, motivation, preprocessor, tmgwr_map
-from .action_selector import ActionSelector
-from .motivation import MotivationEstimator
-from .params import Param, config_params
-from .preprocessor import SensoryPreprocessor
-from .tmgwr_map import SensorimotorMap
+from tmgwr_agent.core import exploration, motivation, preprocessor, sensorimotor_map as tmgwr_map
+from tmgwr_agent.core.action_selector import ActionSelector
+from tmgwr_agent.core.motivation import MotivationEstimator
+from tmgwr_common.params import Param, config_params
+from tmgwr_agent.core.preprocessor import SensoryPreprocessor
+from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
 
 EXPLORATION_SPECS = exploration.SPECS + (
     Param("goal_search", True, "random walk for the rest of an episode once the agent "

@@ -53,8 +53,8 @@ from pathlib import Path
 
 import numpy as np
 
-from . import kernels
-from .params import Param
+from tmgwr_agent.core import kernels
+from tmgwr_common.params import Param
 
 SPECS = (
     Param("a_T", 0.95, "GWR activity threshold: insert a node when exp(-sqrt(d_b)) < a_T",

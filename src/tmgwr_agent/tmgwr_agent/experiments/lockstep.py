@@ -29,7 +29,7 @@ import numpy as np
 from maze_sim.maze import Maze
 from maze_sim.world import GridWorld
 
-from ..agent import TMGWRAgent
+from tmgwr_agent.core.agent import TMGWRAgent
 
 
 def run_reference(maze_path: str | Path, steps: int, goal: str | tuple = "G",

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .params import Param
+from tmgwr_common.params import Param
 
 SPECS = (
     Param("feature_scale", 0.1, "feature-space distance of one sensor resolution step "

@@ -9,7 +9,7 @@
     reliable, transient local, keep-last 1 (only the newest snapshot matters).
   - :data:`SENSOR_QOS` for the pose stream: best effort keep-last 1 (a viewer wants the
     newest pose; a dropped one is harmless).
-* Parameters: :func:`declare_specs` turns the core's :class:`~tmgwr_agent.params.Param`
+* Parameters: :func:`declare_specs` turns the core's :class:`~tmgwr_common.params.Param`
   declarations into ROS 2 parameters with a ParameterDescriptor (description, type, range)
   whose defaults come from ``config/tmgwr_agent.yaml``; every value is then checked by the
   core's own rule, so an invalid value stops the node at start with the parameter's name.
@@ -30,7 +30,7 @@ from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 
-from ..params import CONFIG_DIR, Param, ParamError, load_yaml
+from tmgwr_common.params import Param, ParamError, load_yaml
 
 # ----------------------------------------------------------------------------- QoS
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,  # noqa: E402
@@ -48,42 +48,11 @@ SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
 
 
 # ----------------------------------------------------------------------------- config
-def config_dir() -> Path:
-    """config/ of the source tree, else the installed share/tmgwr_agent/config."""
-    if (CONFIG_DIR / "tmgwr_agent.yaml").is_file():
-        return CONFIG_DIR
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        share = Path(get_package_share_directory("tmgwr_agent")) / "config"
-    except Exception as exc:  # noqa: BLE001 -- report where we looked
-        raise ParamError(f"no config/tmgwr_agent.yaml in {CONFIG_DIR} and no installed "
-                         f"tmgwr_agent share directory ({exc})") from exc
-    if not (share / "tmgwr_agent.yaml").is_file():
-        raise ParamError(f"no tmgwr_agent.yaml in {CONFIG_DIR} nor in {share}")
-    return share
-
-
 def config_defaults(file: str = "tmgwr_agent.yaml", section: str = "tmgwr") -> dict[str, Any]:
-    """The values of ``config/<file>`` section ``section`` (ROS 2 parameter-file format)."""
-    return load_yaml(config_dir() / file, section)
+    """The values of ``share/tmgwr_agent/config/<file>`` section ``section``."""
+    from tmgwr_common.share import share_file
 
-
-def resolve_data_file(path: str, *share_dirs: tuple[str, str]) -> Path:
-    """A data file given as absolute, relative to the cwd or to the repository, or by
-    name in an installed package's share directory (``(package, subdir)`` pairs)."""
-    p = Path(path).expanduser()
-    candidates = [p] if p.is_absolute() else [Path.cwd() / p, CONFIG_DIR.parent / p]
-    for package, sub in share_dirs:
-        try:
-            from ament_index_python.packages import get_package_share_directory
-            candidates.append(Path(get_package_share_directory(package)) / sub / p.name)
-        except Exception:  # noqa: BLE001 -- package not installed: skip it
-            pass
-    for c in candidates:
-        if c.is_file():
-            return c
-    raise ParamError(f"file {path!r} not found (looked in: "
-                     f"{', '.join(str(c) for c in candidates)})")
+    return load_yaml(share_file("tmgwr_agent", "config", file), section)
 
 
 # ----------------------------------------------------------------------------- parameters

@@ -28,7 +28,7 @@ explores (instead of climbing the far tail of the Gaussian into a dead end).
 Terminal nodes (``absorbing_terminals``, our addition, on by default; off = Eq. 5 on every
 node). The agent notices when an episode ends short of its goal: it is moved back to the
 start instead of walking on, and it did not sense the goal. The map flags the node it
-stood on (:meth:`~tmgwr_agent.tmgwr_map.SensorimotorMap.mark_terminal`) until it walks on
+stood on (:meth:`~tmgwr_agent.core.sensorimotor_map.SensorimotorMap.mark_terminal`) until it walks on
 from it, and value iteration treats a flagged node as a terminal state, as any MDP
 solver would: ``V(i) = R_i``, no successor. Without this a route through a cell that
 ends the episode (the previous goal in the goal-change scenario of section 5.2.1, which
@@ -43,9 +43,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import kernels
-from .params import Param
-from .tmgwr_map import SensorimotorMap
+from tmgwr_agent.core import kernels
+from tmgwr_common.params import Param
+from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
 
 #: Potentials below this are 0: gamma**d for d > 10,000 steps, i.e. no path to the goal.
 #: Without it a potential that lost its path decays geometrically for ever (to denormals)

@@ -17,8 +17,6 @@ from typing import Any, Iterable, Mapping
 
 import yaml
 
-REPO_ROOT = Path(__file__).resolve().parents[3]
-CONFIG_DIR = REPO_ROOT / "config"
 
 
 class ParamError(ValueError):
@@ -130,7 +128,9 @@ def _flatten(d: Mapping[str, Any], prefix: str, out: dict[str, Any]) -> None:
 def config_params(specs: Iterable[Param], file: str, section: str,
                   overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Defaults from ``config/<file>`` section ``section``, then ``overrides``, checked."""
-    path = CONFIG_DIR / file
+    from tmgwr_common.share import share_file
+
+    path = share_file("tmgwr_agent", "config", file)
     values = load_yaml(path, section)
     specs = list(specs)
     merged = resolve(specs, values, where=f"{path} [{section}]")
