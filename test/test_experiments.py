@@ -163,7 +163,7 @@ def test_stat_reports_failed_trials_as_null():
 
 def test_oracle_steps_on_the_default_maze():
     maze = Maze.from_file(DEFAULT_MAZE)
-    # By hand from config/mazes/paper_13x17.txt: the only 44-step path runs
+    # By hand from src/maze_sim/mazes/paper_13x17.txt: the only 44-step path runs
     # S(1,1) down, right, up to (1,5), down to (5,5) [12 steps], left to (5,3) [14],
     # through a=(6,3) to row 7, along it to (7,7) [20], up to (3,7) [24], right to (3,9),
     # down to (5,9), right to (5,10) [29], through b=(5,11) down column 11 to (11,11)

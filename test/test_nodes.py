@@ -22,7 +22,7 @@ from ros_helpers import ROOT, parse_json_line, ros2_run, spawn_python
 
 pytestmark = pytest.mark.ros
 
-MAZE = ROOT / "config" / "mazes" / "paper_13x17.txt"
+MAZE = ROOT / "src" / "maze_sim" / "mazes" / "paper_13x17.txt"
 AGENT_NODES = ("sensory_preprocessor", "map_learner", "motivation_estimator",
                "action_selector")
 
@@ -150,7 +150,7 @@ def test_each_node_refuses_an_invalid_parameter(ros_domain):
 def test_parameters_default_to_config_and_follow_params_file_and_overrides(ros_domain,
                                                                            tmp_path):
     from tmgwr_common.params import load_yaml
-    config = load_yaml(ROOT / "config" / "tmgwr_agent.yaml", "tmgwr")
+    config = load_yaml(ROOT / "src" / "tmgwr_agent" / "config" / "tmgwr_agent.yaml", "tmgwr")
     params_file = tmp_path / "p.yaml"
     params_file.write_text("/**:\n  ros__parameters:\n    tmgwr:\n      gamma: 0.5\n"
                            "      beta: 0.25\n")
