@@ -36,12 +36,6 @@ class StepInfo:
     def terminated(self) -> bool:
         return self.reached_goal or self.reached_previous_goal
 
-    def as_dict(self) -> dict:
-        return {"cell": self.cell, "action": self.action, "bumped": self.bumped,
-                "reached_goal": self.reached_goal,
-                "reached_previous_goal": self.reached_previous_goal,
-                "step": self.step, "episode": self.episode}
-
 
 class GridWorld:
     """A maze with an agent in it.

@@ -5,7 +5,7 @@ file, no ROS installation needed) and summarised as the experiments CLI and the 
 summarise a run:
 
 * **episodes** from ``/observation``, with the demo's own episode rules
-  (:class:`tmgwr_agent.graph.clients.EpisodeMonitor`: resent observations ignored, steps
+  (:class:`tmgwr_agent.episodes.EpisodeMonitor`: resent observations ignored, steps
   count actions, an episode ends with a ``terminal`` observation: ``goal``,
   ``previous_goal`` or ``cut``), so the report states the figures the run itself stated;
 * **goal changes** (``/maze_events`` lines ``step N: goal -> row R, col C``, the step whose
@@ -71,7 +71,7 @@ def read_bag(bag: str | Path) -> dict[str, Any]:
     """Everything the report needs, in plain Python/numpy form."""
     from rosbags.highlevel import AnyReader
 
-    from tmgwr_agent.graph.clients import EpisodeMonitor
+    from tmgwr_agent.episodes import EpisodeMonitor
 
     bag = Path(bag)
     data: dict[str, Any] = {'topics': {}, 'goals': [], 'events': [], 'map': [],

@@ -82,10 +82,6 @@ class QLearningAgent:
     def index(self, cell: Cell) -> int:
         return int(cell[0]) * self.cols + int(cell[1])
 
-    def q_table(self) -> np.ndarray:
-        """Q as an array of shape (rows, cols, 4) (a copy)."""
-        return np.array(self.Q).reshape(self.rows, self.cols, N_ACTIONS)
-
     def reward(self, info: StepInfo) -> float:
         """Eq. 8 for the step just taken (the previous goal is an empty cell)."""
         reached = info.reached_goal if self.goal is None else info.cell == self.goal

@@ -189,11 +189,6 @@ class SensorimotorMap:
                                              self.alpha_c)
         return int(b), float(d)
 
-    def best_matching(self, x: np.ndarray) -> int:
-        """The winner for x in the current context, without learning (-1 if empty)."""
-        C = self.context()
-        return self.winner_of(x, x if C is None else C)[0]
-
     def nearest_by_weight(self, x: np.ndarray) -> int:
         """The node whose sensory weight is nearest x (Algorithm 1, line 2: SM.Map(x_g))."""
         return int(kernels.nearest_weight(self.w, self.alive, self.n, x))
@@ -262,21 +257,12 @@ class SensorimotorMap:
         self.inserted = True
         return r
 
-    def _neighbours(self, b: int) -> np.ndarray:
-        """Nodes linked to b in either direction."""
-        return kernels.incident_neighbours(self.out, self.n, b)
-
     def _habituate(self, i: int, tau: float) -> None:
         kernels.habituate(self.h, i, tau, self.kappa_h)
 
     def _adapt(self, b: int, x: np.ndarray, C: np.ndarray) -> None:
         kernels.adapt(self.w, self.c, self.h, self.out, self.n, b, x, C, self.eps_b,
                       self.eps_n, self.tau_b, self.tau_n, self.kappa_h)
-
-    def sim_action(self, a_links: np.ndarray, a: np.ndarray) -> np.ndarray:
-        """Eq. 2: Gaussian similarity sim(a_ij, a) between action vectors."""
-        diff = a_links - a
-        return np.exp(-np.einsum("...j,...j->...", diff, diff) / (2.0 * self.sigma_a ** 2))
 
     def _update_links(self, i: int, j: int, a: np.ndarray) -> None:
         """Eq. 1-2 for the transition i -> j under action a, then ageing (kernels)."""

@@ -24,7 +24,6 @@
 from __future__ import annotations
 
 import importlib
-import importlib.util
 import platform
 import sys
 import time
@@ -66,8 +65,6 @@ def time_steps(world, agent, n: int) -> np.ndarray:
             t3 = clock()
             out[i] = (t1 - t0) + (t3 - t2)
             i += 1
-            if info.reached_goal:
-                agent.goal_attained()
             if term or trunc:
                 break
     return out
@@ -130,13 +127,9 @@ def cpu_to_convergence(trials: int, seed: int, jobs: int) -> dict:
             for a, rs in res.items()}
 
 
-def _optional(module: str, args) -> dict | None:
-    """``module.run(args)`` when the module exists; a failure is recorded, not fatal, so
-    the figures measured so far are still written."""
-    if importlib.util.find_spec(module.rsplit(".", 1)[0]) is None or \
-            importlib.util.find_spec(module) is None:
-        print(f"bench: {module} not present, skipped", file=sys.stderr)
-        return None
+def _optional(module: str, args) -> dict:
+    """``module.run(args)``; a failure is recorded, not fatal, so the figures measured so
+    far are still written."""
     try:
         return importlib.import_module(module).run(args)
     except Exception as exc:  # noqa: BLE001 -- keep the core figures
@@ -145,7 +138,7 @@ def _optional(module: str, args) -> dict | None:
 
 
 def run(args) -> int:
-    from tmgwr_agent.experiments.cli import write_json
+    from tmgwr_agent.experiments.output import write_json
     from tmgwr_agent.experiments.report import bench_table
     if args.trials < 1 or args.steps < 1:
         print("tmgwr: error: --trials and --steps must be >= 1", file=sys.stderr)
@@ -164,9 +157,7 @@ def run(args) -> int:
     if not getattr(args, "no_graph", False):
         for key, module in (("graph", "tmgwr_agent.graph.bench"),
                             ("bag", "tmgwr_agent.bag.bench")):
-            part = _optional(module, args)
-            if part is not None:
-                result[key] = part
+            result[key] = _optional(module, args)
     path = Path(args.json) if args.json else Path("results") / "bench.json"
     write_json(result, path)
     print(bench_table(result))

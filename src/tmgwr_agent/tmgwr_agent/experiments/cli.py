@@ -3,8 +3,8 @@
 ``experiment SCENARIO --maze FILE --agents LIST --trials N --seed S --json OUT
 [--plot OUT.png] [--jobs J]`` with ``--goals``, ``--episodes``, ``--event``, ``--goal``
 for the scenarios that take them; ``demo`` runs every scenario briefly and then the ROS
-graph demo when :mod:`tmgwr_agent.graph.demo` exists; ``bench`` measures the TMGWR core
-and merges the graph / bag benchmarks when present. An unknown agent, scenario, goal or
+graph demo (:mod:`tmgwr_agent.graph.demo`); ``bench`` measures the TMGWR core and merges
+the graph / bag benchmarks. An unknown agent, scenario, goal or
 event, or a missing maze file, exits with code 2 and a message naming it.
 
 Imports stay light here (argparse only): the scenario modules load when a command runs.
@@ -13,7 +13,6 @@ Imports stay light here (argparse only): the scenario modules load when a comman
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -80,7 +79,7 @@ def register(subparsers) -> None:
         description="Median (and percentiles) of the TMGWR core step time (act + observe: "
                     "learn, plan, select) on the default maze and on a generated maze of "
                     "about 1300 free cells, CPU seconds to convergence per agent; then the "
-                    "graph and bag benchmarks when present. Writes results/bench.json.")
+                    "graph and bag benchmarks. Writes results/bench.json.")
     b.add_argument("--json", default=None,
                    help="output JSON (default results/bench.json)")
     b.add_argument("--trials", type=int, default=5,
@@ -99,17 +98,8 @@ def _fail(msg: str) -> int:
     return 2
 
 
-def write_json(result: dict, path: str | Path | None) -> None:
-    text = json.dumps(result, indent=1) + "\n"
-    if path is None or str(path) == "-":
-        sys.stdout.write(text)
-        return
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text)
-
-
 def cmd_experiment(args: argparse.Namespace) -> int:
+    from tmgwr_agent.experiments.output import write_json
     from tmgwr_agent.experiments.scenarios import UsageError, run_scenario
     try:
         result = run_scenario(args.scenario, args.maze or _default_maze(), args.agents,

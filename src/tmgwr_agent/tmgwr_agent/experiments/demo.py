@@ -6,14 +6,13 @@ for events ``a`` and ``b`` with both TMGWR link rules; sample-complexity on goal
 ``1,2,3,4`` with 50-episode curves; timing (train on G, goal 4 -> 3, event a). Each
 scenario writes ``<name>.json`` and ``<name>.png`` under ``results/<UTC time>/`` (or
 ``--out``) and prints its table. The full-size runs are ``./tmgwr experiment ...``
-(README). Then, when :mod:`tmgwr_agent.graph.demo` is installed, its ``run(args)`` plays
-the ROS 2 graph scenario; otherwise a message says it was skipped.
+(README). Then :mod:`tmgwr_agent.graph.demo` plays the ROS 2 graph scenario (not with
+``--no-graph``).
 """
 
 from __future__ import annotations
 
 import importlib
-import importlib.util
 import sys
 import time
 from pathlib import Path
@@ -29,7 +28,7 @@ RUNS = (
 
 
 def run(args) -> int:
-    from tmgwr_agent.experiments.cli import write_json
+    from tmgwr_agent.experiments.output import write_json
     from tmgwr_agent.experiments.plots import plot
     from tmgwr_agent.experiments.report import table
     from tmgwr_agent.experiments.scenarios import DEFAULT_MAZE, UsageError, run_scenario
@@ -55,10 +54,6 @@ def run(args) -> int:
         print(table(result))
     print(f"\nscenarios done in {time.time() - t_all:.0f} s; results in {out}/")
     if getattr(args, "no_graph", False):
-        return 0
-    if importlib.util.find_spec("tmgwr_agent.graph") is None or \
-            importlib.util.find_spec("tmgwr_agent.graph.demo") is None:
-        print("demo: tmgwr_agent.graph.demo is not installed: ROS graph demo skipped")
         return 0
     print("\n== ROS 2 graph demo")
     args.out = str(out)

@@ -150,8 +150,6 @@ def cmd_up(args) -> int:
 
     run.monitor.on_episode = episode_line
     stop = {"now": False}
-    if run.record_note:
-        say(f"up: {run.record_note}")
     code = run.start_or_exit_code("up", on_stop_signal=lambda: stop.update(now=True))
     if code is not None:
         return code

@@ -13,7 +13,8 @@
    change and after the event, where the recording is), stop the nodes in order.
 
 Progress is read from the Observation topic by an in-process observer
-(:class:`~.clients.EpisodeMonitor`), nothing else: the demo sees what any subscriber sees.
+(:class:`~tmgwr_agent.episodes.EpisodeMonitor`), nothing else: the demo sees what any
+subscriber sees.
 Each phase has a time cap, so the whole demo takes about two minutes at most; a phase that
 runs out of time is reported as such and the exit code is 1.
 """
@@ -87,8 +88,6 @@ def run(args) -> int:
           f"event {EVENT!r} {optimal['event']} steps")
     graph = GraphRun(maze=str(maze_path), seed=seed, record=record,
                      record_dir=getattr(args, "record_dir", None), echo=_echo_problems)
-    if graph.record_note:
-        say(f"demo: {graph.record_note}")
     stop = {"now": False}
     t0 = time.monotonic()
     code = graph.start_or_exit_code("demo", on_stop_signal=lambda: stop.update(now=True))

@@ -2,9 +2,9 @@
 
 :class:`GraphRun` is what ``./tmgwr up``, the demo and the bench share: it decides where
 to record, starts the recorder and the five nodes (:mod:`.supervisor`), and runs a small
-rclpy node in this process with the :class:`~.clients.EpisodeMonitor` on the Observation
-topic (created before the nodes start, so it sees the run from its first step) and clients
-for the graph's services. The caller drives it with :meth:`GraphRun.spin_once`.
+rclpy node in this process with the :class:`~tmgwr_agent.episodes.EpisodeMonitor` on the
+Observation topic (created before the nodes start, so it sees the run from its first step)
+and clients for the graph's services. The caller drives it with :meth:`GraphRun.spin_once`.
 """
 
 from __future__ import annotations
@@ -13,7 +13,8 @@ import os
 from pathlib import Path
 from typing import Mapping
 
-from tmgwr_agent.graph.clients import EpisodeMonitor, call
+from tmgwr_agent.episodes import EpisodeMonitor
+from tmgwr_agent.graph.clients import call, subscribe_monitor
 from tmgwr_agent.graph.output import say
 from tmgwr_agent.graph.supervisor import (
     GraphError,
@@ -22,7 +23,6 @@ from tmgwr_agent.graph.supervisor import (
     default_run_dir,
     graph_specs,
     install_stop_handlers,
-    recorder_available,
 )
 
 
@@ -36,13 +36,8 @@ class GraphRun:
                  record_dir: str | Path | None = None, echo=True,
                  node_params: Mapping[str, Mapping[str, object]] | None = None):
         self.record_dir: Path | None = None
-        self.record_note = ""
         if record:
-            if recorder_available():
-                self.record_dir = Path(record_dir) if record_dir else default_run_dir()
-            else:
-                self.record_note = ("recording unavailable: the recorder node "
-                                    "(tmgwr_agent.nodes.recorder) is not in this checkout")
+            self.record_dir = Path(record_dir) if record_dir else default_run_dir()
         self.specs = graph_specs(maze=maze, seed=seed, goal=goal, record_dir=self.record_dir,
                                  node_params=node_params)
         self.supervisor = GraphSupervisor(self.specs, env=os.environ, echo=echo)
@@ -62,7 +57,7 @@ class GraphRun:
         # our own signal handling: the nodes must be stopped in order, not this context first
         rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node("tmgwr_graph_observer")
-        self.monitor.subscribe(self.node)
+        subscribe_monitor(self.node, self.monitor)
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
         try:

@@ -141,15 +141,6 @@ def params_files_for(package: str) -> list[Path]:
     return [f] if f.is_file() else []
 
 
-def recorder_available() -> bool:
-    """True when the recorder node is part of this checkout (``tmgwr_agent.nodes.recorder``)."""
-    import importlib.util
-    try:
-        return importlib.util.find_spec("tmgwr_agent.nodes.recorder") is not None
-    except ImportError:
-        return False
-
-
 def default_run_dir(root: str | Path | None = None) -> Path:
     """``runs/<UTC timestamp>/`` under the repository (or the current directory)."""
     base = Path(root) if root else Path(os.environ.get("TMGWR_ROOT", Path.cwd()))
