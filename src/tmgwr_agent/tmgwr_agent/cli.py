@@ -34,11 +34,6 @@ def build_parser() -> tuple[argparse.ArgumentParser, list[str]]:
     for name in FAMILIES:
         try:
             module = importlib.import_module(name)
-        except ModuleNotFoundError as exc:
-            if exc.name and name.startswith(exc.name):   # the family is not there at all
-                continue
-            broken.append(f"{name}: {exc}")
-            continue
         except Exception as exc:  # noqa: BLE001 -- report, keep the other families usable
             broken.append(f"{name}: {exc}")
             continue

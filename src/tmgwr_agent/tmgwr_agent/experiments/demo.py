@@ -12,7 +12,6 @@ scenario writes ``<name>.json`` and ``<name>.png`` under ``results/<UTC time>/``
 
 from __future__ import annotations
 
-import importlib
 import sys
 import time
 from pathlib import Path
@@ -57,4 +56,5 @@ def run(args) -> int:
         return 0
     print("\n== ROS 2 graph demo")
     args.out = str(out)
-    return int(importlib.import_module("tmgwr_agent.graph.demo").run(args) or 0)
+    from tmgwr_agent.graph.demo import run as graph_demo
+    return int(graph_demo(args) or 0)
