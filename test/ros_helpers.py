@@ -55,7 +55,8 @@ ENV_SCRIPT = ROOT / 'tools' / 'env.sh'
 DOMAIN_MIN, DOMAIN_MAX = 1, 101          # Fast DDS on Linux: ids above ~101 clash with ports
 _LOCK_DIR = Path(tempfile.gettempdir()) / 'tmgwr-ros-domains'
 
-# Harmless Fast DDS noise that may appear in a process's output (see the notes).
+# Harmless Fast DDS noise that may appear in a process's output (the shared-memory
+# transport's `RTPS_TRANSPORT_SHM Error ... open_and_lock_file failed`; delivery goes on).
 HARMLESS_OUTPUT = (re.compile(r'RTPS_TRANSPORT_SHM Error'),)
 
 

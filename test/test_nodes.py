@@ -1,6 +1,6 @@
 """The five nodes as real processes over DDS (each test its own ROS_DOMAIN_ID).
 
-What must hold (issue 3): the graph reaches the goal; /set_goal is refused outside the maze,
+What must hold: the graph reaches the goal; /set_goal is refused outside the maze,
 in a wall and when not finite, the estimator stays up, and an accepted goal is reached;
 the same seeds give the same cells over the graph as the in-process TMGWRAgent loop for
 >= 2000 steps including that goal change; the agent finds the detour after an event fired

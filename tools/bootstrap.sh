@@ -4,7 +4,7 @@
 #   1. .venv/ (python3 -m venv) with the pinned requirements (requirements/ros.txt,
 #      requirements/python.txt, constrained by requirements/lock.txt). Re-run only when the
 #      hash of requirements/*.txt (and the python version) changed: no pip call otherwise.
-#   2. The cmake include-path fix of the ROS message wheels (shared/notes/ros2-from-pypi.md):
+#   2. The cmake include-path fix of the ROS message wheels:
 #      their exported cmake files name the wheel-build container's Python/numpy include
 #      directories; they are rewritten to this interpreter's. Idempotent.
 #   3. colcon build of src/ into build/ install/ log/ at the repository root. Re-run only when

@@ -38,7 +38,7 @@ def generate_launch_description():
     arguments = [
         DeclareLaunchArgument('maze', default_value='paper_13x17.txt',
                               description='maze file: a path, or a file name in '
-                                          'share/tmgwr_agent/config/mazes'),
+                                          'share/maze_sim/mazes'),
         DeclareLaunchArgument('goal', default_value='G',
                               description="initial goal: a goal name ('G', '1'-'9') or 'row,col'"),
         DeclareLaunchArgument('seed', default_value='0',

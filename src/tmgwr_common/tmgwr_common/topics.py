@@ -9,7 +9,8 @@ once around the ring per step (lockstep)::
       +------ACTION------ action_selector <--MOTIVATION-- motivation_estimator
 """
 
-# Per-step data (reliable, keep-last depth 100: lockstep never has more than one in flight)
+# Per-step data (STEP_QOS in tmgwr_common.node: reliable, keep-last depth 10; lockstep never
+# has more than one in flight)
 OBSERVATION = "/observation"          # tmgwr_interfaces/msg/Observation, maze_sim
 FEATURES = "/features"                # tmgwr_interfaces/msg/Features, sensory_preprocessor
 SENSORIMOTOR_STATE = "/sensorimotor_state"  # tmgwr_interfaces/msg/SensorimotorState, map_learner

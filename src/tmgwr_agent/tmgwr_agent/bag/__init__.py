@@ -1,8 +1,7 @@
 """Recordings of the node graph: rosbag2-compatible MCAP bags and the tools around them.
 
-rosbag2 cannot be installed from the registries here, so the project records itself
-(``../shared/notes/mcap-recording.md`` holds what was measured about raw subscriptions, the
-MCAP ``ros2`` profile and what rosbag2 and Foxglove require).
+rosbag2 cannot be installed from the registries here, so the project records itself, in
+the MCAP ``ros2`` profile that rosbag2 and Foxglove read.
 
 A bag is a directory ``runs/<UTC timestamp>/`` holding ``<name>_0.mcap``, ``<name>_1.mcap``
 ... (split by size or duration) and ``metadata.yaml`` (rosbag2 metadata version 9); each

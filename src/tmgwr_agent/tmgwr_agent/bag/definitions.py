@@ -4,7 +4,7 @@ A ``ros2msg`` schema is the type's own ``.msg`` text followed, for every type it
 (transitively, each once), by a line of 80 ``=``, a line ``MSG: pkg/Type`` and that type's
 ``.msg`` text. We use the short ``MSG: pkg/Type`` form on purpose: Foxglove's parser
 (``@foxglove/rosmsg``) rejects the long ``MSG: pkg/msg/Type`` form, while rosbag2, mcap_ros2
-and rosbags accept both (notes/mcap-recording.md).
+and rosbags accept both.
 
 The ``.msg`` files and the RIHS01 type hashes (``.json``) come from the packages' share
 directories (the wheels install them under ``$VIRTUAL_ENV/share/<pkg>/msg``, colcon under

@@ -33,9 +33,9 @@ from it, and value iteration treats a flagged node as a terminal state, as any M
 solver would: ``V(i) = R_i``, no successor. Without this a route through a cell that
 ends the episode (the previous goal in the goal-change scenario of section 5.2.1, which
 stays a termination point) looks as good as any other, and the agent keeps being sent
-home through it: measured on the paper's maze, the learnt way to goal 3's region ran
-through goal 2's cell, and 2 -> 3 reached goal 3 in 84-89 % of the episodes (99.7 % with
-the flag). Episodes that end *at* the goal flag nothing (the goal node keeps Eq. 5, so
+home through it: on the paper's maze the learnt way to goal 3's region ran through goal
+2's cell, so after the change 2 -> 3 many episodes ended there instead of at goal 3 (the
+README's goal-change results compare the two). Episodes that end *at* the goal flag nothing (the goal node keeps Eq. 5, so
 a goal that moves away leaves no trace), nor do episodes cut by a step limit.
 """
 

@@ -1,4 +1,4 @@
-"""How fast the lockstep graph runs, against the ceiling of its design (issue 3).
+"""How fast the lockstep graph runs, against the ceiling of its design.
 
 Measured in one run, on the same machine and middleware settings:
 

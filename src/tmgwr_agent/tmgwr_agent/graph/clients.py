@@ -96,12 +96,12 @@ def reset_request():
 
 # ----------------------------------------------------------------------- episodes
 MONITOR_DEPTH = 10000
-"""Observations the monitor's reader keeps before the oldest is dropped: 20 s of the
-lockstep graph at 500 steps/s. The ring's own STEP_QOS depth (10) is enough for a node that
-answers every step, but the observer is a bystander that can fall behind by hundreds of
-steps while it prints or waits for a service (measured: 266 lost at 510 steps/s on 2 cores
-with depth 10). A reliable keep-last reader never slows the publisher down, so a deep
-history costs only memory (about 1 MB here)."""
+"""Observations the monitor's reader keeps before the oldest is dropped: many seconds of
+the lockstep graph. The ring's own STEP_QOS depth (10) is enough for a node that answers
+every step, but the observer is a bystander that can fall behind by hundreds of steps
+while it prints or waits for a service, and with depth 10 it lost observations (so
+episodes). A reliable keep-last reader never slows the publisher down, so a deep history
+costs only memory."""
 
 
 def monitor_qos():

@@ -1,4 +1,4 @@
-"""The scripted scenario of ``make demo`` over the real node graph (issue 3).
+"""The scripted scenario of ``make demo`` over the real node graph.
 
 1. Start the graph: the five nodes as separate processes, recorded to
    ``runs/<UTC timestamp>/``.

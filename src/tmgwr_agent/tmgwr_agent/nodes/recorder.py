@@ -1,7 +1,7 @@
 """``ros2 run tmgwr_agent recorder``: record the graph's topics to a rosbag2/MCAP bag.
 
-rosbag2 is not installable from the registries here, so the project records itself
-(notes/mcap-recording.md). The node subscribes to every topic (or the ``topics`` list) with
+rosbag2 is not installable from the registries here, so the project records itself.
+The node subscribes to every topic (or the ``topics`` list) with
 *raw* subscriptions, which hand over the CDR bytes as they came off the wire, and writes
 those bytes unchanged with :class:`tmgwr_agent.bag.writer.BagWriter` (no second
 serialization). New topics are discovered every ``discovery_period`` seconds; the ring's
@@ -9,9 +9,9 @@ per-step topics (``expect``) are subscribed at start, before their publishers ex
 first step of a starting graph is recorded on every topic.
 
 Throughput: the executor's per-message round trip (wait set, task) is what limits an rclpy
-recorder (notes/mcap-recording.md: ~2k msg/s lossless); each callback therefore also takes
-whatever else is queued on its subscription (``drain_max``), which about doubles the
-lossless rate (``./tmgwr bench``, part ``bag``).
+recorder; each callback therefore also takes whatever else is queued on its subscription
+(``drain_max``), which raises the rate it records without loss (``./tmgwr bench``, part
+``bag``).
 
 QoS: each topic is subscribed with a profile compatible with all its publishers
 (:func:`tmgwr_agent.bag.qos.subscription_qos`): reliable when they all are, transient local
@@ -44,8 +44,8 @@ from tmgwr_agent.bag.writer import COMPRESSIONS, BagWriter, TopicInfo
 
 _BIG = 2 ** 62
 
-# The per-step topics of the lockstep ring (topics.py, all reliable volatile: STEP_QOS of
-# nodes/common.py). A node publishes its first message as soon as the ring turns, possibly
+# The per-step topics of the lockstep ring (tmgwr_common.topics, all reliable volatile:
+# STEP_QOS of tmgwr_common.node). A node publishes its first message as soon as the ring turns, possibly
 # before periodic discovery has seen its publisher; subscribing to these at start (the
 # ``expect`` parameter) means the recorder is matched as soon as DDS discovers the
 # publisher, so step 0 is recorded on every topic.
