@@ -1,0 +1,43 @@
+"""What the agent senses of its last action besides the observation (Table 1).
+
+The TMGWR agent never sees cells or rewards: after each action it senses its new position
+(the observation), its touch sensor (``bumped``), whether it sensed the goal, and whether
+the episode ended there (it is then moved back to the start, not walked). The in-process
+agent reads these from the simulator's ``StepInfo``; the nodes read them from the step
+messages. Both build an :class:`Outcome`, so every rule that depends on them is written
+once, here or in the core method that takes an Outcome.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Outcome:
+    action: int = -1              # motor primitive executed; -1: the episode starts here
+    bumped: bool = False          # touch sensor: the move was blocked
+    goal_reached: bool = False    # the goal was sensed
+    episode_over: bool = False    # the episode ended here (terminated or truncated)
+    truncated: bool = False       # ... cut by a step limit, not by the task
+
+    @property
+    def episode_start(self) -> bool:
+        return self.action < 0
+
+    @property
+    def ended_short_of_goal(self) -> bool:
+        """The episode ended here without the goal and not by a step limit: the node is a
+        terminal state of the task (absorbing in Eq. 5)."""
+        return self.episode_over and not (self.goal_reached or self.truncated)
+
+    @classmethod
+    def of_step(cls, info) -> Outcome:
+        """From the simulator's ``maze_sim.world.StepInfo`` (truncation is not a
+        termination: ``info.terminated`` is the task's end only)."""
+        return cls(action=int(info.action), bumped=bool(info.bumped),
+                   goal_reached=bool(info.reached_goal), episode_over=bool(info.terminated))
+
+
+#: The outcome of being placed at the start of an episode.
+EPISODE_START = Outcome()
