@@ -26,10 +26,11 @@ from tmgwr_interfaces.msg import (Observation, Action, Features, SensorimotorSta
                                   MapLink, SensorimotorMap, MotivationField)
 from tmgwr_interfaces.srv import SetGoal, SetCell, FireEvent, SaveMap, LoadMap
 from std_srvs.srv import Trigger
-import maze_sim, tmgwr_agent, tmgwr_interfaces
+import maze_sim, tmgwr_agent, tmgwr_common, tmgwr_interfaces
 from ament_index_python.packages import get_package_prefix, get_package_share_directory
 print("RESULT " + json.dumps({
     "interfaces": tmgwr_interfaces.__file__,
+    "tmgwr_common": list(tmgwr_common.__path__),
     "maze_sim": list(maze_sim.__path__),
     "tmgwr_agent": list(tmgwr_agent.__path__),
     "actions": [Action.UP, Action.DOWN, Action.LEFT, Action.RIGHT],
@@ -45,6 +46,7 @@ print("RESULT " + json.dumps({
     res = parse_json_line(proc.stdout, 'RESULT ')
     assert res['interfaces'].startswith(str(ROOT / 'install'))
     # the ROS-free core is imported from src/, not from the installed copy
+    assert res['tmgwr_common'] == [str(ROOT / 'src/tmgwr_common/tmgwr_common')]
     assert res['maze_sim'] == [str(ROOT / 'src/maze_sim/maze_sim')]
     assert res['tmgwr_agent'][0] == str(ROOT / 'src/tmgwr_agent/tmgwr_agent')
     assert res['actions'] == [0, 1, 2, 3]
@@ -61,13 +63,16 @@ def test_environment_variables():
     prefixes = env['AMENT_PREFIX_PATH'].split(':')
     # the workspace overlays the venv (the wheels' prefix)
     assert prefixes.index(str(ROOT / 'install/tmgwr_agent')) < prefixes.index(str(ROOT / '.venv'))
-    assert env['PYTHONPATH'].split(':')[:2] == [str(ROOT / 'src/maze_sim'),
+    # the source trees come first, the shared package first of all (tools/env.sh)
+    assert env['PYTHONPATH'].split(':')[:3] == [str(ROOT / 'src/tmgwr_common'),
+                                                str(ROOT / 'src/maze_sim'),
                                                 str(ROOT / 'src/tmgwr_agent')]
 
 
 def test_ros2_run_layout():
     """`ros2 run <pkg> <exe>` resolves install/<pkg>/lib/<pkg>/<exe>: the contract names."""
     expected = {
+        'tmgwr_common': [],
         'maze_sim': ['maze_sim'],
         'tmgwr_agent': ['sensory_preprocessor', 'map_learner', 'motivation_estimator',
                         'action_selector', 'recorder'],

@@ -9,7 +9,7 @@
 #      directories; they are rewritten to this interpreter's. Idempotent.
 #   3. colcon build of src/ into build/ install/ log/ at the repository root. Re-run only when
 #      the packaging sources changed (package.xml, setup.*, CMakeLists.txt, msg/srv, resource,
-#      launch, config/, the set of __init__.py files) or the venv changed. Python module
+#      launch, config/, the set of Python module files) or the venv changed. Python module
 #      contents are not part of it: tools/env.sh puts src/tmgwr_common, src/maze_sim and src/tmgwr_agent first
 #      on PYTHONPATH, so editing core code never needs a rebuild.
 #
@@ -83,9 +83,9 @@ build_hash() {
                    -o -name '*.action' -o -path '*/resource/*' -o -path '*/launch/*' \
                    -o -path '*/config/*' -o -path '*/mazes/*' \) \
                 -not -path '*/__pycache__/*' -print0 2>/dev/null | sort -z | xargs -0 -r sha256sum
-            # The set of Python packages (not their contents): a new subpackage such as
-            # tmgwr_agent/nodes/ reaches the installed copy that `ros2 run` falls back to.
-            find src -name __init__.py -not -path '*/__pycache__/*' 2>/dev/null | sort
+            # The set of Python modules (names, not contents): a new module or subpackage
+            # reaches the installed copy that `ros2 run` and `colcon test` use.
+            find src -name '*.py' -not -path '*/__pycache__/*' 2>/dev/null | sort
             cat "$REQ_STAMP" 2>/dev/null || true
         } | sha256sum | cut -d' ' -f1
     )

@@ -1,0 +1,164 @@
+"""Package boundaries of the colcon workspace (src/).
+
+- Every ament_python package carries the same test/test_package_xml.py (imports declared in
+  package.xml, setup.py inside the package, the install complete); the copies are identical
+  and each runs here against the repository's install/.
+- The workspace's dependency graph: tmgwr_common <- maze_sim <- tmgwr_agent, no cycle, and
+  maze_sim neither declares nor imports tmgwr_agent.
+- A fresh workspace (a copy of src/ only) passes ``colcon build`` and ``colcon test``, in
+  the environment tools/bootstrap.sh builds with (slow: about 40 s on 2 cores, mostly the
+  rosidl build of tmgwr_interfaces). By hand::
+
+      W=$(mktemp -d) && cp -r src "$W" && cd "$W" && VENV=<repo>/.venv &&
+      env -u PYTHONPATH -u _ROS_WHEELS_BOOTSTRAP_COMPLETE VIRTUAL_ENV=$VENV \\
+          PATH=$VENV/bin:$PATH AMENT_PREFIX_PATH=$VENV CMAKE_PREFIX_PATH=$VENV \\
+          sh -c "colcon build --cmake-args -DPython3_EXECUTABLE=$VENV/bin/python &&
+                 colcon test && colcon test-result --verbose"
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib.util
+import os
+from pathlib import Path
+import shutil
+import subprocess
+import sys
+import time
+import xml.etree.ElementTree as ET
+
+import pytest
+
+from ros_helpers import ROOT
+
+SRC = ROOT / 'src'
+CHECKER = 'test/test_package_xml.py'
+
+
+def _package_xml(pkg_dir: Path):
+    root = ET.parse(pkg_dir / 'package.xml').getroot()
+    deps = {e.text.strip() for tag in ('depend', 'exec_depend', 'build_depend', 'test_depend')
+            for e in root.findall(tag)}
+    build_type = root.findtext('export/build_type', default='').strip()
+    return root.findtext('name').strip(), deps, build_type
+
+
+PACKAGES = {}
+for _xml in sorted(SRC.glob('*/package.xml')):
+    _name, _deps, _type = _package_xml(_xml.parent)
+    PACKAGES[_name] = (_xml.parent, _deps, _type)
+PYTHON_PACKAGES = sorted(n for n, (_, _, t) in PACKAGES.items() if t == 'ament_python')
+
+
+def _load_checker(pkg: str):
+    """The package's own copy of test_package_xml.py, as a module (its PKG_DIR is its package)."""
+    path = PACKAGES[pkg][0] / CHECKER
+    spec = importlib.util.spec_from_file_location(f'_package_xml_check_{pkg}', path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_workspace_packages():
+    assert set(PACKAGES) == {'tmgwr_common', 'maze_sim', 'tmgwr_agent', 'tmgwr_interfaces'}
+    assert PYTHON_PACKAGES == ['maze_sim', 'tmgwr_agent', 'tmgwr_common']
+
+
+def test_every_python_package_carries_the_same_checker():
+    texts = {pkg: (PACKAGES[pkg][0] / CHECKER).read_text(encoding='utf-8')
+             for pkg in PYTHON_PACKAGES}
+    reference = texts['tmgwr_common']
+    differ = [pkg for pkg, text in texts.items() if text != reference]
+    assert not differ, (f'{CHECKER} differs from src/tmgwr_common/{CHECKER} in {differ}: '
+                        f'edit one and copy it to the others')
+
+
+@pytest.mark.parametrize('pkg', PYTHON_PACKAGES)
+def test_package_checks(pkg):
+    """Runs every test of the package's test_package_xml.py (what `colcon test` runs)."""
+    checker = _load_checker(pkg)
+    skipped = []
+    for name in sorted(n for n in dir(checker) if n.startswith('test_')):
+        try:
+            getattr(checker, name)()
+        except pytest.skip.Exception as exc:
+            skipped.append(f'{name}: {exc}')
+    # The repository's install/ is built (make test bootstraps first): only "no console
+    # scripts" may skip.
+    assert all('no console scripts' in s for s in skipped), skipped
+
+
+def test_dependency_graph_has_no_cycle_and_maze_sim_stays_below_the_agent():
+    inside = {n: deps & set(PACKAGES) for n, (_, deps, _) in PACKAGES.items()}
+    assert inside['tmgwr_common'] == set()
+    assert 'tmgwr_agent' not in inside['maze_sim']
+    assert {'maze_sim', 'tmgwr_common', 'tmgwr_interfaces'} <= inside['tmgwr_agent']
+    # topological order exists (colcon refuses a cycle)
+    done: set[str] = set()
+    while len(done) < len(inside):
+        ready = {n for n, deps in inside.items() if n not in done and deps <= done}
+        assert ready, f'dependency cycle among {sorted(set(inside) - done)}'
+        done |= ready
+
+
+@pytest.mark.parametrize('pkg,forbidden', [('maze_sim', {'tmgwr_agent'}),
+                                           ('tmgwr_common', {'tmgwr_agent', 'maze_sim'})])
+def test_lower_packages_do_not_import_higher_ones(pkg, forbidden):
+    pkg_dir = PACKAGES[pkg][0]
+    hits = []
+    for path in sorted((pkg_dir / pkg).rglob('*.py')):
+        for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'))):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                     [node.module] if isinstance(node, ast.ImportFrom) and node.module else [])
+            hits += [f'{path.relative_to(ROOT)}:{node.lineno}: {n}' for n in names
+                     if n.split('.')[0] in forbidden]
+    assert not hits, hits
+
+
+# --------------------------------------------------------------------------- fresh workspace
+def _build_env(venv: Path) -> dict[str, str]:
+    """tools/bootstrap.sh's build_env: the venv as the only underlay, no source trees."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ('PYTHONPATH', 'COLCON_PREFIX_PATH', 'AMENT_CURRENT_PREFIX',
+                        '_ROS_WHEELS_BOOTSTRAP_COMPLETE', 'LD_LIBRARY_PATH')
+           and not k.startswith('PYTEST_')}
+    env.update(VIRTUAL_ENV=str(venv), PATH=f"{venv / 'bin'}:{os.environ.get('PATH', '')}",
+               AMENT_PREFIX_PATH=str(venv), CMAKE_PREFIX_PATH=str(venv),
+               PYTHONDONTWRITEBYTECODE='1', MAKEFLAGS=f'-j{os.cpu_count() or 2}')
+    return env
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(400)
+def test_fresh_workspace_colcon_build_and_test(tmp_path):
+    venv = ROOT / '.venv'
+    colcon = venv / 'bin' / 'colcon'
+    if not colcon.exists():
+        pytest.skip(f'{colcon} missing: run tools/bootstrap.sh')
+    shutil.copytree(SRC, tmp_path / 'src',
+                    ignore=shutil.ignore_patterns('__pycache__', '.pytest_cache'))
+    env = _build_env(venv)
+    handlers = ['--event-handlers', 'console_direct-', 'desktop_notification-',
+                'terminal_title-']
+    steps = [
+        ('build', [str(colcon), 'build', *handlers,
+                   '--cmake-args', f"-DPython3_EXECUTABLE={venv / 'bin' / 'python'}"]),
+        ('test', [str(colcon), 'test', *handlers]),
+        ('test-result', [str(colcon), 'test-result', '--verbose']),
+    ]
+    timings = {}
+    for step, cmd in steps:
+        t0 = time.monotonic()
+        proc = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True,
+                              timeout=360)
+        timings[step] = round(time.monotonic() - t0, 1)
+        out = proc.stdout + proc.stderr
+        assert proc.returncode == 0, f'colcon {step} failed ({timings}):\n{out[-6000:]}'
+    summary = [line for line in proc.stdout.splitlines() if line.startswith('Summary:')]
+    assert summary and ' 0 errors, 0 failures' in summary[-1], proc.stdout
+    n_tests = int(summary[-1].split()[1])
+    assert n_tests >= 3 * 6, summary
+    for pkg in PYTHON_PACKAGES:
+        assert (tmp_path / 'build' / pkg / 'pytest.xml').is_file(), f'no tests ran for {pkg}'
+    print(f'fresh workspace: {timings}, {summary[-1]}', file=sys.stderr)
