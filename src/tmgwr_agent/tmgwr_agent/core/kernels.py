@@ -188,45 +188,77 @@ def sim_action(a_ij, a, sigma_a):
 
 
 @njit(cache=True)
-def update_links(out, E, A, age, n, i, j, a, alpha, sigma_a, eta_a, E_init, E_min,
-                 max_age, credit):
-    """Eq. 1-2 on the transition i -> j under action a, the credit option, then ageing.
+def needs_wider_rows(out, i, j):
+    """Whether i -> j would be a new link (i != j) while row i has no free slot, so the
+    caller must widen the link rows before :func:`update_links` (a numpy test of the row
+    costs more than the rest of the link update)."""
+    if i == j:
+        return False
+    free = False
+    for s in range(out.shape[1]):
+        t = out[i, s]
+        if t == j:
+            return False
+        if t < 0:
+            free = True
+    return not free
 
-    The caller guarantees a free slot in row i when i -> j is new. Returns
-    ``(created, ends)``: whether a link was created, and the end nodes of every link this
-    call deleted (for the isolated-node check), as a flat array.
+
+@njit(cache=True)
+def reinforce_link(out, E, A, age, i, j, a, alpha, sigma_a, eta_a, E_init):
+    """Eq. 1-2 on the traversed link i -> j (i != j), then a_ij follows the action a.
+
+    A transition never seen before creates the link (labelled a, reliability ``E_init``)
+    in the first free slot of row i, which the caller guarantees. Returns
+    ``(slot, created)``: the link's slot in row i and whether it was created.
     """
     K = out.shape[1]
     slot = -1
     created = False
-    if i != j:
+    for s in range(K):
+        if out[i, s] == j:
+            slot = s
+            break
+    if slot < 0:
         for s in range(K):
-            if out[i, s] == j:
+            if out[i, s] < 0:
                 slot = s
                 break
-        if slot < 0:
-            for s in range(K):
-                if out[i, s] < 0:
-                    slot = s
-                    break
-            out[i, slot] = j
-            A[i, slot, :] = a
-            E[i, slot] = E_init
-            age[i, slot] = 0
-            created = True
-        # Eq. 1-2 on the traversed link, I{i != j} = 1
-        E[i, slot] += alpha * (sim_action(A[i, slot], a, sigma_a) - E[i, slot])
-        for k in range(a.shape[0]):
-            A[i, slot, k] += eta_a * (a[k] - A[i, slot, k])
-    if credit:
-        # blame the other links out of i as far as their action matches a
-        for s in range(K):
-            if s != slot and out[i, s] >= 0:
-                E[i, s] -= alpha * sim_action(A[i, s], a, sigma_a) * E[i, s]
-    # GWR ageing of every link incident to i; deletion of stale and unreliable links
+        out[i, slot] = j
+        A[i, slot, :] = a
+        E[i, slot] = E_init
+        age[i, slot] = 0
+        created = True
+    # Eq. 1-2 with I{i != j} = 1: E[i, j] += alpha (sim(a_ij, a) - E[i, j])
+    E[i, slot] += alpha * (sim_action(A[i, slot], a, sigma_a) - E[i, slot])
+    # a_ij += eta_a (a - a_ij): the label stays the action that leads from i to j
+    for k in range(a.shape[0]):
+        A[i, slot, k] += eta_a * (a[k] - A[i, slot, k])
+    return slot, created
+
+
+@njit(cache=True)
+def credit_other_links(out, E, A, i, slot, a, alpha, sigma_a):
+    """The credit rule: action a did not lead along the other links i -> k (every slot
+    but ``slot``), so each is blamed as far as its action matches a:
+    E[i, k] += alpha sim(a_ik, a) (0 - E[i, k])."""
+    for s in range(out.shape[1]):
+        if s != slot and out[i, s] >= 0:
+            E[i, s] -= alpha * sim_action(A[i, s], a, sigma_a) * E[i, s]
+
+
+@njit(cache=True)
+def age_links(out, E, age, n, i, slot, E_min, max_age):
+    """GWR ageing: every link incident to i (in or out) ages by one, the traversed link
+    (row i, ``slot``; -1 for none) restarts at 0. Links older than ``max_age`` and links
+    out of i less reliable than ``E_min`` are deleted.
+
+    Returns the end nodes of the deleted links as a flat array: they may now be isolated,
+    which the caller checks (GWR removes nodes without links).
+    """
     ends = []
     for src in range(n):
-        for s in range(K):
+        for s in range(out.shape[1]):
             t = out[src, s]
             if t < 0 or (src != i and t != i):
                 continue
@@ -239,4 +271,24 @@ def update_links(out, E, A, age, n, i, j, a, alpha, sigma_a, eta_a, E_init, E_mi
                 E[src, s] = 0.0
                 ends.append(src)
                 ends.append(t)
-    return created, np.array(ends, dtype=np.int64)
+    return np.array(ends, dtype=np.int64)
+
+
+@njit(cache=True)
+def update_links(out, E, A, age, n, i, j, a, alpha, sigma_a, eta_a, E_init, E_min,
+                 max_age, credit):
+    """The link update of one transition i -> j under action a: Eq. 1-2 on the traversed
+    link, the credit rule on the other links out of i (``credit``), then GWR ageing.
+
+    A self transition (i == j, a bump) only ages: Eq. 1-2 would drive E[i, i] to 0, so it
+    is not stored. Returns ``(created, ends)``: whether a link was created, and the end
+    nodes of every deleted link (:func:`age_links`).
+    """
+    slot = -1
+    created = False
+    if i != j:
+        slot, created = reinforce_link(out, E, A, age, i, j, a, alpha, sigma_a, eta_a,
+                                       E_init)
+    if credit:
+        credit_other_links(out, E, A, i, slot, a, alpha, sigma_a)
+    return created, age_links(out, E, age, n, i, slot, E_min, max_age)

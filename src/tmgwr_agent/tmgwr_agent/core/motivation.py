@@ -106,8 +106,8 @@ class MotivationEstimator:
     def rewards(self, m: SensorimotorMap, g: int, scale: float) -> np.ndarray:
         """Eq. 10: R_i = sim(i, g) = exp(-|w_i - w_g|^2 / (2 sigma_g^2)), 0 for dead slots."""
         R = np.empty(m.n)
-        kernels.goal_rewards(m.w, m.alive, m.n, g, self.goal_sigma * scale,
-                             self.goal_sim_floor, R)
+        kernels.goal_rewards(w=m.w, alive=m.alive, n=m.n, g=g, sigma=self.goal_sigma * scale,
+                             floor=self.goal_sim_floor, R=R)
         return R
 
     def update(self, m: SensorimotorMap) -> np.ndarray:
@@ -129,7 +129,8 @@ class MotivationEstimator:
             self._scale_version = m.version
         R = self.rewards(m, g, self._scale)
         absorbing = m.terminal if self.absorbing_terminals else _no_absorbing(n)
-        self.sweeps = kernels.value_iteration(m.out, m.E, R, self.V, n, self.beta,
-                                              self.gamma, self.vi_tol, V_FLOOR,
-                                              self.vi_max_sweeps, absorbing, m.alive)
+        self.sweeps = kernels.value_iteration(
+            out=m.out, E=m.E, R=R, V=self.V, n=n, beta=self.beta, gamma=self.gamma,
+            tol=self.vi_tol, v_floor=V_FLOOR, max_sweeps=self.vi_max_sweeps,
+            absorbing=absorbing, alive=m.alive)
         return self.V[:n]
