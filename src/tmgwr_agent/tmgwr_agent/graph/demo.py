@@ -49,81 +49,42 @@ def _echo_problems(line: str) -> None:
         say(line)
 
 
-def run(args) -> int:
-    """Run the scenario; ``args`` may carry ``maze``, ``graph_seed``, ``record``/``no_record``,
-    ``record_dir``, ``phase_timeout`` (s), ``streak``, ``slack``. Returns the exit code."""
-    from maze_sim.maze import Maze
-    from maze_sim.world import GridWorld
+class _Demo:
+    """One run of the scenario on a started graph: the phases share the graph, its episode
+    monitor, the stop flag and the report they fill in."""
 
-    from tmgwr_agent.graph.clients import fire_event_request, set_goal_request
-    from tmgwr_agent.graph.run import GraphRun, describe_exit
-    from maze_sim.maze import DEFAULT_MAZE, maze_file
+    def __init__(self, graph, optimal: dict, streak: int, slack: float, caps: dict,
+                 report: dict, stop: dict):
+        self.graph, self.mon = graph, graph.monitor
+        self.optimal, self.streak, self.slack, self.caps = optimal, streak, slack, caps
+        self.report, self.stop = report, stop
+        self.phase = "learn"
+        self.mon.on_episode = self.on_episode
 
-    from tmgwr_agent.graph.supervisor import GraphError
-
-    maze_path = maze_file(_opt(args, "maze", DEFAULT_MAZE)).resolve()
-    seed = int(_opt(args, "graph_seed", DEMO_SEED))
-    streak = int(_opt(args, "streak", 3))
-    slack = float(_opt(args, "slack", 1.5))
-    caps = {"learn": 75.0, "goal": 25.0, "event": 25.0}
-    if getattr(args, "phase_timeout", None):
-        caps = {k: float(args.phase_timeout) for k in caps}
-    record = not getattr(args, "no_record", False) and getattr(args, "record", True)
-
-    maze = Maze.from_file(maze_path)
-    if NEW_GOAL not in maze.goals or EVENT not in maze.events:
-        say(f"demo: maze {maze_path} needs goal '{NEW_GOAL}' and event '{EVENT}'",
-              file=sys.stderr)
-        return 2
-    world = GridWorld(maze, goal="G")
-    optimal = {"learn": world.shortest_path_length()}
-    world.set_goal(NEW_GOAL)
-    optimal["goal"] = world.shortest_path_length()
-    world.fire_event(EVENT)
-    optimal["event"] = world.shortest_path_length()
-    new_row, new_col = maze.goals[NEW_GOAL]
-
-    say(f"== ROS 2 graph demo: maze {maze_path.name}, seed {seed}; shortest paths: G "
-          f"{optimal['learn']}, goal {NEW_GOAL} {optimal['goal']}, goal {NEW_GOAL} after "
-          f"event {EVENT!r} {optimal['event']} steps")
-    graph = GraphRun(maze=str(maze_path), seed=seed, record=record,
-                     record_dir=getattr(args, "record_dir", None), echo=_echo_problems)
-    stop = {"now": False}
-    t0 = time.monotonic()
-    code = graph.start_or_exit_code("demo", on_stop_signal=lambda: stop.update(now=True))
-    if code is not None:
-        return code
-    mon = graph.monitor
-    say(f"graph up in {time.monotonic() - t0:.1f} s: " + ", ".join(graph.supervisor.pids()))
-    if graph.record_dir:
-        say(f"recording to {graph.record_dir}")
-
-    phase = {"name": "learn"}
-
-    def on_episode(rec) -> None:
+    def on_episode(self, rec) -> None:
         mark = {"goal": "goal", "previous_goal": "previous goal", "cut": "cut"}[rec.outcome]
-        say(f"  [{phase['name']}] episode {rec.episode}: {rec.steps} steps ({mark})")
+        say(f"  [{self.phase}] episode {rec.episode}: {rec.steps} steps ({mark})")
 
-    mon.on_episode = on_episode
-    report: dict = {"seed": seed, "maze": str(maze_path), "optimal": optimal, "phases": {}}
-    code = 0
-
-    def wait_phase(name: str, after_step: int) -> dict:
+    def wait_phase(self, name: str, after_step: int) -> dict:
         """Spin until the goal is reached reliably (after ``after_step``) or time is up."""
-        phase["name"] = name
+        from tmgwr_agent.graph.run import describe_exit
+        from tmgwr_agent.graph.supervisor import GraphError
+
+        graph, mon, optimal = self.graph, self.mon, self.optimal
+        self.phase = name
         start = time.monotonic()
-        while not stop["now"]:
+        while not self.stop["now"]:
             graph.spin_once(0.1)
             if graph.supervisor.dead():
                 raise GraphError("; ".join(describe_exit(p) for p in graph.supervisor.dead()))
-            if mon.reliable(optimal[name], streak, slack, after_step):
+            if mon.reliable(optimal[name], self.streak, self.slack, after_step):
                 break
-            if time.monotonic() - start > caps[name]:
+            if time.monotonic() - start > self.caps[name]:
                 break
         eps = mon.since(after_step)
         first = next((e for e in eps if e.outcome == "goal"), None)
         res = {
-            "reliable": mon.reliable(optimal[name], streak, slack, after_step),
+            "reliable": mon.reliable(optimal[name], self.streak, self.slack, after_step),
             "seconds": round(time.monotonic() - start, 1),
             "episodes": len(eps),
             "steps_per_episode": [e.steps for e in eps],
@@ -131,71 +92,119 @@ def run(args) -> int:
             "first_goal_steps_after": (first.end_step - after_step) if first else None,
             "steps": mon.last_step_id - after_step,
         }
-        report["phases"][name] = res
+        self.report["phases"][name] = res
         return res
 
-    def describe(name: str, res: dict, what: str) -> None:
+    def describe(self, name: str, res: dict, what: str) -> None:
         first = res["first_goal_steps_after"]
         say(f"{what}: " + (f"goal first reached {first} steps later; " if first is not None
                              else "goal not reached; ")
-              + (f"reliable (last {streak} episodes <= {slack:g} x {optimal[name]} steps) "
-                 if res["reliable"] else "not yet reliable ")
+              + (f"reliable (last {self.streak} episodes <= {self.slack:g} x "
+                 f"{self.optimal[name]} steps) " if res["reliable"] else "not yet reliable ")
               + f"after {res['episodes']} episodes, {res['steps']} steps, {res['seconds']} s")
 
-    try:
-        say(f"-- phase 1: learn the default goal G (until {streak} episodes in a row take "
-              f"<= {slack:g} x {optimal['learn']} steps)")
-        res = wait_phase("learn", -1)
-        describe("learn", res, "learn G")
-        if stop["now"]:
+    def _interrupted(self) -> None:
+        if self.stop["now"]:
             raise KeyboardInterrupt
-        code |= not res["reliable"]
 
-        say(f"-- phase 2: /set_goal x={new_col} y={new_row} (goal {NEW_GOAL}: row {new_row}, "
-              f"col {new_col})")
-        srv, req = set_goal_request(new_col, new_row)
-        resp = graph.call(srv, topics.SET_GOAL, req)
-        say(f"/set_goal: {'accepted' if resp.accepted else 'refused'}: {resp.message}")
-        report["set_goal"] = {"accepted": bool(resp.accepted), "message": resp.message,
-                              "at_step": mon.last_step_id}
+    def learn(self) -> int:
+        """Phase 1: learn G until ``streak`` episodes in a row are near-optimal; 1 if not."""
+        say(f"-- phase 1: learn the default goal G (until {self.streak} episodes in a row "
+            f"take <= {self.slack:g} x {self.optimal['learn']} steps)")
+        res = self.wait_phase("learn", -1)
+        self.describe("learn", res, "learn G")
+        self._interrupted()
+        return int(not res["reliable"])
+
+    def _request(self, key: str, srv, name: str, req, label: str, refused: str) -> None:
+        """Call a service of the graph, say and record its answer; a refusal ends the demo."""
+        from tmgwr_agent.graph.supervisor import GraphError
+
+        resp = self.graph.call(srv, name, req)
+        say(f"{label}: {'accepted' if resp.accepted else 'refused'}: {resp.message}")
+        self.report[key] = {"accepted": bool(resp.accepted), "message": resp.message,
+                            "at_step": self.mon.last_step_id}
         if not resp.accepted:
-            raise GraphError(f"/set_goal refused the demo's goal: {resp.message}")
-        res = wait_phase("goal", mon.last_step_id)
-        describe("goal", res, "after the goal change")
-        if stop["now"]:
-            raise KeyboardInterrupt
-        code |= res["first_goal_steps_after"] is None
+            raise GraphError(f"{refused}: {resp.message}")
+
+    def change_goal(self, new_row: int, new_col: int) -> int:
+        """Phase 2: a real ``/set_goal`` call to goal NEW_GOAL; 1 if it is never reached."""
+        from tmgwr_agent.graph.clients import set_goal_request
+
+        say(f"-- phase 2: /set_goal x={new_col} y={new_row} (goal {NEW_GOAL}: row "
+            f"{new_row}, col {new_col})")
+        srv, req = set_goal_request(new_col, new_row)
+        self._request("set_goal", srv, topics.SET_GOAL, req, "/set_goal",
+                      "/set_goal refused the demo's goal")
+        res = self.wait_phase("goal", self.mon.last_step_id)
+        self.describe("goal", res, "after the goal change")
+        self._interrupted()
+        return int(res["first_goal_steps_after"] is None)
+
+    def fire_event(self) -> int:
+        """Phase 3: maze event EVENT closes a corridor of the learnt route; 1 if the goal
+        is never reached again."""
+        from tmgwr_agent.graph.clients import fire_event_request
 
         say(f"-- phase 3: fire event {EVENT!r} (a corridor of the learnt route closes)")
         srv, req = fire_event_request(EVENT)
-        resp = graph.call(srv, topics.FIRE_EVENT, req)
-        say(f"event {EVENT!r}: {'accepted' if resp.accepted else 'refused'}: {resp.message}")
-        report["event"] = {"accepted": bool(resp.accepted), "message": resp.message,
-                           "at_step": mon.last_step_id}
-        if not resp.accepted:
-            raise GraphError(f"event {EVENT!r} refused: {resp.message}")
-        res = wait_phase("event", mon.last_step_id)
-        describe("event", res, f"after event {EVENT!r}")
-        code |= res["first_goal_steps_after"] is None
-    except KeyboardInterrupt:
-        say("demo: interrupted", sys.stderr)
-        code = 130
-    except (GraphError, TimeoutError, RuntimeError) as exc:
-        say(f"demo: {exc}", sys.stderr)
-        code = 1
-    finally:
+        self._request("event", srv, topics.FIRE_EVENT, req, f"event {EVENT!r}",
+                      f"event {EVENT!r} refused")
+        res = self.wait_phase("event", self.mon.last_step_id)
+        self.describe("event", res, f"after event {EVENT!r}")
+        return int(res["first_goal_steps_after"] is None)
+
+    def phases(self, new_row: int, new_col: int) -> int:
+        """The three phases in order; the exit code (130 interrupted, 1 a graph failure)."""
+        from tmgwr_agent.graph.supervisor import GraphError
+
+        code = 0
+        try:
+            code |= self.learn()
+            code |= self.change_goal(new_row, new_col)
+            code |= self.fire_event()
+        except KeyboardInterrupt:
+            say("demo: interrupted", sys.stderr)
+            code = 130
+        except (GraphError, TimeoutError, RuntimeError) as exc:
+            say(f"demo: {exc}", sys.stderr)
+            code = 1
+        return code
+
+    def stop_graph(self, t0: float) -> dict:
+        """Stop the nodes in order and complete the report with the run's totals."""
+        mon, report = self.mon, self.report
         report["steps"] = mon.last_step_id + 1
         report["episodes"] = len(mon.episodes)
         report["steps_per_s"] = round(mon.rate(), 1)
         report["missed_observations"] = mon.missed
-        codes = graph.stop()
+        codes = self.graph.stop()
         report["exit_codes"] = codes
-        report["record_dir"] = str(graph.record_dir) if graph.record_dir else None
+        report["record_dir"] = str(self.graph.record_dir) if self.graph.record_dir else None
         report["seconds"] = round(time.monotonic() - t0, 1)
+        return codes
 
-    eps = mon.episodes
+
+def _shortest_paths(maze) -> dict:
+    """The optimal episode length of each phase: G, goal NEW_GOAL, and NEW_GOAL after
+    event EVENT (the yardstick of "reached reliably")."""
+    from maze_sim.world import GridWorld
+
+    world = GridWorld(maze, goal="G")
+    optimal = {"learn": world.shortest_path_length()}
+    world.set_goal(NEW_GOAL)
+    optimal["goal"] = world.shortest_path_length()
+    world.fire_event(EVENT)
+    optimal["event"] = world.shortest_path_length()
+    return optimal
+
+
+def _summarise(args, graph, report: dict, codes: dict, code: int) -> int:
+    """Print the run's figures, write ``graph_demo.json`` when asked, and the DEMO line;
+    returns the final exit code (1 if a node exited badly)."""
+    eps = graph.monitor.episodes
     say(f"== {report['steps']} steps in {len(eps)} episodes at {report['steps_per_s']} "
-          f"steps/s; steps per episode: {' '.join(str(e.steps) for e in eps)}")
+        f"steps/s; steps per episode: {' '.join(str(e.steps) for e in eps)}")
     say("nodes stopped: " + ", ".join(f"{k} exit {v}" for k, v in codes.items()))
     if any(v not in (0, None) for v in codes.values()):
         code = code or 1
@@ -209,6 +218,53 @@ def run(args) -> int:
         say(f"written: {path}")
     say("DEMO " + json.dumps(report))
     return int(code)
+
+
+def run(args) -> int:
+    """Run the scenario; ``args`` may carry ``maze``, ``graph_seed``, ``record``/``no_record``,
+    ``record_dir``, ``phase_timeout`` (s), ``streak``, ``slack``. Returns the exit code."""
+    from maze_sim.maze import DEFAULT_MAZE, Maze, maze_file
+
+    from tmgwr_agent.graph.run import GraphRun
+
+    maze_path = maze_file(_opt(args, "maze", DEFAULT_MAZE)).resolve()
+    seed = int(_opt(args, "graph_seed", DEMO_SEED))
+    streak = int(_opt(args, "streak", 3))
+    slack = float(_opt(args, "slack", 1.5))
+    caps = {"learn": 75.0, "goal": 25.0, "event": 25.0}
+    if getattr(args, "phase_timeout", None):
+        caps = {k: float(args.phase_timeout) for k in caps}
+    record = not getattr(args, "no_record", False) and getattr(args, "record", True)
+
+    maze = Maze.from_file(maze_path)
+    if NEW_GOAL not in maze.goals or EVENT not in maze.events:
+        say(f"demo: maze {maze_path} needs goal '{NEW_GOAL}' and event '{EVENT}'",
+            file=sys.stderr)
+        return 2
+    optimal = _shortest_paths(maze)
+    new_row, new_col = maze.goals[NEW_GOAL]
+
+    say(f"== ROS 2 graph demo: maze {maze_path.name}, seed {seed}; shortest paths: G "
+        f"{optimal['learn']}, goal {NEW_GOAL} {optimal['goal']}, goal {NEW_GOAL} after "
+        f"event {EVENT!r} {optimal['event']} steps")
+    graph = GraphRun(maze=str(maze_path), seed=seed, record=record,
+                     record_dir=getattr(args, "record_dir", None), echo=_echo_problems)
+    stop = {"now": False}
+    t0 = time.monotonic()
+    code = graph.start_or_exit_code("demo", on_stop_signal=lambda: stop.update(now=True))
+    if code is not None:
+        return code
+    say(f"graph up in {time.monotonic() - t0:.1f} s: " + ", ".join(graph.supervisor.pids()))
+    if graph.record_dir:
+        say(f"recording to {graph.record_dir}")
+
+    report: dict = {"seed": seed, "maze": str(maze_path), "optimal": optimal, "phases": {}}
+    demo = _Demo(graph, optimal, streak, slack, caps, report, stop)
+    try:
+        code = demo.phases(new_row, new_col)
+    finally:
+        codes = demo.stop_graph(t0)
+    return _summarise(args, graph, report, codes, code)
 
 
 def main(argv: list[str] | None = None) -> int:
