@@ -301,31 +301,54 @@ def _rate(data: dict) -> float:
 
 # ----------------------------------------------------------------------------- figures
 def _figures(data: dict, summary: dict, out: Path) -> list[str]:
+    """Draw every figure into ``out``; returns the files written."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
-    files = []
-    eps = data['monitor'].episodes
+    t_of = _seconds_since_start(data)
+    files = [
+        _steps_per_episode(data['monitor'].episodes, summary, t_of,
+                           out / 'steps_per_episode.png'),
+        _goal_change_visits(summary, out / 'goal_change_visits.png'),
+        _steps_to_goal(summary, out / 'steps_to_goal.png'),
+        _map_over_time(data, summary, t_of, out / 'map_over_time.png'),
+        _final_map(data, out / 'final_map.png'),
+    ]
+    plt.close('all')
+    return files
+
+
+def _seconds_since_start(data: dict):
+    """``t_of(step)``: seconds from the start of the recording to the step's observation
+    (the figures over time share this axis)."""
     t0 = data.get('start_ns') or 0
     times = data['obs_times']
 
     def t_of(step):
         return (times.get(step, t0) - t0) / 1e9
 
-    def mark(ax, use_time):
-        for c in summary['goal_changes']:
-            x = t_of(c['step']) if use_time else c['step']
-            ax.axvline(x, color='tab:purple', ls='--', lw=1)
-            ax.annotate(f'goal -> {tuple(c["to"])}', (x, 1), xycoords=('data', 'axes fraction'),
-                        rotation=90, va='top', ha='right', fontsize=7, color='tab:purple')
-        for e in summary['events']:
-            x = t_of(e['step']) if use_time else e['step']
-            ax.axvline(x, color='tab:red', ls=':', lw=1)
-            ax.annotate(e['what'], (x, 1), xycoords=('data', 'axes fraction'), rotation=90,
-                        va='top', ha='right', fontsize=7, color='tab:red')
+    return t_of
 
-    # 1. steps per episode over time
+
+def _mark_changes(ax, summary: dict, t_of) -> None:
+    """Vertical lines at every goal change (purple) and maze event (red), labelled."""
+    for c in summary['goal_changes']:
+        x = t_of(c['step'])
+        ax.axvline(x, color='tab:purple', ls='--', lw=1)
+        ax.annotate(f'goal -> {tuple(c["to"])}', (x, 1), xycoords=('data', 'axes fraction'),
+                    rotation=90, va='top', ha='right', fontsize=7, color='tab:purple')
+    for e in summary['events']:
+        x = t_of(e['step'])
+        ax.axvline(x, color='tab:red', ls=':', lw=1)
+        ax.annotate(e['what'], (x, 1), xycoords=('data', 'axes fraction'), rotation=90,
+                    va='top', ha='right', fontsize=7, color='tab:red')
+
+
+def _steps_per_episode(eps: list, summary: dict, t_of, path: Path) -> str:
+    """Steps per episode over time, coloured by how the episode ended."""
+    import matplotlib.pyplot as plt
+
     fig, ax = plt.subplots(figsize=(8, 4))
     colours = {'goal': 'tab:green', 'previous_goal': 'tab:orange', 'cut': 'tab:gray'}
     for outcome, colour in colours.items():
@@ -333,14 +356,19 @@ def _figures(data: dict, summary: dict, out: Path) -> list[str]:
         ax.scatter([t_of(e.end_step) for e in sel], [e.steps for e in sel], s=12, c=colour,
                    label=outcome.replace('_', ' '))
     ax.plot([t_of(e.end_step) for e in eps], [e.steps for e in eps], lw=0.5, c='k', alpha=0.4)
-    mark(ax, True)
+    _mark_changes(ax, summary, t_of)
     ax.set_xlabel('time since the recording started (s)')
     ax.set_ylabel('steps in the episode')
     ax.set_title('Steps per episode')
     ax.legend(fontsize=8)
-    files.append(_save(fig, out / 'steps_per_episode.png'))
+    return _save(fig, path)
 
-    # 2. visits to the previous / current goal after each goal change
+
+def _goal_change_visits(summary: dict, path: Path) -> str:
+    """After each goal change: % of the episodes that ended at the previous goal, passed
+    its cell, and ended at the current goal (the goal-change scenario's figures)."""
+    import matplotlib.pyplot as plt
+
     tr = summary['goal_changes']
     fig, ax = plt.subplots(figsize=(max(4, 1.6 * len(tr) + 2), 3.5))
     if tr:
@@ -361,23 +389,28 @@ def _figures(data: dict, summary: dict, out: Path) -> list[str]:
     ax.set_yticks(range(0, 101, 20))
     ax.set_ylabel('% of the episodes after the change')
     ax.set_title('Visits after each goal change')
-    files.append(_save(fig, out / 'goal_change_visits.png'))
+    return _save(fig, path)
 
-    # 3. steps to the goal after each goal change / event
+
+def _steps_to_goal(summary: dict, path: Path) -> str:
+    """Steps from each goal change and event until the goal is first reached, against the
+    shortest path then in force."""
+    import matplotlib.pyplot as plt
+
+    tr, events = summary['goal_changes'], summary['events']
     rows = [(f'goal -> {tuple(t["to"])}\n(step {t["step"]})', t['first_goal_steps_after'])
             for t in tr] + [(f'{e["what"]}\n(step {e["step"]})', e['first_goal_steps_after'])
-                            for e in summary['events']]
+                            for e in events]
     fig, ax = plt.subplots(figsize=(max(4, 1.6 * len(rows) + 2), 3.5))
     if rows:
         vals = [v if v is not None else 0 for _l, v in rows]
         bars = ax.bar(range(len(rows)), vals, color=['tab:purple'] * len(tr) +
-                      ['tab:red'] * len(summary['events']))
+                      ['tab:red'] * len(events))
         for b, (_l, v) in zip(bars, rows):
             ax.annotate('not reached' if v is None else str(v), (b.get_x() + b.get_width() / 2,
                         b.get_height()), ha='center', va='bottom', fontsize=8)
         ax.set_xticks(range(len(rows)), [label for label, _v in rows], fontsize=7)
-        optimal = [t['optimal_steps'] for t in tr] + [e['optimal_steps']
-                                                      for e in summary['events']]
+        optimal = [t['optimal_steps'] for t in tr] + [e['optimal_steps'] for e in events]
         xs = [k for k, o in enumerate(optimal) if o]
         if xs:
             ax.scatter(xs, [optimal[k] for k in xs], marker='_', s=900, c='k', zorder=3,
@@ -388,11 +421,16 @@ def _figures(data: dict, summary: dict, out: Path) -> list[str]:
                 transform=ax.transAxes)
     ax.set_ylabel('steps until the goal is first reached')
     ax.set_title('Steps to the goal after each change')
-    files.append(_save(fig, out / 'steps_to_goal.png'))
+    return _save(fig, path)
 
-    # 4. map size and reliability over time
+
+def _map_over_time(data: dict, summary: dict, t_of, path: Path) -> str:
+    """The map's nodes and links, and its mean link reliability E, over time."""
+    import matplotlib.pyplot as plt
+
     fig, ax = plt.subplots(figsize=(8, 4))
     if data['map']:
+        t0 = data.get('start_ns') or 0
         tm = [(m['t'] - t0) / 1e9 for m in data['map']]
         ax.plot(tm, [m['nodes'] for m in data['map']], label='nodes', c='tab:blue')
         ax.plot(tm, [m['links'] for m in data['map']], label='links', c='tab:cyan')
@@ -405,18 +443,13 @@ def _figures(data: dict, summary: dict, out: Path) -> list[str]:
         h1, l1 = ax.get_legend_handles_labels()
         h2, l2 = ax2.get_legend_handles_labels()
         ax.legend(h1 + h2, l1 + l2, fontsize=8, loc='lower right')
-        mark(ax, True)
+        _mark_changes(ax, summary, t_of)
     else:
         ax.text(0.5, 0.5, f'no {T.MAP} messages recorded', ha='center', va='center',
                 transform=ax.transAxes)
     ax.set_xlabel('time since the recording started (s)')
     ax.set_title('Sensorimotor map size and reliability')
-    files.append(_save(fig, out / 'map_over_time.png'))
-
-    # 5. the final map over the maze, with motivation potentials
-    files.append(_final_map(data, out / 'final_map.png'))
-    plt.close('all')
-    return files
+    return _save(fig, path)
 
 
 def node_cells(data: dict) -> dict[int, tuple[int, int]]:
