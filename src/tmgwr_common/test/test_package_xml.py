@@ -179,7 +179,8 @@ def test_install_holds_the_source_packages_and_data():
     marker = prefix / 'share' / 'ament_index' / 'resource_index' / 'packages' / name
     if not marker.is_file():
         missing.append(str(marker.relative_to(prefix)))
-    assert not missing, f'{name}: not installed by colcon build: {missing}'
+    assert not missing, (f'{name}: not in the install (a stale build? colcon build, or '
+                         f'tools/bootstrap.sh in the repository): {missing}')
 
 
 def test_console_scripts_are_where_ros2_run_looks():
