@@ -2,8 +2,10 @@
 
 ``experiment SCENARIO --maze FILE --agents LIST --trials N --seed S --json OUT
 [--plot OUT.png] [--jobs J]`` with ``--goals``, ``--episodes``, ``--event``, ``--goal``
-for the scenarios that take them; ``demo`` runs every scenario briefly and then the ROS
-graph demo (:mod:`tmgwr_agent.graph.demo`); ``bench`` measures the TMGWR core and merges
+for the scenarios that take them; ``--suite SPEC [--suite-seed K] [--suite-first I]``
+instead of ``--maze`` runs env-change or goal-change on generated mazes
+(:mod:`tmgwr_agent.experiments.suite_runner`); ``demo`` runs every scenario briefly and
+then the ROS graph demo (:mod:`tmgwr_agent.graph.demo`); ``bench`` measures the TMGWR core and merges
 the graph / bag benchmarks. An unknown agent, scenario, goal or
 event, or a missing maze file, exits with code 2 and a message naming it.
 
@@ -58,6 +60,16 @@ def register(subparsers) -> None:
     p.add_argument("--goal", default="G",
                    help="goal of the env-change / timing training (default G)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--suite", default=None, metavar="SPEC",
+                   help="instead of --maze: generated mazes (env-change, goal-change), "
+                        "FAMILY[:N] or all[:N] or a comma list (braided:3,rooms:3); "
+                        "families braided, rooms, open, blocking, shortcut, large. "
+                        "env-change: --event block (default) or open; goal-change: each "
+                        "maze's goals 1,2,3,4,1. Mazes go to OUT_mazes/ beside --json OUT")
+    p.add_argument("--suite-seed", type=int, default=0,
+                   help="seed of the generated mazes (default 0)")
+    p.add_argument("--suite-first", type=int, default=0,
+                   help="first maze index of each family (a held-out split; default 0)")
     p.set_defaults(func=cmd_experiment)
 
     d = subparsers.add_parser(
@@ -101,6 +113,8 @@ def _fail(msg: str) -> int:
 def cmd_experiment(args: argparse.Namespace) -> int:
     from tmgwr_agent.experiments.output import write_json
     from tmgwr_agent.experiments.scenarios import UsageError, run_scenario
+    if args.suite:
+        return _cmd_suite(args)
     try:
         result = run_scenario(args.scenario, args.maze or _default_maze(), args.agents,
                               args.trials, args.seed, args.goals, args.episodes, args.event,
@@ -115,6 +129,34 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     if args.json:
         from tmgwr_agent.experiments.report import table
         print(table(result))
+    return 0
+
+
+def _cmd_suite(args: argparse.Namespace) -> int:
+    """``experiment SCENARIO --suite SPEC`` (:mod:`tmgwr_agent.experiments.suite_runner`)."""
+    from tmgwr_agent.experiments.output import write_json
+    from tmgwr_agent.experiments.scenarios import UsageError
+    from tmgwr_agent.experiments.suite_runner import maze_dir_for, run_suite, table
+    if args.maze:
+        return _fail("--maze and --suite exclude each other")
+    if args.goal != "G":
+        return _fail("--goal does not apply with --suite (every suite maze's goal is G)")
+    maze_dir = maze_dir_for(args.json) if args.json and args.json != "-" else None
+    try:
+        result = run_suite(args.scenario, args.suite, args.agents, args.trials, args.seed,
+                           args.suite_seed, args.suite_first, args.event, args.goals,
+                           args.episodes, args.jobs, progress=not args.quiet,
+                           maze_dir=maze_dir)
+    except UsageError as exc:
+        return _fail(str(exc))
+    write_json(result, args.json)
+    if args.plot:
+        from tmgwr_agent.experiments.plots import plot_suite
+        Path(args.plot).parent.mkdir(parents=True, exist_ok=True)
+        plot_suite(result, args.plot)
+    if args.json and args.json != "-":
+        print(table(result))
+        print(f"mazes: {maze_dir}/")
     return 0
 
 

@@ -8,7 +8,14 @@
 * sample-complexity: one panel per goal, mean steps per episode every 5th episode,
   log scale (Fig. 6 a-d);
 * timing: grouped bars of CPU seconds for training, goal adaptation and recovery from
-  the event, with std error bars; "never" where every trial failed (Fig. 7 a-c).
+  the event, with std error bars; "never" where every trial failed (Fig. 7 a-c);
+* a suite run (``--suite``, :func:`plot_suite`): one panel per maze family. env-change
+  with blocks: per agent a box of the per-maze oracle ratios (median steps /
+  oracle_steps; one dot per maze, log scale, the oracle as a dashed line at 1), failed
+  trials and mazes whose median failed annotated; with openings: the per-maze median
+  ``episodes_to_optimal`` instead (a dashed line at 10 episodes, mazes whose median
+  never found the shortcut counted). goal-change: per agent a box of the per-maze mean
+  % of episodes ending at the current goal.
 """
 
 from __future__ import annotations
@@ -145,9 +152,76 @@ def plot_timing(result: dict, path: str | Path) -> None:
     plt.close(fig)
 
 
+def plot_suite(result: dict, path: str | Path) -> None:
+    """One panel per family (the families of the suite JSON, see :mod:`.suite_runner`)."""
+    s = result["suite"]
+    fams = [f for f, d in s["families"].items() if d["mazes"]]
+    env = result["scenario"] == "env-change"
+    n = max(len(fams), 1)
+    cols = min(3, n)
+    rows = (n + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(max(4.6 * cols, 7), 3.8 * rows),
+                             squeeze=False)
+    for ax, fam in zip(axes.flat, fams):
+        d = s["families"][fam]
+        opening = env and s.get("event") == "open"
+        key = ("episodes_to_optimal" if opening else "oracle_ratio") if env \
+            else "current_pct"
+        names = list(d[key])
+        data, nulls = [], []
+        for a in names:
+            vals = d[key][a]["values"]
+            data.append([v for v in vals if v is not None])
+            nulls.append(sum(v is None for v in vals))
+        pos = np.arange(len(names))
+        ok = [i for i, v in enumerate(data) if v]
+        if ok:
+            ax.boxplot([data[i] for i in ok], positions=pos[ok], widths=0.5,
+                       medianprops={"color": "tab:red"}, showfliers=False)
+        for i, v in enumerate(data):
+            ax.plot(np.full(len(v), pos[i]), v, "k.", ms=4, alpha=0.7)
+            notes = []
+            if env and d["failures"][names[i]]:
+                notes.append(f"{d['failures'][names[i]]} failed trials")
+            if nulls[i]:
+                notes.append(f"{nulls[i]} maze{'s' if nulls[i] > 1 else ''} never")
+            if notes:
+                ax.text(pos[i], 0.98, "\n".join(notes), ha="center", va="top", fontsize=7,
+                        color="tab:red", transform=ax.get_xaxis_transform())
+        if opening:
+            ax.axhline(10, color="k", ls="--", lw=0.8)
+            ax.set_yscale("log")
+            ax.set_ylabel("episodes until the greedy path\nuses the shortcut (median)")
+        elif env:
+            ax.axhline(1.0, color="k", ls="--", lw=0.8)
+            ax.set_yscale("log")
+            plain = matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}")
+            ax.yaxis.set_major_formatter(plain)
+            lo, hi = ax.get_ylim()
+            if hi / lo < 10:             # less than a decade: label the minor ticks too
+                ax.yaxis.set_minor_formatter(plain)
+            ax.set_ylabel("median steps / oracle_steps per maze")
+        else:
+            ax.set_ylabel("% episodes at the current goal per maze")
+        ax.set_xticks(pos, names, rotation=20, fontsize=8)
+        ax.set_xlim(-0.6, len(names) - 0.4)
+        ax.set_title(f"{fam} ({d['mazes']} mazes, {d['trials']} trials)", fontsize=9)
+    for ax in list(axes.flat)[len(fams):]:
+        ax.axis("off")
+    what = (f"env-change, {s.get('event', '')} event" if env
+            else f"goal-change, {result['episodes']} episodes per goal")
+    fig.suptitle(f"Suite {s['spec']} (seed {s['seed']}): {what}", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 PLOTS = {"goal-change": plot_goal_change, "env-change": plot_env_change,
          "sample-complexity": plot_sample_complexity, "timing": plot_timing}
 
 
 def plot(result: dict, path: str | Path) -> None:
+    if "suite" in result:
+        plot_suite(result, path)
+        return
     PLOTS[result["scenario"]](result, path)
