@@ -143,3 +143,26 @@ def test_up_reports_a_node_that_dies_and_stops_the_rest(ros_domain):
         assert f"{name} exit 0" in stopped, out
     time.sleep(0.5)
     assert not [n for n, pid in pids.items() if os.path.exists(f"/proc/{pid}")], out
+
+
+def test_up_refuses_a_bad_params_file_before_starting_nodes(ros_domain, tmp_path):
+    """``up --params-file``: a malformed file (file:line), an old-layout file (how to
+    convert it) and an unknown name (the nearest known one) are refused up front, exit 2."""
+    files = {"broken.yaml": ("/**:\n  ros__parameters:\n    gamma: [0.9\n",
+                             ["broken.yaml:4:", "malformed parameter file"]),
+             "old.yaml": ("/**:\n  ros__parameters:\n    tmgwr:\n      gamma: 0.9\n",
+                          ["old.yaml", "old layout", "'gamma: ...' directly under"]),
+             "typo.yaml": ("action_selector:\n  ros__parameters:\n    eps_mn: 0.2\n",
+                           ["typo.yaml [action_selector]", "unknown parameter 'eps_mn'",
+                            "did you mean 'eps_min'"])}
+    for name, (text, expected) in files.items():
+        (tmp_path / name).write_text(text)
+        p = spawn_module("tmgwr_agent.cli", "up", "--no-record", "--params-file",
+                         str(tmp_path / name), domain=ros_domain, name=name)
+        with p:
+            p.proc.wait(timeout=60)
+            p._reader.join(timeout=5)
+        assert p.proc.returncode == 2, p.describe(name)
+        assert "graph up" not in p.output and "Traceback" not in p.output, p.output
+        for e in expected:
+            assert e in p.output, (name, e, p.output)

@@ -147,13 +147,15 @@ def test_each_node_refuses_an_invalid_parameter(ros_domain):
             assert "ready" not in out
 
 
-def test_parameters_default_to_config_and_follow_params_file_and_overrides(ros_domain,
-                                                                           tmp_path):
-    from tmgwr_common.params import load_yaml
-    config = load_yaml(ROOT / "src" / "tmgwr_agent" / "config" / "tmgwr_agent.yaml", "tmgwr")
+def test_parameters_default_to_specs_and_follow_params_file_and_overrides(ros_domain,
+                                                                          tmp_path):
+    """Defaults come from the config dataclasses (no shipped file); a ``/**`` file in the
+    ROS layout overrides them, ``-p`` overrides the file; a key of another node in the
+    shared file is accepted (and not shown by this node)."""
+    from tmgwr_agent.core.motivation import MotivationConfig
     params_file = tmp_path / "p.yaml"
-    params_file.write_text("/**:\n  ros__parameters:\n    tmgwr:\n      gamma: 0.5\n"
-                           "      beta: 0.25\n")
+    params_file.write_text("/**:\n  ros__parameters:\n    gamma: 0.5\n    beta: 0.25\n"
+                           "    a_T: 0.9\n    seed: 3\n")
     runs = {"default": [], "file": ["--params-file", str(params_file)],
             "both": ["--params-file", str(params_file), "-p", "gamma:=0.9"]}
     procs = {k: ros2_run("tmgwr_agent", "motivation_estimator", "--ros-args", *a,
@@ -163,9 +165,44 @@ def test_parameters_default_to_config_and_follow_params_file_and_overrides(ros_d
         with p:
             line = p.wait_for_line("motivation_estimator ready", timeout=60)
             seen[k] = ast.literal_eval(line.split("ready: ", 1)[1])   # its parameter dict
-    assert seen["default"] == {k: config[k] for k in seen["default"]}
+    assert seen["default"] == MotivationConfig().as_dict()
     assert (seen["file"]["gamma"], seen["file"]["beta"]) == (0.5, 0.25)
+    assert "a_T" not in seen["file"]
     assert (seen["both"]["gamma"], seen["both"]["beta"]) == (0.9, 0.25)
+
+
+def test_unknown_parameter_names_stop_the_node_naming_the_nearest(ros_domain, tmp_path):
+    """A typo given with -p or in a parameter file stops the node at start (exit code 2),
+    naming the key, the nearest known name and the file; an old-layout file (values nested
+    under 'tmgwr:') is refused with how to convert it; a malformed file names its line."""
+    typo = tmp_path / "typo.yaml"
+    typo.write_text("/**:\n  ros__parameters:\n    gama: 0.9\n")
+    old = tmp_path / "old.yaml"
+    old.write_text("/**:\n  ros__parameters:\n    tmgwr:\n      gamma: 0.9\n")
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("/**:\n  ros__parameters:\n    gamma: [0.9\n")
+    cases = {
+        "p": (("tmgwr_agent", "motivation_estimator"), ["-p", "gama:=0.9"],
+              ["unknown parameter 'gama'", "did you mean 'gamma'"]),
+        "file": (("tmgwr_agent", "action_selector"), ["--params-file", str(typo)],
+                 ["unknown parameter 'gama'", str(typo), "did you mean 'gamma'"]),
+        "sim": (("maze_sim", "maze_sim"), ["-p", "sede:=1"],
+                ["unknown parameter 'sede'", "did you mean 'seed'"]),
+        "old": (("tmgwr_agent", "map_learner"), ["--params-file", str(old)],
+                [str(old), "old layout", "tmgwr:", "'gamma: ...' directly under"]),
+        "broken": (("tmgwr_agent", "sensory_preprocessor"), ["--params-file", str(broken)],
+                   [f"{broken}:4:", "malformed parameter file"]),
+    }
+    procs = {k: ros2_run(pkg, exe, "--ros-args", *args, domain=ros_domain, name=k)
+             for k, ((pkg, exe), args, _) in cases.items()}
+    for k, p in procs.items():
+        with p:
+            out = p.wait(timeout=60, check=False)
+            assert p.proc.returncode == 2, p.describe(f"{k}: did not exit with code 2")
+            assert "cannot start" in out and "ready" not in out, out
+            assert "Traceback" not in out, out
+            for text in cases[k][2]:
+                assert text in out, (k, text, out)
 
 
 # --------------------------------------------------------------------------- the run

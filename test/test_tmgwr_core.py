@@ -6,12 +6,12 @@ import pytest
 
 from maze_sim import GridWorld, Maze
 from maze_sim.maze import ACTION_VECTORS, maze_file
-from tmgwr_agent.core.agent import TMGWRAgent, tmgwr_params
+from tmgwr_agent.core.agent import TMGWRAgent, tmgwr_config
 from tmgwr_agent.core.exploration import EpsilonSchedule, RandomWalk
-from tmgwr_agent.core.motivation import MotivationEstimator
-from tmgwr_common.params import ParamError
-from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
-from tmgwr_agent.core.action_selector import ActionSelector
+from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
+from tmgwr_common.params import ParamError, make_config
+from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap
+from tmgwr_agent.core.action_selector import ActionSelector, SelectorConfig
 
 UP, DOWN, LEFT, RIGHT = range(4)
 
@@ -19,7 +19,8 @@ UP, DOWN, LEFT, RIGHT = range(4)
 def chain_map(**kw):
     """Three nodes on a line, 0.1 apart, visited 0 -> 1 -> 2 with action 'right'
     (each winner habituated at once, so every new input gets its own node)."""
-    m = SensorimotorMap(dim=2, a_T=0.95, h_T=0.75, alpha_c=0.0, insert_at=1.0, **kw)
+    m = SensorimotorMap(dim=2, config=MapConfig(a_T=0.95, h_T=0.75, alpha_c=0.0,
+                                                insert_at=1.0, **kw))
     for k in range(3):
         m.step(np.array([0.0, 0.1 * k]), ACTION_VECTORS[RIGHT] if k else None)
         m.h[m.winner] = 0.5
@@ -81,7 +82,7 @@ def test_links_age_and_stale_links_are_deleted():
 
 # ---------------------------------------------------------------- GWR + Merge-GNG
 def test_context_is_merge_gng_blend_of_previous_winner():
-    m = SensorimotorMap(dim=2, beta_c=0.25, alpha_c=0.5)
+    m = SensorimotorMap(dim=2, config=MapConfig(beta_c=0.25, alpha_c=0.5))
     m.step(np.array([1.0, 2.0]), None)
     m.c[0] = [3.0, 5.0]
     np.testing.assert_allclose(m.context(), 0.75 * np.array([1.0, 2.0]) + 0.25 * np.array([3.0, 5.0]))
@@ -92,8 +93,8 @@ def test_context_is_merge_gng_blend_of_previous_winner():
 
 
 def test_insertion_needs_low_activity_and_habituated_winner():
-    m = SensorimotorMap(dim=2, a_T=0.95, h_T=0.75, tau_b=0.3, kappa_h=1.05, alpha_c=0.0,
-                        insert_at=0.5, eps_b=0.2)
+    m = SensorimotorMap(dim=2, config=MapConfig(a_T=0.95, h_T=0.75, tau_b=0.3, kappa_h=1.05,
+                                                alpha_c=0.0, insert_at=0.5, eps_b=0.2))
     m.step(np.array([0.0, 0.0]), None)                   # node 0, h = 1
     # far input, but node 0 not habituated (h = 1 >= h_T): adapt instead of insert
     m.step(np.array([0.0, 0.2]), ACTION_VECTORS[RIGHT])
@@ -122,8 +123,9 @@ def test_near_input_adapts_winner_and_neighbours():
 # ---------------------------------------------------------------- Eq. 4-5: motivation
 def test_value_iteration_matches_fixed_point_on_a_chain():
     m = chain_map()
-    mo = MotivationEstimator(gamma=0.97, beta=0.8, goal_sigma=0.3, goal_sim_floor=1e-3,
-                             vi_tol=1e-10, vi_max_sweeps=100000)
+    mo = MotivationEstimator(MotivationConfig(gamma=0.97, beta=0.8, goal_sigma=0.3,
+                                              goal_sim_floor=1e-3, vi_tol=1e-10,
+                                              vi_max_sweeps=100000))
     mo.set_goal(np.array([0.0, 0.2]))
     V = mo.update(m)
     assert mo.goal_node == 2
@@ -138,7 +140,7 @@ def test_value_iteration_matches_fixed_point_on_a_chain():
 def test_node_where_an_episode_ended_short_of_the_goal_is_absorbing(tmp_path):
     m = chain_map()
     m.mark_terminal(1)                  # an episode ended on node 1 without the goal
-    mo = MotivationEstimator(vi_tol=1e-10, vi_max_sweeps=100000)
+    mo = MotivationEstimator(MotivationConfig(vi_tol=1e-10, vi_max_sweeps=100000))
     mo.set_goal(np.array([0.0, 0.2]))
     R1 = np.exp(-0.01 / (2 * 0.03 ** 2))
     # node 1 has no successor: V(1) = R_1, and node 0 only sees that through it
@@ -147,7 +149,8 @@ def test_node_where_an_episode_ended_short_of_the_goal_is_absorbing(tmp_path):
     m2 = SensorimotorMap(dim=2)
     m2.load(tmp_path / "map.npz")
     assert list(m2.terminal[:3]) == [False, True, False]
-    off = MotivationEstimator(vi_tol=1e-10, vi_max_sweeps=100000, absorbing_terminals=False)
+    off = MotivationEstimator(MotivationConfig(vi_tol=1e-10, vi_max_sweeps=100000,
+                                               absorbing_terminals=False))
     off.set_goal(np.array([0.0, 0.2]))
     np.testing.assert_allclose(off.update(m)[1], R1 + 0.97, rtol=1e-8)   # Eq. 5 as printed
     # walking on from node 1 within an episode clears the flag: it is not an end any more
@@ -197,7 +200,7 @@ def test_value_iteration_without_a_path_gives_no_motivation():
 
 
 def test_eq6_picks_link_with_highest_E_times_V_and_breaks_ties_by_rng():
-    m = SensorimotorMap(dim=2, alpha_c=0.0, insert_at=1.0)
+    m = SensorimotorMap(dim=2, config=MapConfig(alpha_c=0.0, insert_at=1.0))
     m.step(np.array([0.0, 0.0]), None)
     for a, x in ((RIGHT, [0.0, 0.1]), (DOWN, [0.1, 0.0])):
         m.begin_episode()
@@ -219,13 +222,13 @@ def test_eq6_picks_link_with_highest_E_times_V_and_breaks_ties_by_rng():
 
 
 def test_goal_search_walks_for_the_rest_of_the_episode_after_the_goal_node():
-    m = SensorimotorMap(dim=2, alpha_c=0.0, insert_at=1.0)
+    m = SensorimotorMap(dim=2, config=MapConfig(alpha_c=0.0, insert_at=1.0))
     m.step(np.array([0.0, 0.0]), None)
     m.h[:m.n] = 0.5
     m.step(np.array([0.0, 0.1]), ACTION_VECTORS[RIGHT])
     V = np.array([0.5, 0.9, 0.0])                         # node 1 is the most motivating
-    sel = ActionSelector(np.random.default_rng(0), eps_start=0.0, eps_min=0.0,
-                         try_untried=False)
+    sel = ActionSelector(np.random.default_rng(0),
+                         SelectorConfig(eps_start=0.0, eps_min=0.0, try_untried=False))
     assert sel.select(m, 0, V) == (RIGHT, False)          # Eq. 6 while not at the goal node
     # standing on the goal node with the episode still running: the map does not know
     # the way, the random walk acts, also back on node 0, until the episode ends
@@ -234,19 +237,20 @@ def test_goal_search_walks_for_the_rest_of_the_episode_after_the_goal_node():
     assert sel.select(m, 0, V, explore=False) == (RIGHT, False)   # the probe never searches
     sel.begin_episode()
     assert sel.select(m, 0, V) == (RIGHT, False)
-    off = ActionSelector(np.random.default_rng(0), eps_start=0.0, eps_min=0.0,
-                         goal_search=False, try_untried=False)   # the paper's selector
+    off = ActionSelector(np.random.default_rng(0),     # the paper's selector
+                         SelectorConfig(eps_start=0.0, eps_min=0.0, goal_search=False,
+                                        try_untried=False))
     off.select(m, 1, V, at_goal_node=True)
     assert off.select(m, 0, V) == (RIGHT, False)
 
 
 def test_each_primitive_is_tried_once_from_a_node_before_eq6():
-    m = SensorimotorMap(dim=2, alpha_c=0.0, insert_at=1.0)
+    m = SensorimotorMap(dim=2, config=MapConfig(alpha_c=0.0, insert_at=1.0))
     m.step(np.array([0.0, 0.0]), None)
     m.h[:m.n] = 0.5
     m.step(np.array([0.0, 0.1]), ACTION_VECTORS[RIGHT])
     V = np.array([0.5, 0.9, 0.0])
-    sel = ActionSelector(np.random.default_rng(0), eps_start=0.0, eps_min=0.0)
+    sel = ActionSelector(np.random.default_rng(0), SelectorConfig(eps_start=0.0, eps_min=0.0))
     sel.observe(0, RIGHT)                                 # right was taken from node 0
     seen = []
     for _ in range(3):                                    # up, down, left, once each
@@ -257,7 +261,7 @@ def test_each_primitive_is_tried_once_from_a_node_before_eq6():
     assert sorted(seen) == [UP, DOWN, LEFT]
     assert sel.select(m, 0, V) == (RIGHT, False)          # then Eq. 6
     assert sel.select(m, 0, V, explore=False) == (RIGHT, False)   # the probe: Eq. 6 only
-    fresh = ActionSelector(np.random.default_rng(0), eps_start=0.0, eps_min=0.0)
+    fresh = ActionSelector(np.random.default_rng(0), SelectorConfig(eps_start=0.0, eps_min=0.0))
     assert fresh.select(m, 0, V, explore=False) == (RIGHT, False)
     # a view holding the winner in row 0 (the ROS selector) names the node by its id
     fresh.observe(7, UP)
@@ -289,13 +293,43 @@ def test_random_walk_keeps_direction_and_turns_after_bump():
 # ---------------------------------------------------------------- parameters
 def test_invalid_parameters_are_refused_with_their_name():
     with pytest.raises(ParamError, match="a_T"):
-        tmgwr_params({"a_T": 1.5})
+        tmgwr_config({"a_T": 1.5})
     with pytest.raises(ParamError, match="link_rule"):
-        tmgwr_params({"link_rule": "sometimes"})
+        tmgwr_config({"link_rule": "sometimes"})
     with pytest.raises(ParamError, match="gamma"):
-        tmgwr_params({"gamma": float("nan")})
-    with pytest.raises(ParamError, match="unknown parameter"):
-        tmgwr_params({"gama": 0.9})
+        tmgwr_config({"gamma": float("nan")})
+    with pytest.raises(ParamError, match="eps_min"):       # a rule across two parameters
+        tmgwr_config({"eps_start": 0.2, "eps_min": 0.5})
+    with pytest.raises(ParamError, match="gamma"):         # constructed directly: checked too
+        MotivationConfig(gamma=1.0)
+
+
+def test_unknown_parameter_is_refused_naming_the_nearest_known_one():
+    with pytest.raises(ParamError, match=r"unknown parameter 'gama' \(did you mean 'gamma'\?\)"):
+        tmgwr_config({"gama": 0.9})
+    with pytest.raises(ParamError, match=r"'eps_strat' \(did you mean 'eps_start'\?\)"):
+        make_config(SelectorConfig, {"eps_strat": 0.5})
+    # a name nested under a section (the old file layout) says how to write it
+    with pytest.raises(ParamError, match=r"'tmgwr.gamma'.*write 'gamma' directly"):
+        tmgwr_config({"tmgwr.gamma": 0.9})
+
+
+def test_defaults_are_declared_once_in_the_config_dataclasses():
+    """The specs are derived from the config fields; the agent's config is their union and
+    the constructors take no literal defaults of their own."""
+    import inspect
+    from tmgwr_agent.core.agent import SPECS
+    from tmgwr_agent.core.exploration import EpsilonGreedy
+    from tmgwr_agent.core.preprocessor import SensoryPreprocessor
+    from tmgwr_common.params import specs
+
+    assert {p.name: p.default for p in specs(MotivationConfig)}["gamma"] == 0.97   # Table 2
+    assert tmgwr_config().as_dict() == {p.name: p.default for p in SPECS}
+    assert tmgwr_config({"gamma": 0.9}).motivation.gamma == 0.9
+    for cls in (SensorimotorMap, MotivationEstimator, ActionSelector, EpsilonGreedy,
+                SensoryPreprocessor):
+        for name, par in inspect.signature(cls).parameters.items():
+            assert name in ("rng", "dim", "action_dim", "config"), (cls, name)
 
 
 # ---------------------------------------------------------------- behaviour on mazes

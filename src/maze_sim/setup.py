@@ -6,6 +6,9 @@ package_name = 'maze_sim'
 
 data_files = [
     ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+    # the parameter declarations of this package's nodes (tmgwr_common.params registry)
+    ('share/ament_index/resource_index/tmgwr_parameters',
+     ['resource/tmgwr_parameters/' + package_name]),
     ('share/' + package_name, ['package.xml']),
     ('share/' + package_name + '/mazes', sorted(glob('mazes/*.txt'))),
 ]

@@ -42,8 +42,9 @@ from tmgwr_common.node import (
     LATCHED_QOS,
     SENSOR_QOS,
     STEP_QOS,
+    NODE_OPTIONS,
     CallbackTimer,
-    declare_specs,
+    declare_parameters,
     f64,
     run,
 )
@@ -94,8 +95,8 @@ def parse_goal(maze: Maze, goal: str):
 
 class MazeSimNode(Node):
     def __init__(self):
-        super().__init__("maze_sim")
-        p = declare_specs(self, SPECS)
+        super().__init__("maze_sim", **NODE_OPTIONS)
+        p = declare_parameters(self, SPECS)
         self.p = p
         try:
             path = maze_file(p["maze"])

@@ -4,8 +4,9 @@
     ros2 launch tmgwr_agent agent.launch.py maze:=paper_13x17.txt goal:=2 seed:=1 record:=true
 
 Starts ``maze_sim`` and the four agent nodes (and, with ``record:=true``, the MCAP
-recorder first) with the parameters of ``share/tmgwr_agent/config/tmgwr_agent.yaml``.
-Then, from another shell::
+recorder first). Every hyperparameter defaults to its spec (the config dataclasses of the
+core); ``params_file:=FILE`` passes a ROS 2 parameter file of overrides to the five nodes
+(``/**: ros__parameters: {gamma: 0.9}`` or per-node sections). Then, from another shell::
 
     ros2 service call /set_goal tmgwr_interfaces/srv/SetGoal "{goal: {x: 11.0, y: 1.0, z: 0.0}}"
     ros2 service call /maze_sim/fire_event tmgwr_interfaces/srv/FireEvent "{event: a}"
@@ -15,12 +16,11 @@ does the same with tmgwr_agent.graph.supervisor.
 """
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.conditions import IfCondition
-from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
-from launch_ros.substitutions import FindPackageShare
 
 #: (package, executable) of the graph in data-flow order; the names are a contract.
 GRAPH = (
@@ -32,9 +32,24 @@ GRAPH = (
 )
 
 
+def graph_nodes(context):
+    """The five nodes, each with the user's parameter file (if any), then its overrides."""
+    params_file = LaunchConfiguration('params_file').perform(context)
+    files = [params_file] if params_file else []
+    seed = ParameterValue(LaunchConfiguration('seed'), value_type=int)
+    overrides = {
+        'maze_sim': {'maze': LaunchConfiguration('maze'), 'goal': LaunchConfiguration('goal'),
+                     'seed': seed},
+        'action_selector': {'seed': seed},
+    }
+    return [
+        Node(package=package, executable=executable, name=executable, output='screen',
+             parameters=[*files, overrides.get(executable, {})])
+        for package, executable in GRAPH
+    ]
+
+
 def generate_launch_description():
-    params_file = PathJoinSubstitution(
-        [FindPackageShare('tmgwr_agent'), 'config', 'tmgwr_agent.yaml'])
     arguments = [
         DeclareLaunchArgument('maze', default_value='paper_13x17.txt',
                               description='maze file: a path, or a file name in '
@@ -47,20 +62,12 @@ def generate_launch_description():
                               description='record every topic to MCAP (tmgwr_agent recorder)'),
         DeclareLaunchArgument('output_dir', default_value='',
                               description="recorder bag directory ('' = runs/<UTC timestamp>/)"),
+        DeclareLaunchArgument('params_file', default_value='',
+                              description="ROS 2 parameter file of overrides for the five "
+                                          "nodes ('' = every parameter at its default)"),
     ]
-    seed = ParameterValue(LaunchConfiguration('seed'), value_type=int)
-    overrides = {
-        'maze_sim': {'maze': LaunchConfiguration('maze'), 'goal': LaunchConfiguration('goal'),
-                     'seed': seed},
-        'action_selector': {'seed': seed},
-    }
     recorder = Node(
         package='tmgwr_agent', executable='recorder', name='recorder', output='screen',
         parameters=[{'output_dir': LaunchConfiguration('output_dir')}],
         condition=IfCondition(LaunchConfiguration('record')))
-    nodes = [
-        Node(package=package, executable=executable, name=executable, output='screen',
-             parameters=[params_file, overrides.get(executable, {})])
-        for package, executable in GRAPH
-    ]
-    return LaunchDescription(arguments + [recorder] + nodes)
+    return LaunchDescription(arguments + [recorder, OpaqueFunction(function=graph_nodes)])

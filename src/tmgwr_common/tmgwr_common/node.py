@@ -9,10 +9,11 @@
     reliable, transient local, keep-last 1 (only the newest snapshot matters).
   - :data:`SENSOR_QOS` for the pose stream: best effort keep-last 1 (a viewer wants the
     newest pose; a dropped one is harmless).
-* Parameters: :func:`declare_specs` turns the core's :class:`~tmgwr_common.params.Param`
-  declarations into ROS 2 parameters with a ParameterDescriptor (description, type, range)
-  whose defaults come from ``config/tmgwr_agent.yaml``; every value is then checked by the
-  core's own rule, so an invalid value stops the node at start with the parameter's name.
+* Parameters: :func:`declare_parameters` turns the core's config dataclasses (and the
+  nodes' own :class:`~tmgwr_common.params.Param` tuples) into ROS 2 parameters with a
+  ParameterDescriptor (description, type, range) and the spec's default; every value is
+  then checked by the core's own rule, so an invalid value stops the node at start with
+  the parameter's name, and so does a name that no node of the graph knows.
 * Arrays: per-step messages carry flat numeric arrays; :func:`f64` etc. build the
   ``array.array`` rclpy stores from a numpy array in one memcpy, :func:`np_f64` etc. read
   them back without a Python loop.
@@ -26,11 +27,12 @@ import array
 import sys
 import time
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping
+from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
-from tmgwr_common.params import Param, ParamError, load_yaml
+from tmgwr_common.params import (Config, Param, ParamError, graph_parameter_names,
+                                  make_config, read_params_file, specs, unknown_name_message)
 
 # ----------------------------------------------------------------------------- QoS
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,  # noqa: E402
@@ -47,15 +49,18 @@ SENSOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                         durability=DurabilityPolicy.VOLATILE)
 
 
-# ----------------------------------------------------------------------------- config
-def config_defaults(file: str = "tmgwr_agent.yaml", section: str = "tmgwr") -> dict[str, Any]:
-    """The values of ``share/tmgwr_agent/config/<file>`` section ``section``."""
-    from tmgwr_common.share import share_file
-
-    return load_yaml(share_file("tmgwr_agent", "config", file), section)
-
-
 # ----------------------------------------------------------------------------- parameters
+#: Options every node of the graph is created with (``Node(name, **NODE_OPTIONS)``): its
+#: parameter overrides (``--params-file``, ``-p``, launch) are declared at once, so
+#: :func:`declare_parameters` sees every name it was given (public rclpy API) and can
+#: refuse one that no node of the graph knows.
+NODE_OPTIONS = {"automatically_declare_parameters_from_overrides": True}
+
+#: Parameters rclpy itself declares or reads on every node.
+ROS_PARAMETERS = ("use_sim_time", "start_type_description_service")
+ROS_PARAMETER_PREFIXES = ("qos_overrides.",)
+
+
 def descriptor(p: Param):
     """A read-only ParameterDescriptor with the Param's description, type and range.
 
@@ -89,48 +94,75 @@ def descriptor(p: Param):
     return d
 
 
-def declare_specs(node, specs: Iterable[Param], defaults: Mapping[str, Any] | None = None,
-                  section: str | None = None) -> dict[str, Any]:
-    """Declare each Param on ``node``; returns the checked values.
+def declare_parameters(node, *groups: type[Config] | Iterable[Param]):
+    """Declare the parameters of ``groups`` on ``node`` (created with
+    :data:`NODE_OPTIONS`), each with its descriptor; returns, per group, the config (for
+    a Config class) or the dict of checked values (for a Param tuple), a single result
+    for a single group.
 
-    The default is, in order: a ``<section>.<name>`` value of a ``--params-file`` in the
-    config/ layout (``/**: ros__parameters: tmgwr: {...}``), ``defaults`` (the config
-    file), the Param's own. ``-p name:=value`` overrides it. Raises ParamError naming the
-    first invalid parameter.
+    A value comes from ``-p name:=value`` or a ``--params-file``, else it is the spec's
+    default. An invalid value raises ParamError naming it. Then every other name the node
+    was given is checked: one that belongs to another node of the graph (a ``/**`` file is
+    shared by all of them) is dropped from this node, one that no node knows is refused,
+    naming the nearest known name and the parameter file that holds it.
     """
+    where = f"node '{node.get_name()}'"
+    results = []
+    declared: set[str] = set()
+    for group in groups:
+        values = {p.name: _declare(node, p, where) for p in specs(group)}
+        declared.update(values)
+        results.append(make_config(group, values, where) if isinstance(group, type)
+                       else values)
+    _drop_foreign_parameters(node, declared, where)
+    return results[0] if len(results) == 1 else tuple(results)
+
+
+def _declare(node, p: Param, where: str) -> Any:
     from rclpy.exceptions import (InvalidParameterTypeException,
                                   InvalidParameterValueException)
-    defaults = dict(defaults or {})
-    overrides = getattr(node, "_parameter_overrides", {}) or {}
-    values: dict[str, Any] = {}
-    where = f"node '{node.get_name()}'"
-    for p in specs:
-        src = where + " (config default)"
-        default = defaults.get(p.name, p.default)
-        if section and f"{section}.{p.name}" in overrides:
-            default = overrides[f"{section}.{p.name}"].value
-            src = where + f" (parameter file '{section}.{p.name}')"
-        default = _check(p, default, src)
-        if not p.integer and isinstance(default, int) and not isinstance(default, bool) \
-                and p.choices is None and not isinstance(p.default, (bool, str)):
-            default = float(default)
-        try:
-            param = node.declare_parameter(p.name, default, descriptor(p))
-        except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
-            raise ParamError(f"{where}: invalid parameter '{p.name}': {exc}") from None
-        values[p.name] = _check(p, param.value, where)
-    return values
+    if node.has_parameter(p.name):       # declared from its override: add the descriptor
+        node.undeclare_parameter(p.name)
+    try:
+        param = node.declare_parameter(p.name, p.check(p.default), descriptor(p))
+    except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
+        raise ParamError(f"{where}: invalid parameter '{p.name}': {exc}") from None
+    return p.check(param.value, where)
 
 
-def _check(p: Param, value: Any, where: str) -> Any:
-    """Param.check, plus free-form string parameters (paths, names)."""
-    if isinstance(p.default, str) and p.choices is None:
-        if isinstance(value, int) and not isinstance(value, bool):
-            value = str(value)
-        if not isinstance(value, str):
-            raise ParamError(f"{where}: parameter '{p.name}' must be a string, got {value!r}")
-        return value
-    return p.check(value, where)
+def _drop_foreign_parameters(node, declared: set[str], where: str) -> None:
+    given = [n for n in node.list_parameters([], 0).names
+             if n not in declared and n not in ROS_PARAMETERS
+             and not n.startswith(ROS_PARAMETER_PREFIXES)]
+    if not given:
+        return
+    known = graph_parameter_names() | declared
+    for name in given:
+        if name not in known:
+            files = [str(f) for f in params_files(sys.argv) if _holds(f, name)]
+            origin = f"set in {', '.join(files)}" if files else ""
+            raise ParamError(unknown_name_message(name, known, where, origin))
+        node.undeclare_parameter(name)   # another node's parameter: not this node's to show
+
+
+def params_files(argv: Sequence[str]) -> list[Path]:
+    """The ``--params-file`` arguments of the ROS arguments in ``argv``."""
+    files, in_ros = [], False
+    for i, a in enumerate(argv):
+        if a == "--ros-args":
+            in_ros = True
+        elif a == "--":
+            in_ros = False
+        elif in_ros and a == "--params-file" and i + 1 < len(argv):
+            files.append(Path(argv[i + 1]))
+    return files
+
+
+def _holds(path: Path, name: str) -> bool:
+    try:
+        return any(name in values for values in read_params_file(path).values())
+    except ParamError:
+        return False
 
 
 # ----------------------------------------------------------------------------- arrays
@@ -229,7 +261,14 @@ def run(factory: Callable[[], Any], name: str, args=None) -> int:
     import rclpy
     from rclpy.executors import ExternalShutdownException
 
-    rclpy.init(args=args if args is not None else sys.argv)
+    args = list(args if args is not None else sys.argv)
+    try:
+        for f in params_files(args):     # rcl's own parse error names neither file nor line
+            read_params_file(f)
+        rclpy.init(args=args)
+    except (ParamError, RuntimeError) as exc:    # RCLError is a RuntimeError
+        print(f"[{name}] cannot start: {exc}", file=sys.stderr, flush=True)
+        return 2
     node = None
     code = 0
     try:

@@ -1,8 +1,9 @@
-"""Where the installed data lives: the one way the project finds its parameter files and mazes.
+"""Where the installed data lives: the one way the project finds its data files (mazes).
 
 Every package installs its own data into its ament share directory (``colcon build``; the
-pip-only bootstrap builds the same workspace): ``share/tmgwr_agent/config/*.yaml`` and
-``share/maze_sim/mazes/*.txt``. Nothing reads them from the source tree.
+pip-only bootstrap builds the same workspace): ``share/maze_sim/mazes/*.txt``, the launch
+file. Nothing reads them from the source tree. (Hyperparameters have no shipped file:
+their defaults are the specs of :mod:`tmgwr_common.params`.)
 """
 
 from __future__ import annotations

@@ -10,20 +10,8 @@ All of them are tabular over maze cells (the state is the cell the world reports
 explore exactly like the TMGWR agent: :class:`~tmgwr_agent.core.exploration.EpsilonGreedy` with
 one ``explores()`` draw per ``act``, the random walk of section 5.1 when exploring or when
 the agent has no greedy opinion, and ``walk.observe(action, bumped)`` after every step.
-Defaults live in ``config/baselines.yaml`` (sections ``q_learning``, ``model_based``,
-``dyna_q_plus``).
+Each agent's hyperparameters are one config dataclass (``QLearningConfig``,
+``ModelBasedConfig``, ``DynaQPlusConfig``) that extends
+:class:`~tmgwr_agent.core.exploration.ExplorationConfig`, the exploration parameters every
+agent shares (the same names, defaults and ranges as the TMGWR agent's).
 """
-
-from __future__ import annotations
-
-from tmgwr_agent.core.exploration import SPECS
-
-#: Exploration parameters shared by every agent (section 5.1, Eq. 7); the same names,
-#: defaults and ranges as the TMGWR agent's.
-EXPLORATION_SPECS = SPECS
-
-
-def exploration_kwargs(p) -> dict:
-    """The EpsilonGreedy keyword arguments from a resolved parameter dict."""
-    return {"p_turn": p["p_turn"], "eps_start": p["eps_start"],
-            "eps_decay": p["eps_decay"], "eps_min": p["eps_min"]}

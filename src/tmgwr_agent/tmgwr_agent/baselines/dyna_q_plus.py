@@ -49,36 +49,38 @@ O(n) with a small constant.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numpy as np
 
 from maze_sim.maze import Maze
 
-from tmgwr_common.params import Param
-from tmgwr_agent.baselines.q_learning import N_ACTIONS, RL_SPECS, QLearningAgent
-from tmgwr_agent.baselines import EXPLORATION_SPECS
+from tmgwr_common.params import param
+from tmgwr_agent.baselines.q_learning import N_ACTIONS, QLearningAgent, QLearningConfig
 
-SPECS = RL_SPECS + (
-    Param("n_planning", 10, "planning updates per real step (Dyna-Q step f)", low=0,
-          high=10000, integer=True),
-    Param("kappa", 0.1, "exploration bonus kappa * sqrt(tau) added in planning", low=0.0,
-          high=1e6),
-) + EXPLORATION_SPECS
+
+@dataclass(frozen=True)
+class DynaQPlusConfig(QLearningConfig):
+    """Q-learning's parameters (Table 2, Eq. 8) plus planning and the exploration bonus."""
+
+    n_planning: int = param(10, "planning updates per real step (Dyna-Q step f)", low=0,
+                            high=10000, integer=True)
+    kappa: float = param(0.1, "exploration bonus kappa * sqrt(tau) added in planning",
+                         low=0.0, high=1e6)
 
 
 class DynaQPlusAgent(QLearningAgent):
     """Dyna-Q+ with the rewards and learning rate of the paper's Q-learning agent."""
 
     name = "dyna_q_plus"
-    config_section = "dyna_q_plus"
-    specs = SPECS
+    Config = DynaQPlusConfig
 
     def __init__(self, maze: Maze, rng: np.random.Generator,
-                 overrides: Mapping[str, Any] | None = None):
-        super().__init__(maze, rng, overrides)
-        self.n_planning = self.params["n_planning"]
-        self.kappa = self.params["kappa"]
+                 config: DynaQPlusConfig | Mapping[str, Any] | None = None):
+        super().__init__(maze, rng, config)
+        self.n_planning = self.config.n_planning
+        self.kappa = self.config.kappa
         n = self.rows * self.cols * N_ACTIONS
         # Model(s, a), indexed by s * 4 + a; next -1 = never tried.
         self.m_next = [-1] * n

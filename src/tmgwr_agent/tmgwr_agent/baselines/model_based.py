@@ -41,6 +41,7 @@ Exploration follows section 5.1 / Eq. 7 like every other agent.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numpy as np
@@ -48,24 +49,25 @@ import numpy as np
 from maze_sim.maze import Cell, Maze, move
 from maze_sim.world import StepInfo
 
-from tmgwr_agent.core.exploration import EpsilonGreedy
-from tmgwr_common.params import Param, config_params
-from tmgwr_agent.baselines import EXPLORATION_SPECS, exploration_kwargs
+from tmgwr_agent.core.exploration import EpsilonGreedy, ExplorationConfig
+from tmgwr_common.params import make_config, param
 
 N_ACTIONS = 4
 
-SPECS = (
-    Param("gamma", 0.94, "discount factor of the value iteration (Table 2)", low=0.0,
-          high=1.0, high_open=True),
-    Param("beta", 0.23, "learning rate of the value iteration (Table 2)", low=0.0, high=1.0,
-          low_open=True),
-    Param("r_goal", 75.0, "Eq. 9: r(s) of the goal state", low=-1e6, high=1e6),
-    Param("r_empty", -18.0, "Eq. 9: r(s) of an empty state", low=-1e6, high=1e6),
-    Param("vi_tol", 1e-10, "stop value iteration when max |beta Delta_V(s)| <= vi_tol",
-          low=0.0, low_open=True, high=1e3),
-    Param("vi_max_sweeps", 100000, "upper bound on value-iteration sweeps per goal", low=1,
-          high=1e9, integer=True),
-) + EXPLORATION_SPECS
+@dataclass(frozen=True)
+class ModelBasedConfig(ExplorationConfig):
+    """The model-based column of Table 2 and Eq. 9, plus the shared exploration parameters."""
+
+    gamma: float = param(0.94, "discount factor of the value iteration (Table 2)", low=0.0,
+                         high=1.0, high_open=True)
+    beta: float = param(0.23, "learning rate of the value iteration (Table 2)", low=0.0,
+                        high=1.0, low_open=True)
+    r_goal: float = param(75.0, "Eq. 9: r(s) of the goal state", low=-1e6, high=1e6)
+    r_empty: float = param(-18.0, "Eq. 9: r(s) of an empty state", low=-1e6, high=1e6)
+    vi_tol: float = param(1e-10, "stop value iteration when max |beta Delta_V(s)| <= vi_tol",
+                          low=0.0, low_open=True, high=1e3)
+    vi_max_sweeps: int = param(100000, "upper bound on value-iteration sweeps per goal",
+                               low=1, high=1e9, integer=True)
 
 
 def transition_table(walls: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -105,14 +107,16 @@ class ModelBasedAgent:
     name = "model_based"
 
     def __init__(self, maze: Maze, rng: np.random.Generator,
-                 overrides: Mapping[str, Any] | None = None):
-        self.params = config_params(SPECS, "baselines.yaml", "model_based", overrides)
-        p = self.params
-        self.gamma, self.beta = p["gamma"], p["beta"]
-        self.r_goal, self.r_empty = p["r_goal"], p["r_empty"]
-        self.vi_tol, self.vi_max_sweeps = p["vi_tol"], p["vi_max_sweeps"]
+                 config: ModelBasedConfig | Mapping[str, Any] | None = None):
+        """``config``: the agent's config, or a dict of parameter overrides."""
+        if not isinstance(config, ModelBasedConfig):
+            config = make_config(ModelBasedConfig, config, where=self.name)
+        self.config = c = config
+        self.gamma, self.beta = c.gamma, c.beta
+        self.r_goal, self.r_empty = c.r_goal, c.r_empty
+        self.vi_tol, self.vi_max_sweeps = c.vi_tol, c.vi_max_sweeps
         self.rng = rng
-        self.policy = EpsilonGreedy(rng, **exploration_kwargs(p))
+        self.policy = EpsilonGreedy(rng, c)
         # T(s, a, s') from the original walls, hard-coded once (Eq. 11).
         self.free, self.next = transition_table(maze.walls.copy())
         self.cols = maze.shape[1]

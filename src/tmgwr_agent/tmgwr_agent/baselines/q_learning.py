@@ -25,6 +25,7 @@ O(1): Q is a list of 4-float lists indexed by ``row * cols + col``.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numpy as np
@@ -32,44 +33,44 @@ import numpy as np
 from maze_sim.maze import Cell, Maze
 from maze_sim.world import StepInfo
 
-from tmgwr_agent.core.exploration import EpsilonGreedy
-from tmgwr_common.params import Param, config_params
-from tmgwr_agent.baselines import EXPLORATION_SPECS, exploration_kwargs
+from tmgwr_agent.core.exploration import EpsilonGreedy, ExplorationConfig
+from tmgwr_common.params import make_config, param
 
 N_ACTIONS = 4
 
-#: Eq. 8 and the Q-learning column of Table 2 (shared with Dyna-Q+).
-RL_SPECS = (
-    Param("gamma", 0.86, "discount factor (Table 2)", low=0.0, high=1.0, high_open=True),
-    Param("beta", 0.39, "learning rate of the Q update (Table 2)", low=0.0, high=1.0,
-          low_open=True),
-    Param("r_goal", 88.0, "Eq. 8: reward of an action that leads to the goal",
-          low=-1e6, high=1e6),
-    Param("r_wall", -131.0, "Eq. 8: reward of an action that leads into a wall (bump)",
-          low=-1e6, high=1e6),
-    Param("r_empty", -29.0, "Eq. 8: reward of an action that leads to an empty cell",
-          low=-1e6, high=1e6),
-)
+@dataclass(frozen=True)
+class QLearningConfig(ExplorationConfig):
+    """Eq. 8 and the Q-learning column of Table 2 (shared with Dyna-Q+), plus the shared
+    exploration parameters."""
 
-SPECS = RL_SPECS + EXPLORATION_SPECS
+    gamma: float = param(0.86, "discount factor (Table 2)", low=0.0, high=1.0,
+                         high_open=True)
+    beta: float = param(0.39, "learning rate of the Q update (Table 2)", low=0.0, high=1.0,
+                        low_open=True)
+    r_goal: float = param(88.0, "Eq. 8: reward of an action that leads to the goal",
+                          low=-1e6, high=1e6)
+    r_wall: float = param(-131.0, "Eq. 8: reward of an action that leads into a wall "
+                          "(bump)", low=-1e6, high=1e6)
+    r_empty: float = param(-29.0, "Eq. 8: reward of an action that leads to an empty cell",
+                           low=-1e6, high=1e6)
 
 
 class QLearningAgent:
     """Tabular Q-learning with the rewards of Eq. 8 and the exploration of section 5.1."""
 
     name = "q_learning"
-    config_section = "q_learning"
-    specs = SPECS
+    Config = QLearningConfig
 
     def __init__(self, maze: Maze, rng: np.random.Generator,
-                 overrides: Mapping[str, Any] | None = None):
-        self.params = config_params(self.specs, "baselines.yaml", self.config_section,
-                                    overrides)
-        p = self.params
-        self.gamma, self.beta = p["gamma"], p["beta"]
-        self.r_goal, self.r_wall, self.r_empty = p["r_goal"], p["r_wall"], p["r_empty"]
+                 config: QLearningConfig | Mapping[str, Any] | None = None):
+        """``config``: the agent's config, or a dict of parameter overrides."""
+        if not isinstance(config, self.Config):
+            config = make_config(self.Config, config, where=self.name)
+        self.config = c = config
+        self.gamma, self.beta = c.gamma, c.beta
+        self.r_goal, self.r_wall, self.r_empty = c.r_goal, c.r_wall, c.r_empty
         self.rng = rng
-        self.policy = EpsilonGreedy(rng, **exploration_kwargs(p))
+        self.policy = EpsilonGreedy(rng, c)
         self.rows, self.cols = maze.shape
         n = self.rows * self.cols
         self.Q: list[list[float]] = [[0.0] * N_ACTIONS for _ in range(n)]

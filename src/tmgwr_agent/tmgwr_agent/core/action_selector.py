@@ -37,23 +37,38 @@ results).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from maze_sim.maze import ACTION_VECTORS
 
 from tmgwr_agent.core import kernels
-from tmgwr_agent.core.exploration import EpsilonGreedy
+from tmgwr_agent.core.exploration import EpsilonGreedy, ExplorationConfig
 from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
+from tmgwr_common.params import param
+
+
+@dataclass(frozen=True)
+class SelectorConfig(ExplorationConfig):
+    """The shared exploration parameters plus our two additions to Eq. 6."""
+
+    goal_search: bool = param(True, "random walk for the rest of an episode once the agent "
+                              "stood on the goal node without reaching the goal "
+                              "(action_selector.py; false: the paper's Eq. 6 selector)")
+    try_untried: bool = param(True, "take each motor primitive once from every node before "
+                              "following Eq. 6 there (action_selector.py; false: the "
+                              "paper's Eq. 6 selector)")
 
 
 class ActionSelector:
-    def __init__(self, rng: np.random.Generator, *, p_turn=0.3, eps_start=1.0, eps_decay=0.1,
-                 eps_min=0.1, goal_search=True, try_untried=True):
+    def __init__(self, rng: np.random.Generator, config: SelectorConfig = SelectorConfig()):
         self.rng = rng
-        self.policy = EpsilonGreedy(rng, p_turn, eps_start, eps_decay, eps_min)
-        self.goal_search = bool(goal_search)
+        self.config = config
+        self.policy = EpsilonGreedy(rng, config)
+        self.goal_search = config.goal_search
         self.searching = False      # stood on the goal node this episode, goal not there
-        self.try_untried = bool(try_untried)
+        self.try_untried = config.try_untried
         self.tried: dict[int, int] = {}   # node id -> bitmask of primitives taken from it
 
     def observe(self, node: int, action: int) -> None:

@@ -15,6 +15,7 @@ a seed gives the same trajectory in-process and over the graph.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, fields
 from typing import Any, Mapping
 
 import numpy as np
@@ -22,47 +23,58 @@ import numpy as np
 from maze_sim.maze import ACTION_VECTORS, Cell, Maze
 from maze_sim.world import StepInfo
 
-from tmgwr_agent.core import exploration, motivation, preprocessor, sensorimotor_map as tmgwr_map
-from tmgwr_agent.core.action_selector import ActionSelector
-from tmgwr_agent.core.motivation import MotivationEstimator
-from tmgwr_common.params import Param, config_params
-from tmgwr_agent.core.preprocessor import SensoryPreprocessor
-from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
-
-EXPLORATION_SPECS = exploration.SPECS + (
-    Param("goal_search", True, "random walk for the rest of an episode once the agent "
-          "stood on the goal node without reaching the goal (action_selector.py; "
-          "false: the paper's Eq. 6 selector)"),
-    Param("try_untried", True, "take each motor primitive once from every node before "
-          "following Eq. 6 there (action_selector.py; false: the paper's Eq. 6 selector)"),
-)
-
-SPECS = preprocessor.SPECS + tmgwr_map.SPECS + motivation.SPECS + EXPLORATION_SPECS
+from tmgwr_agent.core.action_selector import ActionSelector, SelectorConfig
+from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
+from tmgwr_agent.core.preprocessor import PreprocessorConfig, SensoryPreprocessor
+from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap
+from tmgwr_common.params import make_config, resolve, specs
 
 
-def split_params(p: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
-    """The flat parameter dict split per module (keys of each module's SPECS)."""
-    return {name: {s.name: p[s.name] for s in specs} for name, specs in (
-        ("preprocessor", preprocessor.SPECS), ("map", tmgwr_map.SPECS),
-        ("motivation", motivation.SPECS), ("exploration", EXPLORATION_SPECS))}
+@dataclass(frozen=True)
+class TMGWRConfig:
+    """The agent's hyperparameters: one config per module of Fig. 1a. Their names form one
+    flat namespace (no two modules share a name), as the ROS parameters of the nodes do."""
+
+    preprocessor: PreprocessorConfig = PreprocessorConfig()
+    map: MapConfig = MapConfig()
+    motivation: MotivationConfig = MotivationConfig()
+    selector: SelectorConfig = SelectorConfig()
+
+    def as_dict(self) -> dict[str, Any]:
+        """The flat parameter dict."""
+        return {k: v for f in fields(self) for k, v in getattr(self, f.name).as_dict().items()}
 
 
-def tmgwr_params(overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    """Defaults from config/tmgwr_agent.yaml (section ``tmgwr``) updated by overrides."""
-    return config_params(SPECS, "tmgwr_agent.yaml", "tmgwr", overrides)
+#: The config class of each part (the field's default is an instance of it).
+_PARTS = {f.name: type(f.default) for f in fields(TMGWRConfig)}
+
+#: Every parameter of the agent (the union of the nodes' core parameters).
+SPECS = specs(*_PARTS.values())
+
+
+def tmgwr_config(overrides: Mapping[str, Any] | None = None, where: str = "") -> TMGWRConfig:
+    """The defaults of the specs updated by a flat dict of overrides, every value checked and
+    an unknown name refused naming the nearest known one."""
+    flat = resolve(SPECS, overrides, where)
+    return TMGWRConfig(**{part: make_config(cls, {p.name: flat[p.name] for p in specs(cls)},
+                                            where)
+                          for part, cls in _PARTS.items()})
 
 
 class TMGWRAgent:
     name = "tmgwr"
 
     def __init__(self, maze: Maze | None, rng: np.random.Generator,
-                 params: Mapping[str, Any] | None = None):
-        self.params = tmgwr_params(params)
-        parts = split_params(self.params)
-        self.preprocessor = SensoryPreprocessor(**parts["preprocessor"])
-        self.map = SensorimotorMap(dim=2, action_dim=ACTION_VECTORS.shape[1], **parts["map"])
-        self.motivation = MotivationEstimator(**parts["motivation"])
-        self.selector = ActionSelector(rng, **parts["exploration"])
+                 config: TMGWRConfig | Mapping[str, Any] | None = None):
+        """``config``: a TMGWRConfig, or a flat dict of parameter overrides."""
+        if not isinstance(config, TMGWRConfig):
+            config = tmgwr_config(config)
+        self.config = config
+        self.preprocessor = SensoryPreprocessor(config.preprocessor)
+        self.map = SensorimotorMap(dim=2, action_dim=ACTION_VECTORS.shape[1],
+                                   config=config.map)
+        self.motivation = MotivationEstimator(config.motivation)
+        self.selector = ActionSelector(rng, config.selector)
         self.winner = -1
         self.last_action = -1
         self.last_explored = False

@@ -12,31 +12,38 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
-from tmgwr_common.params import Param
+from tmgwr_common.params import Config, ParamError, param
 
 N_ACTIONS = 4
 
-#: The exploration parameters every agent shares (same names, defaults and ranges).
-SPECS = (
-    Param("p_turn", 0.3, "random walk: probability of turning when not blocked (5.1)",
-          low=0.0, high=1.0),
-    Param("eps_start", 1.0, "Eq. 7: initial exploration probability", low=0.0, high=1.0),
-    Param("eps_decay", 0.1, "Eq. 7: decrease of epsilon per goal attained", low=0.0,
-          high=1.0),
-    Param("eps_min", 0.1, "Eq. 7: floor of epsilon", low=0.0, high=1.0),
-)
+@dataclass(frozen=True)
+class ExplorationConfig(Config):
+    """The exploration parameters every agent shares (same names, defaults and ranges)."""
+
+    p_turn: float = param(0.3, "random walk: probability of turning when not blocked (5.1)",
+                          low=0.0, high=1.0)
+    eps_start: float = param(1.0, "Eq. 7: initial exploration probability", low=0.0,
+                             high=1.0)
+    eps_decay: float = param(0.1, "Eq. 7: decrease of epsilon per goal attained", low=0.0,
+                             high=1.0)
+    eps_min: float = param(0.1, "Eq. 7: floor of epsilon", low=0.0, high=1.0)
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.eps_min > self.eps_start:
+            raise ParamError(f"parameter 'eps_min' ({self.eps_min}) must not exceed "
+                             f"'eps_start' ({self.eps_start})")
 
 
 class RandomWalk:
     """The random-walk exploration policy of section 5.1."""
 
-    def __init__(self, rng: np.random.Generator, p_turn: float = 0.3):
-        if not 0.0 <= p_turn <= 1.0:
-            raise ValueError(f"p_turn must be in [0, 1], got {p_turn}")
+    def __init__(self, rng: np.random.Generator, p_turn: float):
         self.rng = rng
         self.p_turn = p_turn
         self.direction = int(rng.integers(N_ACTIONS))
@@ -59,12 +66,8 @@ class RandomWalk:
 class EpsilonSchedule:
     """Eq. 7: decay epsilon each time the goal is attained, never below ``eps_min``."""
 
-    def __init__(self, eps_start: float = 1.0, decay: float = 0.1, eps_min: float = 0.1):
-        for name, v in (("eps_start", eps_start), ("decay", decay), ("eps_min", eps_min)):
-            if not 0.0 <= v <= 1.0:
-                raise ValueError(f"{name} must be in [0, 1], got {v}")
-        if eps_min > eps_start:
-            raise ValueError(f"eps_min ({eps_min}) must not exceed eps_start ({eps_start})")
+    def __init__(self, eps_start: float, decay: float, eps_min: float):
+        """Values as :class:`ExplorationConfig` checks them (ranges, eps_min <= eps_start)."""
         self.eps = float(eps_start)
         self.decay = float(decay)
         self.eps_min = float(eps_min)
@@ -77,11 +80,11 @@ class EpsilonSchedule:
 class EpsilonGreedy:
     """Choose between the random walk and a greedy action (one draw per step)."""
 
-    def __init__(self, rng: np.random.Generator, p_turn: float = 0.3, eps_start: float = 1.0,
-                 eps_decay: float = 0.1, eps_min: float = 0.1):
+    def __init__(self, rng: np.random.Generator,
+                 config: ExplorationConfig = ExplorationConfig()):
         self.rng = rng
-        self.walk = RandomWalk(rng, p_turn)
-        self.schedule = EpsilonSchedule(eps_start, eps_decay, eps_min)
+        self.walk = RandomWalk(rng, config.p_turn)
+        self.schedule = EpsilonSchedule(config.eps_start, config.eps_decay, config.eps_min)
 
     @property
     def epsilon(self) -> float:

@@ -41,10 +41,12 @@ a goal that moves away leaves no trace), nor do episodes cut by a step limit.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from tmgwr_agent.core import kernels
-from tmgwr_common.params import Param
+from tmgwr_common.params import Config, param
 from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
 
 #: Potentials below this are 0: gamma**d for d > 10,000 steps, i.e. no path to the goal.
@@ -52,22 +54,25 @@ from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
 #: and the agent follows that numerical dust instead of exploring.
 V_FLOOR = 1e-150
 
-SPECS = (
-    Param("gamma", 0.97, "Eq. 5: discount factor (Table 2)", low=0.0, high=1.0,
-          low_open=True, high_open=True),
-    Param("beta", 0.80, "Eq. 4: learning rate of the value iteration (Table 2)", low=0.0,
-          high=1.0, low_open=True),
-    Param("goal_sigma", 0.3, "width of sim(i, g) in units of the median link length",
-          low=0.0, low_open=True, high=100.0),
-    Param("goal_sim_floor", 1e-3, "sim(i, g) below this counts as 0 (compact support)",
-          low=0.0, high=1.0, high_open=True),
-    Param("vi_tol", 1e-4, "stop when |beta Delta_V(i)| <= vi_tol * V(i) for every node", low=0.0,
-          low_open=True, high=1.0),
-    Param("vi_max_sweeps", 5000, "upper bound on sweeps per call", low=1, high=1e9,
-          integer=True),
-    Param("absorbing_terminals", True, "nodes where an episode ended have no successor in "
-          "Eq. 5 (false: the paper's Eq. 5 on every node)"),
-)
+
+@dataclass(frozen=True)
+class MotivationConfig(Config):
+    """Hyperparameters of the motivation estimator (Eq. 4-5, Algorithm 1)."""
+
+    gamma: float = param(0.97, "Eq. 5: discount factor (Table 2)", low=0.0, high=1.0,
+                         low_open=True, high_open=True)
+    beta: float = param(0.80, "Eq. 4: learning rate of the value iteration (Table 2)",
+                        low=0.0, high=1.0, low_open=True)
+    goal_sigma: float = param(0.3, "width of sim(i, g) in units of the median link length",
+                              low=0.0, low_open=True, high=100.0)
+    goal_sim_floor: float = param(1e-3, "sim(i, g) below this counts as 0 (compact "
+                                  "support)", low=0.0, high=1.0, high_open=True)
+    vi_tol: float = param(1e-4, "stop when |beta Delta_V(i)| <= vi_tol * V(i) for every "
+                          "node", low=0.0, low_open=True, high=1.0)
+    vi_max_sweeps: int = param(5000, "upper bound on sweeps per call", low=1, high=1e9,
+                               integer=True)
+    absorbing_terminals: bool = param(True, "nodes where an episode ended have no successor "
+                                      "in Eq. 5 (false: the paper's Eq. 5 on every node)")
 
 
 def _no_absorbing(n: int) -> np.ndarray:
@@ -77,12 +82,12 @@ def _no_absorbing(n: int) -> np.ndarray:
 class MotivationEstimator:
     """Holds the goal and the potentials V; :meth:`update` re-solves Eq. 4-5."""
 
-    def __init__(self, *, gamma=0.97, beta=0.80, goal_sigma=0.3, goal_sim_floor=1e-3,
-                 vi_tol=1e-4, vi_max_sweeps=5000, absorbing_terminals=True):
-        self.gamma, self.beta = gamma, beta
-        self.goal_sigma, self.goal_sim_floor = goal_sigma, goal_sim_floor
-        self.vi_tol, self.vi_max_sweeps = vi_tol, vi_max_sweeps
-        self.absorbing_terminals = bool(absorbing_terminals)
+    def __init__(self, config: MotivationConfig = MotivationConfig()):
+        self.config = config
+        self.gamma, self.beta = config.gamma, config.beta
+        self.goal_sigma, self.goal_sim_floor = config.goal_sigma, config.goal_sim_floor
+        self.vi_tol, self.vi_max_sweeps = config.vi_tol, config.vi_max_sweeps
+        self.absorbing_terminals = config.absorbing_terminals
         self.goal_x: np.ndarray | None = None
         self.goal_node = -1
         self.V = np.zeros(1)          # V[:n]; V[n] stays 0 (target of empty link slots)

@@ -10,28 +10,32 @@ restarts at every episode start because the agent is moved there, not walked.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from tmgwr_common.params import Param
+from tmgwr_common.params import Config, param
 
-SPECS = (
-    Param("feature_scale", 0.1, "feature-space distance of one sensor resolution step "
-          "(one maze cell)", low=0.0, low_open=True, high=100.0),
-    Param("sensor_resolution", 1.0, "raw sensor units per resolution step (1 cell = 1.0 "
-          "for the maze simulator)", low=0.0, low_open=True, high=1e6),
-    Param("filter_alpha", 1.0, "EMA weight of the newest observation (1 = no filtering)",
-          low=0.0, low_open=True, high=1.0),
-)
+
+@dataclass(frozen=True)
+class PreprocessorConfig(Config):
+    feature_scale: float = param(0.1, "feature-space distance of one sensor resolution step "
+                                 "(one maze cell)", low=0.0, low_open=True, high=100.0)
+    sensor_resolution: float = param(1.0, "raw sensor units per resolution step (1 cell = "
+                                     "1.0 for the maze simulator)", low=0.0, low_open=True,
+                                     high=1e6)
+    filter_alpha: float = param(1.0, "EMA weight of the newest observation (1 = no "
+                                "filtering)", low=0.0, low_open=True, high=1.0)
 
 
 class SensoryPreprocessor:
     """x = feature_scale * raw / sensor_resolution, optionally EMA-filtered."""
 
-    def __init__(self, feature_scale: float = 0.1, sensor_resolution: float = 1.0,
-                 filter_alpha: float = 1.0):
-        self.gain = feature_scale / sensor_resolution
-        self.feature_scale = feature_scale
-        self.filter_alpha = filter_alpha
+    def __init__(self, config: PreprocessorConfig = PreprocessorConfig()):
+        self.config = config
+        self.gain = config.feature_scale / config.sensor_resolution
+        self.feature_scale = config.feature_scale
+        self.filter_alpha = config.filter_alpha
         self._state: np.ndarray | None = None
 
     def __call__(self, raw: np.ndarray, episode_start: bool = False) -> np.ndarray:

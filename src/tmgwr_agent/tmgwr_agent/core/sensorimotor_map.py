@@ -49,46 +49,54 @@ changes (insertion, deletion) so consumers know when ids were reassigned.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from tmgwr_agent.core import kernels
-from tmgwr_common.params import Param
+from tmgwr_common.params import Config, param
 
-SPECS = (
-    Param("a_T", 0.95, "GWR activity threshold: insert a node when exp(-sqrt(d_b)) < a_T",
-          low=0.0, high=1.0, low_open=True, high_open=True),
-    Param("h_T", 1.0, "GWR habituation threshold: only a winner with h_b <= h_T spawns a "
-          "node (1: any winner; lower it for noisy sensors)", low=0.0, high=1.0,
-          low_open=True),
-    Param("tau_b", 0.3, "habituation rate of the winner", low=0.0, high=1.0, low_open=True),
-    Param("tau_n", 0.1, "habituation rate of the winner's neighbours", low=0.0, high=1.0,
-          low_open=True),
-    Param("kappa_h", 1.05, "GWR habituation constant kappa (h tends to 1 - 1/kappa)",
-          low=1.0, high=10.0, low_open=True),
-    Param("eps_b", 0.2, "learning rate of the winner", low=0.0, high=1.0),
-    Param("eps_n", 0.006, "learning rate of the winner's neighbours", low=0.0, high=1.0),
-    Param("insert_at", 1.0, "where a new node goes between the winner (0) and the input "
-          "(1); GWR uses 0.5", low=0.0, high=1.0, low_open=True),
-    Param("max_age", 100, "links older than this are deleted", low=1, high=1e9, integer=True),
-    Param("alpha_c", 0.01, "Merge-GNG weight of the temporal context in the distance",
-          low=0.0, high=1.0, high_open=True),
-    Param("beta_c", 0.5, "Merge-GNG context blend: C_t = (1-beta_c) w_prev + beta_c c_prev",
-          low=0.0, high=1.0),
-    Param("alpha", 0.52, "Eq. 1: learning rate of the sensorimotor-link reliability E "
-          "(Table 2)", low=0.0, high=1.0, low_open=True),
-    Param("sigma_a", 0.5, "Eq. 2: width of the Gaussian sim(a_ij, a) between action vectors",
-          low=0.0, low_open=True, high=100.0),
-    Param("E_init", 1.0, "reliability of a newly created link before Eq. 1-2 adapts it "
-          "(1 = the binary link of the original TMGWR)", low=0.0, high=1.0),
-    Param("E_min", 0.01, "a link whose reliability falls below this is deleted (it is no "
-          "longer a possible transition: E = 0 in the original TMGWR)", low=0.0, high=1.0),
-    Param("eta_a", 1.0, "rate at which a link's action vector a_ij follows the action that "
-          "traversed it (0 = fixed at creation)", low=0.0, high=1.0),
-    Param("link_rule", "credit", "Eq. 1-2 reading: 'literal' or 'credit' (DESIGN.md 3)",
-          choices=("literal", "credit")),
-)
+@dataclass(frozen=True)
+class MapConfig(Config):
+    """Hyperparameters of the TMGWR map: GWR growth, Merge-GNG context, Eq. 1-2 links."""
+
+    a_T: float = param(0.95, "GWR activity threshold: insert a node when exp(-sqrt(d_b)) < "
+                       "a_T", low=0.0, high=1.0, low_open=True, high_open=True)
+    h_T: float = param(1.0, "GWR habituation threshold: only a winner with h_b <= h_T spawns "
+                       "a node (1: any winner; lower it for noisy sensors)", low=0.0,
+                       high=1.0, low_open=True)
+    tau_b: float = param(0.3, "habituation rate of the winner", low=0.0, high=1.0,
+                         low_open=True)
+    tau_n: float = param(0.1, "habituation rate of the winner's neighbours", low=0.0,
+                         high=1.0, low_open=True)
+    kappa_h: float = param(1.05, "GWR habituation constant kappa (h tends to 1 - 1/kappa)",
+                           low=1.0, high=10.0, low_open=True)
+    eps_b: float = param(0.2, "learning rate of the winner", low=0.0, high=1.0)
+    eps_n: float = param(0.006, "learning rate of the winner's neighbours", low=0.0,
+                         high=1.0)
+    insert_at: float = param(1.0, "where a new node goes between the winner (0) and the "
+                             "input (1); GWR uses 0.5", low=0.0, high=1.0, low_open=True)
+    max_age: int = param(100, "links older than this are deleted", low=1, high=1e9,
+                         integer=True)
+    alpha_c: float = param(0.01, "Merge-GNG weight of the temporal context in the distance",
+                           low=0.0, high=1.0, high_open=True)
+    beta_c: float = param(0.5, "Merge-GNG context blend: C_t = (1-beta_c) w_prev + beta_c "
+                          "c_prev", low=0.0, high=1.0)
+    alpha: float = param(0.52, "Eq. 1: learning rate of the sensorimotor-link reliability E "
+                         "(Table 2)", low=0.0, high=1.0, low_open=True)
+    sigma_a: float = param(0.5, "Eq. 2: width of the Gaussian sim(a_ij, a) between action "
+                           "vectors", low=0.0, low_open=True, high=100.0)
+    E_init: float = param(1.0, "reliability of a newly created link before Eq. 1-2 adapts "
+                          "it (1 = the binary link of the original TMGWR)", low=0.0,
+                          high=1.0)
+    E_min: float = param(0.01, "a link whose reliability falls below this is deleted (it is "
+                         "no longer a possible transition: E = 0 in the original TMGWR)",
+                         low=0.0, high=1.0)
+    eta_a: float = param(1.0, "rate at which a link's action vector a_ij follows the action "
+                         "that traversed it (0 = fixed at creation)", low=0.0, high=1.0)
+    link_rule: str = param("credit", "Eq. 1-2 reading: 'literal' or 'credit' (DESIGN.md 3)",
+                           choices=("literal", "credit"))
 
 _INITIAL_CAPACITY = 64
 _INITIAL_DEGREE = 4
@@ -97,22 +105,19 @@ _INITIAL_DEGREE = 4
 class SensorimotorMap:
     """A growing map of (weight, context) nodes joined by directed, action-labelled links."""
 
-    def __init__(self, dim: int, action_dim: int = 2, *, a_T=0.95, h_T=1.0, tau_b=0.3,
-                 tau_n=0.1, kappa_h=1.05, eps_b=0.2, eps_n=0.006, insert_at=1.0, max_age=100, alpha_c=0.01,
-                 beta_c=0.5, alpha=0.52, sigma_a=0.5, E_init=1.0, E_min=0.01, eta_a=1.0,
-                 link_rule="credit"):
+    def __init__(self, dim: int, action_dim: int = 2, config: MapConfig = MapConfig()):
         self.dim, self.action_dim = dim, action_dim
-        self.a_T, self.h_T = a_T, h_T
-        self.tau_b, self.tau_n, self.kappa_h = tau_b, tau_n, kappa_h
-        self.eps_b, self.eps_n = eps_b, eps_n
-        self.insert_at = insert_at
-        self.max_age = max_age
-        self.alpha_c, self.beta_c = alpha_c, beta_c
-        self.alpha, self.sigma_a, self.eta_a = alpha, sigma_a, eta_a
-        self.E_init, self.E_min = E_init, E_min
-        if link_rule not in ("literal", "credit"):
-            raise ValueError(f"link_rule must be 'literal' or 'credit', got {link_rule!r}")
-        self.link_rule = link_rule
+        self.config = config
+        c = config
+        self.a_T, self.h_T = c.a_T, c.h_T
+        self.tau_b, self.tau_n, self.kappa_h = c.tau_b, c.tau_n, c.kappa_h
+        self.eps_b, self.eps_n = c.eps_b, c.eps_n
+        self.insert_at = c.insert_at
+        self.max_age = c.max_age
+        self.alpha_c, self.beta_c = c.alpha_c, c.beta_c
+        self.alpha, self.sigma_a, self.eta_a = c.alpha, c.sigma_a, c.eta_a
+        self.E_init, self.E_min = c.E_init, c.E_min
+        self.link_rule = c.link_rule
         self._alloc(_INITIAL_CAPACITY, _INITIAL_DEGREE)
         self.n = 0                 # slots in use are [0, n); dead slots have alive False
         self.version = 0           # bumped on every structural change

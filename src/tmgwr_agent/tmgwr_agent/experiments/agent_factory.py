@@ -2,9 +2,10 @@
 
 ``make_agent("tmgwr:credit", maze, rng)``: a name, optionally followed by ``:options``
 joined by ``+``. TMGWR options: ``literal`` / ``credit`` choose the sensorimotor-link rule
-(plain ``tmgwr`` uses the configured default); ``paper`` turns our three additions off
-(``absorbing_terminals``, ``goal_search``, ``try_untried``: the agent of Eq. 1-7 as
-printed), e.g. ``tmgwr:literal+paper``. The baselines take no option.
+(plain ``tmgwr`` uses the default of ``MapConfig.link_rule``); ``paper`` turns our three
+additions off (``absorbing_terminals``, ``goal_search``, ``try_untried``: the agent of
+Eq. 1-7 as printed), e.g. ``tmgwr:literal+paper``. The baselines take no option. Options
+are parameter overrides, checked like any other (an unknown name is refused).
 """
 
 from __future__ import annotations

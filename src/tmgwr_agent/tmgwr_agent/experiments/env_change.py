@@ -26,8 +26,8 @@ the (unchanged) shortest path length.
 
 Link rules: the TMGWR agent is run under both readings of Eq. 1-2 (DESIGN.md section 3):
 the default agent list of this scenario is ``tmgwr,tmgwr:literal,tmgwr:credit,q_learning,
-model_based,dyna_q_plus`` (plain ``tmgwr`` is whichever rule config/tmgwr_agent.yaml
-selects; with the same seeds it repeats one of the two named runs exactly).
+model_based,dyna_q_plus`` (plain ``tmgwr`` is the default rule of ``MapConfig.link_rule``;
+with the same seeds it repeats one of the two named runs exactly).
 """
 
 from __future__ import annotations

@@ -38,6 +38,10 @@ def register(subparsers) -> None:
     p.add_argument("--quiet", action="store_true", help="do not forward the nodes' output "
                    "(it is still shown when a node fails)")
     p.add_argument("--max-steps", type=int, metavar="N", help="stop by itself after N steps")
+    p.add_argument("--params-file", action="append", default=[], metavar="FILE",
+                   help="ROS 2 parameter file passed to every node (overrides only: "
+                        "'/**: ros__parameters: {gamma: 0.9}' or per-node sections); "
+                        "repeatable, later files win")
     _domain_arg(p)
     p.set_defaults(func=cmd_up)
 
@@ -138,9 +142,14 @@ def cmd_up(args) -> int:
     _apply_domain(args)
     from tmgwr_agent.graph.run import GraphRun, describe_exit
 
-    run = GraphRun(maze=args.maze, seed=args.seed, goal=args.goal,
-                   record=not args.no_record, record_dir=args.record_dir,
-                   echo=not args.quiet)
+    from tmgwr_common.params import ParamError
+    try:
+        run = GraphRun(maze=args.maze, seed=args.seed, goal=args.goal,
+                       record=not args.no_record, record_dir=args.record_dir,
+                       echo=not args.quiet, params_files=args.params_file)
+    except ParamError as exc:
+        say(f"up: {exc}", sys.stderr)
+        return 2
     outcomes = {"goal": "reached the goal", "previous_goal": "ended at the previous goal",
                 "cut": "cut short"}
 

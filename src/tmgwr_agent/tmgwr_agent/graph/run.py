@@ -34,12 +34,13 @@ class GraphRun:
     def __init__(self, maze: str | None = None, seed: int | None = None,
                  goal: str | None = None, record: bool = True,
                  record_dir: str | Path | None = None, echo=True,
-                 node_params: Mapping[str, Mapping[str, object]] | None = None):
+                 node_params: Mapping[str, Mapping[str, object]] | None = None,
+                 params_files=()):
         self.record_dir: Path | None = None
         if record:
             self.record_dir = Path(record_dir) if record_dir else default_run_dir()
         self.specs = graph_specs(maze=maze, seed=seed, goal=goal, record_dir=self.record_dir,
-                                 node_params=node_params)
+                                 node_params=node_params, params_files=params_files)
         self.supervisor = GraphSupervisor(self.specs, env=os.environ, echo=echo)
         self.monitor = EpisodeMonitor()
         self.node = None

@@ -2,8 +2,8 @@
 
 What ``ros2 launch`` would do on a real install, for the pip-only environment (no
 ``launch`` package on PyPI): each node is the installed console script that ``ros2 run``
-starts (``install/<pkg>/lib/<pkg>/<exe>``), given ``--ros-args --params-file
-config/<file>.yaml`` and ``-p name:=value`` overrides.
+starts (``install/<pkg>/lib/<pkg>/<exe>``), given ``--ros-args --params-file FILE`` for
+the user's parameter files (checked here first) and ``-p name:=value`` overrides.
 
 * :meth:`GraphSupervisor.start` starts the processes in order (the recorder first, so it
   sees everything), waits for each to print a line containing ``ready``, and raises
@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
 from tmgwr_agent.graph.output import say
+from tmgwr_common.params import check_params_file
 
 READY = re.compile(r"\bready\b", re.IGNORECASE)
 RECORDER_READY = re.compile(r"\bready\b|\brecording\b.* to ", re.IGNORECASE)
@@ -127,18 +128,6 @@ def executable_path(package: str, executable: str) -> Path:
         raise GraphError(f"{path} missing: '{package} {executable}' is not built "
                          "(tools/bootstrap.sh --rebuild after adding a console script)")
     return path
-
-
-def config_dir() -> Path:
-    """The installed parameter files (share/tmgwr_agent/config), what the nodes read."""
-    from tmgwr_common.share import share_dir
-    return share_dir("tmgwr_agent") / "config"
-
-
-def params_files_for(package: str) -> list[Path]:
-    """``config/<package>.yaml`` when it exists (ROS 2 parameter-file format)."""
-    f = config_dir() / f"{package}.yaml"
-    return [f] if f.is_file() else []
 
 
 def default_run_dir(root: str | Path | None = None) -> Path:
@@ -299,11 +288,18 @@ def _print_line(line: str) -> None:
 # ---------------------------------------------------------------------- the graph itself
 def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | None = None,
                 record_dir: str | Path | None = None,
-                node_params: Mapping[str, Mapping[str, object]] | None = None) -> list[NodeSpec]:
-    """The recorder (when ``record_dir``) and the five nodes, with config files and
+                node_params: Mapping[str, Mapping[str, object]] | None = None,
+                params_files: Sequence[str | Path] = ()) -> list[NodeSpec]:
+    """The recorder (when ``record_dir``) and the five nodes, with parameter files and
     overrides. ``maze``, ``seed`` and ``goal`` are the simulator's (and, for the seed, the
-    action selector's) parameters; ``node_params`` adds overrides per executable."""
+    action selector's) parameters; ``node_params`` adds overrides per executable;
+    ``params_files`` (ROS 2 parameter files, ``/**`` or per-node sections) go to every node
+    of the five, checked first (a malformed file or an unknown name raises ParamError).
+    Without them every node runs on its specs' defaults."""
     node_params = node_params or {}
+    files = [Path(f).expanduser().resolve() for f in params_files]
+    for f in files:               # refused here, with file and line, not by each node
+        check_params_file(f)
     specs: list[NodeSpec] = []
     if record_dir is not None:
         # The recorder logs "recording ... to DIR" once its writer is open.
@@ -326,9 +322,6 @@ def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | No
         if seed is not None and exe in ("maze_sim", "action_selector"):
             params["seed"] = int(seed)
         params.update(node_params.get(exe, {}))
-        files = params_files_for(package)
-        if package != "tmgwr_agent":          # the agent file also holds shared values
-            files += params_files_for("tmgwr_agent")
         specs.append(NodeSpec(package, exe, files, params))
     return specs
 

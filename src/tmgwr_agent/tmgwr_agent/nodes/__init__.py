@@ -41,9 +41,10 @@ name                   type                                by / QoS
 =====================  ==================================  ==========================
 
 Coordinates: cell (row, col) is the point x = col, y = row in frame ``maze``.
-Parameters: every core hyperparameter (``config/tmgwr_agent.yaml``, section ``tmgwr``) is
-a read-only ROS parameter of the node that uses it, with its range in the descriptor;
-``--params-file config/tmgwr_agent.yaml`` and ``-p name:=value`` both work; an invalid
-value stops the node at start (exit code 2) naming the parameter. ``TMGWR_EXECUTOR``
+Parameters: every core hyperparameter (a field of the core's config dataclasses, where its
+default lives) is a read-only ROS parameter of the node that uses it, with its range in the
+descriptor; ``--params-file FILE`` (ROS layout, ``/**`` or per-node sections, overrides
+only) and ``-p name:=value`` both work; an invalid value, or a name no node of the graph
+declares, stops the node at start (exit code 2) naming the parameter. ``TMGWR_EXECUTOR``
 (``events`` default, or ``single``) picks the executor.
 """

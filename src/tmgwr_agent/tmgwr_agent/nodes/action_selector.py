@@ -22,14 +22,13 @@ from tmgwr_interfaces.msg import Action, MotivationField
 from maze_sim.maze import ACTION_VECTORS
 
 from tmgwr_common import topics
-from tmgwr_agent.core.action_selector import ActionSelector
-from tmgwr_agent.core.agent import EXPLORATION_SPECS
+from tmgwr_agent.core.action_selector import ActionSelector, SelectorConfig
 from tmgwr_common.params import Param
 from tmgwr_common.node import (
     STEP_QOS,
     CallbackTimer,
-    config_defaults,
-    declare_specs,
+    NODE_OPTIONS,
+    declare_parameters,
     f64,
     np_f64,
     np_i64,
@@ -45,10 +44,9 @@ NODE_SPECS = (
 
 class ActionSelectorNode(Node):
     def __init__(self):
-        super().__init__("action_selector")
-        p = declare_specs(self, EXPLORATION_SPECS, config_defaults(), section="tmgwr")
-        self.p = declare_specs(self, NODE_SPECS)
-        self.core = ActionSelector(np.random.default_rng(self.p["seed"]), **p)
+        super().__init__("action_selector", **NODE_OPTIONS)
+        config, self.p = declare_parameters(self, SelectorConfig, NODE_SPECS)
+        self.core = ActionSelector(np.random.default_rng(self.p["seed"]), config)
         self.last_step = -1
         self.last_out: Action | None = None
         self.prev_winner = -1               # the winner this selector last acted from
@@ -56,7 +54,8 @@ class ActionSelectorNode(Node):
         self.create_subscription(MotivationField, topics.MOTIVATION, self.on_motivation,
                                  STEP_QOS)
         self.timer = CallbackTimer()
-        self.get_logger().info(f"action_selector ready: seed {self.p['seed']}, {p}")
+        self.get_logger().info(f"action_selector ready: seed {self.p['seed']}, "
+                               f"{config.as_dict()}")
 
     def on_motivation(self, f: MotivationField):
         if f.step_id <= self.last_step:      # a resent step: answer again, draw nothing

@@ -35,17 +35,16 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from maze_sim.maze import ACTION_VECTORS
 
-from tmgwr_agent.core import sensorimotor_map as tmgwr_map
 from tmgwr_common import topics
 from tmgwr_common.params import Param
-from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
+from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap
 from tmgwr_common.node import (
     LATCHED_QOS,
     SENSOR_QOS,
     STEP_QOS,
     CallbackTimer,
-    config_defaults,
-    declare_specs,
+    NODE_OPTIONS,
+    declare_parameters,
     f64,
     i32,
     np_f64,
@@ -72,7 +71,8 @@ def save_map(m: SensorimotorMap, path: Path, step_id: int) -> Path:
     return path
 
 
-def load_map(m: SensorimotorMap | None, path: Path, params: dict) -> tuple[SensorimotorMap, int]:
+def load_map(m: SensorimotorMap | None, path: Path, config: MapConfig
+             ) -> tuple[SensorimotorMap, int]:
     """A map loaded from ``path`` (its dimensions from the file) and its last step id."""
     try:
         with np.load(path) as data:
@@ -82,16 +82,15 @@ def load_map(m: SensorimotorMap | None, path: Path, params: dict) -> tuple[Senso
     except (OSError, KeyError, ValueError, IndexError) as exc:
         raise ValueError(f"{path}: not a saved sensorimotor map ({exc})") from exc
     if m is None or m.dim != dim or m.action_dim != action_dim:
-        m = SensorimotorMap(dim=dim, action_dim=action_dim, **params)
+        m = SensorimotorMap(dim=dim, action_dim=action_dim, config=config)
     m.load(path)
     return m, step_id
 
 
 class MapLearnerNode(Node):
     def __init__(self):
-        super().__init__("map_learner")
-        self.params = declare_specs(self, tmgwr_map.SPECS, config_defaults(), section="tmgwr")
-        self.p = declare_specs(self, NODE_SPECS)
+        super().__init__("map_learner", **NODE_OPTIONS)
+        self.config, self.p = declare_parameters(self, MapConfig, NODE_SPECS)
         self.map: SensorimotorMap | None = None
         self.last_step = -1
         self.last_out: SensorimotorState | None = None
@@ -99,7 +98,7 @@ class MapLearnerNode(Node):
         self.prev_winner = -1
         if self.p["initial_map"]:
             path = Path(self.p["initial_map"]).expanduser()
-            self.map, self.last_step = load_map(None, path, self.params)
+            self.map, self.last_step = load_map(None, path, self.config)
             self.get_logger().info(f"started from {path}: {self.map.size} nodes, "
                                    f"{self.map.link_count()} links, step {self.last_step}")
         self.V = np.zeros(0)
@@ -121,7 +120,7 @@ class MapLearnerNode(Node):
         self.timer = CallbackTimer()
         if self.map is not None:
             self.publish_map()
-        self.get_logger().info(f"map_learner ready: {self.params}")
+        self.get_logger().info(f"map_learner ready: {self.config.as_dict()}")
 
     # ------------------------------------------------------------------ per step
     def on_features(self, f: Features):
@@ -133,7 +132,7 @@ class MapLearnerNode(Node):
             x = np_f64(f.features)
             if self.map is None:
                 self.map = SensorimotorMap(dim=len(x), action_dim=ACTION_VECTORS.shape[1],
-                                           **self.params)
+                                           config=self.config)
             self.gain = f.gain or 1.0
             if f.episode_start:
                 self.map.begin_episode()
@@ -252,7 +251,7 @@ class MapLearnerNode(Node):
     def on_load(self, req, resp):
         path = Path(req.path or self.p["map_path"]).expanduser()
         try:
-            self.map, step = load_map(self.map, path, self.params)
+            self.map, step = load_map(self.map, path, self.config)
         except ValueError as exc:
             resp.success, resp.message = False, str(exc)
             return resp

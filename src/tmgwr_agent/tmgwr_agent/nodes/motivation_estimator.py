@@ -28,16 +28,15 @@ from tmgwr_interfaces.srv import SetGoal
 
 from maze_sim.maze import ACTION_VECTORS
 
-from tmgwr_agent.core import motivation
 from tmgwr_common import topics
-from tmgwr_agent.core.motivation import MotivationEstimator
+from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
 from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
 from tmgwr_common.node import (
     LATCHED_QOS,
     STEP_QOS,
     CallbackTimer,
-    config_defaults,
-    declare_specs,
+    NODE_OPTIONS,
+    declare_parameters,
     f64,
     i32,
     np_bool,
@@ -67,9 +66,9 @@ def map_view(m: SensorimotorMap | None, s: SensorimotorState) -> SensorimotorMap
 
 class MotivationEstimatorNode(Node):
     def __init__(self):
-        super().__init__("motivation_estimator")
-        p = declare_specs(self, motivation.SPECS, config_defaults(), section="tmgwr")
-        self.core = MotivationEstimator(**p)
+        super().__init__("motivation_estimator", **NODE_OPTIONS)
+        config = declare_parameters(self, MotivationConfig)
+        self.core = MotivationEstimator(config)
         self.view: SensorimotorMap | None = None
         self.goal_x: np.ndarray | None = None
         self.last_step = -1
@@ -86,7 +85,7 @@ class MotivationEstimatorNode(Node):
         self.sim_goal = self.create_client(SetGoal, topics.SIM_SET_GOAL)
         self.create_service(SetGoal, topics.SET_GOAL, self.on_set_goal)
         self.timer = CallbackTimer()
-        self.get_logger().info(f"motivation_estimator ready: {p}")
+        self.get_logger().info(f"motivation_estimator ready: {config.as_dict()}")
 
     # ------------------------------------------------------------------ per step
     def on_state(self, s: SensorimotorState):

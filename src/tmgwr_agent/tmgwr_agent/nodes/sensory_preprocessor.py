@@ -11,14 +11,13 @@ from rclpy.node import Node
 
 from tmgwr_interfaces.msg import Features, Observation
 
-from tmgwr_agent.core import preprocessor
 from tmgwr_common import topics
-from tmgwr_agent.core.preprocessor import SensoryPreprocessor
+from tmgwr_agent.core.preprocessor import PreprocessorConfig, SensoryPreprocessor
 from tmgwr_common.node import (
     STEP_QOS,
     CallbackTimer,
-    config_defaults,
-    declare_specs,
+    NODE_OPTIONS,
+    declare_parameters,
     f64,
     np_f64,
     run,
@@ -27,16 +26,16 @@ from tmgwr_common.node import (
 
 class SensoryPreprocessorNode(Node):
     def __init__(self):
-        super().__init__("sensory_preprocessor")
-        p = declare_specs(self, preprocessor.SPECS, config_defaults(), section="tmgwr")
-        self.core = SensoryPreprocessor(**p)
+        super().__init__("sensory_preprocessor", **NODE_OPTIONS)
+        config = declare_parameters(self, PreprocessorConfig)
+        self.core = SensoryPreprocessor(config)
         self.pub = self.create_publisher(Features, topics.FEATURES, STEP_QOS)
         self.create_subscription(Observation, topics.OBSERVATION, self.on_observation,
                                  STEP_QOS)
         self.last_step = -1
         self.last_out: Features | None = None
         self.timer = CallbackTimer()
-        self.get_logger().info(f"sensory_preprocessor ready: {p}")
+        self.get_logger().info(f"sensory_preprocessor ready: {config.as_dict()}")
 
     def on_observation(self, m: Observation):
         if m.step_id <= self.last_step:     # a resent step: answer it again, learn nothing
