@@ -6,6 +6,8 @@ import pytest
 
 from maze_sim import GridWorld, Maze
 from maze_sim.maze import ACTION_VECTORS, maze_file
+
+from tmgwr_agent.core.outcome import EPISODE_START, Outcome
 from tmgwr_agent.core.agent import TMGWRAgent, tmgwr_config
 from tmgwr_agent.core.exploration import EpsilonSchedule, RandomWalk
 from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
@@ -145,9 +147,9 @@ def test_node_where_an_episode_ended_short_of_the_goal_is_absorbing(tmp_path):
     R1 = np.exp(-0.01 / (2 * 0.03 ** 2))
     # node 1 has no successor: V(1) = R_1, and node 0 only sees that through it
     np.testing.assert_allclose(mo.update(m), [0.97 * R1, R1, 1.0], rtol=1e-8)
-    m.save(tmp_path / "map.npz")        # the flag is part of the map
-    m2 = SensorimotorMap(dim=2)
-    m2.load(tmp_path / "map.npz")
+    m.save(tmp_path / "map.npz", step_id=7)     # the flag is part of the map
+    m2, step_id = SensorimotorMap.load(tmp_path / "map.npz")
+    assert step_id == 7
     assert list(m2.terminal[:3]) == [False, True, False]
     off = MotivationEstimator(MotivationConfig(vi_tol=1e-10, vi_max_sweeps=100000,
                                                absorbing_terminals=False))
@@ -211,14 +213,14 @@ def test_eq6_picks_link_with_highest_E_times_V_and_breaks_ties_by_rng():
     V = np.zeros(m.n + 1)
     V[1], V[2] = 0.5, 0.9
     sel = ActionSelector(np.random.default_rng(0))
-    assert sel.greedy(m, 0, V) == DOWN
+    assert sel.greedy(m.links_of(0), V) == DOWN
     m.E[0, 1] = 0.5                                      # 0.5 * 0.9 < 1.0 * 0.5? no: 0.45
-    assert sel.greedy(m, 0, V) == RIGHT
+    assert sel.greedy(m.links_of(0), V) == RIGHT
     V[1] = V[2] = 0.7
     m.E[0, :2] = 1.0
-    picks = {sel.greedy(m, 0, V) for _ in range(50)}
+    picks = {sel.greedy(m.links_of(0), V) for _ in range(50)}
     assert picks == {RIGHT, DOWN}
-    assert sel.greedy(m, 0, np.zeros(m.n + 1)) is None   # no motivation: no opinion
+    assert sel.greedy(m.links_of(0), np.zeros(m.n + 1)) is None   # no motivation: no opinion
 
 
 def test_goal_search_walks_for_the_rest_of_the_episode_after_the_goal_node():
@@ -229,19 +231,20 @@ def test_goal_search_walks_for_the_rest_of_the_episode_after_the_goal_node():
     V = np.array([0.5, 0.9, 0.0])                         # node 1 is the most motivating
     sel = ActionSelector(np.random.default_rng(0),
                          SelectorConfig(eps_start=0.0, eps_min=0.0, try_untried=False))
-    assert sel.select(m, 0, V) == (RIGHT, False)          # Eq. 6 while not at the goal node
+    at0, at1 = m.links_of(0), m.links_of(1)
+    assert sel.select(at0, 0, V, goal_node=1) == (RIGHT, False)   # Eq. 6 off the goal node
     # standing on the goal node with the episode still running: the map does not know
     # the way, the random walk acts, also back on node 0, until the episode ends
-    assert sel.select(m, 1, V, at_goal_node=True)[1] is True
-    assert all(sel.select(m, 0, V)[1] for _ in range(20))
-    assert sel.select(m, 0, V, explore=False) == (RIGHT, False)   # the probe never searches
-    sel.begin_episode()
-    assert sel.select(m, 0, V) == (RIGHT, False)
+    assert sel.select(at1, 1, V, goal_node=1)[1] is True
+    assert all(sel.select(at0, 0, V, goal_node=1)[1] for _ in range(20))
+    assert sel.select(at0, 0, V, 1, explore=False) == (RIGHT, False)  # the probe never searches
+    sel.record(-1, EPISODE_START)
+    assert sel.select(at0, 0, V, goal_node=1) == (RIGHT, False)
     off = ActionSelector(np.random.default_rng(0),     # the paper's selector
                          SelectorConfig(eps_start=0.0, eps_min=0.0, goal_search=False,
                                         try_untried=False))
-    off.select(m, 1, V, at_goal_node=True)
-    assert off.select(m, 0, V) == (RIGHT, False)
+    off.select(at1, 1, V, goal_node=1)
+    assert off.select(at0, 0, V, goal_node=1) == (RIGHT, False)
 
 
 def test_each_primitive_is_tried_once_from_a_node_before_eq6():
@@ -250,24 +253,38 @@ def test_each_primitive_is_tried_once_from_a_node_before_eq6():
     m.h[:m.n] = 0.5
     m.step(np.array([0.0, 0.1]), ACTION_VECTORS[RIGHT])
     V = np.array([0.5, 0.9, 0.0])
+    at0 = m.links_of(0)
     sel = ActionSelector(np.random.default_rng(0), SelectorConfig(eps_start=0.0, eps_min=0.0))
-    sel.observe(0, RIGHT)                                 # right was taken from node 0
+    sel.record(0, Outcome(action=RIGHT))                  # right was taken from node 0
     seen = []
     for _ in range(3):                                    # up, down, left, once each
-        a, explored = sel.select(m, 0, V)
+        a, explored = sel.select(at0, 0, V, goal_node=1)
         assert explored and a != RIGHT
-        sel.observe(0, a)
+        sel.record(0, Outcome(action=a))
         seen.append(a)
     assert sorted(seen) == [UP, DOWN, LEFT]
-    assert sel.select(m, 0, V) == (RIGHT, False)          # then Eq. 6
-    assert sel.select(m, 0, V, explore=False) == (RIGHT, False)   # the probe: Eq. 6 only
+    assert sel.select(at0, 0, V, goal_node=1) == (RIGHT, False)               # then Eq. 6
+    assert sel.select(at0, 0, V, 1, explore=False) == (RIGHT, False)  # the probe: Eq. 6 only
     fresh = ActionSelector(np.random.default_rng(0), SelectorConfig(eps_start=0.0, eps_min=0.0))
-    assert fresh.select(m, 0, V, explore=False) == (RIGHT, False)
-    # a view holding the winner in row 0 (the ROS selector) names the node by its id
-    fresh.observe(7, UP)
-    fresh.observe(7, DOWN)
-    fresh.observe(7, LEFT)
-    assert fresh.select(m, 0, V, node=7) == (RIGHT, True)
+    assert fresh.select(at0, 0, V, 1, explore=False) == (RIGHT, False)
+    # the node is named by its id, whatever holds its links (the graph's selector
+    # receives only the winner's links)
+    for a in (UP, DOWN, LEFT):
+        fresh.record(7, Outcome(action=a))
+    assert fresh.select(at0, 7, V, goal_node=1) == (RIGHT, True)
+    # a greedy probe marks nothing tried
+    probe = ActionSelector(np.random.default_rng(0), SelectorConfig(eps_start=0.0, eps_min=0.0))
+    probe.record(0, Outcome(action=UP), learn=False)
+    assert probe.untried(0) is not None and probe.tried == {}
+
+
+def test_outcome_terminal_rule():
+    """One rule for 'the episode ended here short of the goal' (absorbing in Eq. 5)."""
+    assert Outcome(action=UP, episode_over=True).ended_short_of_goal
+    assert not Outcome(action=UP, episode_over=True, goal_reached=True).ended_short_of_goal
+    assert not Outcome(action=UP, episode_over=True, truncated=True).ended_short_of_goal
+    assert not Outcome(action=UP).ended_short_of_goal
+    assert EPISODE_START.episode_start and not Outcome(action=0).episode_start
 
 
 # ---------------------------------------------------------------- Eq. 7 and section 5.1
@@ -358,8 +375,6 @@ def run_episode(world, agent, learn=True, cap=20000, seen=None):
         if seen is not None:
             seen.add((prev, info.cell))
         prev = info.cell
-        if learn and info.reached_goal:
-            agent.goal_attained()
         if term or trunc:
             return cells, info.reached_goal
     return cells, False
@@ -448,7 +463,7 @@ def test_save_and_load_restore_the_same_map_and_decisions(tmp_path):
     agent, world = trained(maze, episodes=10)
     path = agent.map.save(tmp_path / "map.npz")
     other = TMGWRAgent(maze, np.random.default_rng(99))
-    other.map.load(path)
+    other.map, _ = SensorimotorMap.load(path)
     for name in ("w", "c", "h", "alive", "out", "E", "a", "age"):
         np.testing.assert_array_equal(getattr(other.map, name)[: other.map.n],
                                       getattr(agent.map, name)[: agent.map.n])
@@ -457,7 +472,7 @@ def test_save_and_load_restore_the_same_map_and_decisions(tmp_path):
     assert reached and len(cells) == world.shortest_path_length()
     (tmp_path / "bad.npz").write_bytes(b"not a map")
     with pytest.raises(ValueError, match="not a saved sensorimotor map"):
-        other.map.load(tmp_path / "bad.npz")
+        SensorimotorMap.load(tmp_path / "bad.npz")
 
 
 def test_same_seed_same_trajectory():

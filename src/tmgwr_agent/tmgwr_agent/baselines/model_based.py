@@ -191,7 +191,5 @@ class ModelBasedAgent:
     def observe(self, obs: np.ndarray, info: StepInfo, learn: bool = True) -> None:
         # Nothing is learnt: T and r(s) are the designer's (Table 1).
         self.state = int(self.state_of[info.cell[0] * self.cols + info.cell[1]])
-        self.policy.walk.observe(info.action, info.bumped)
+        self.policy.observe(info.action, info.bumped, info.reached_goal, learn)
 
-    def goal_attained(self) -> None:
-        self.policy.schedule.goal_attained()

@@ -131,11 +131,9 @@ class QLearningAgent:
         if learn and self.state >= 0:
             self.learn(self.state, info.action, self.reward(info), s2, info.terminated)
         self.state = s2
-        self.policy.walk.observe(info.action, info.bumped)
+        self.policy.observe(info.action, info.bumped, info.reached_goal, learn)
 
     def learn(self, s: int, a: int, r: float, s2: int, terminal: bool) -> None:
         """What a real transition teaches (overridden by Dyna-Q+)."""
         self.q_update(s, a, r, s2, terminal)
 
-    def goal_attained(self) -> None:
-        self.policy.schedule.goal_attained()

@@ -45,7 +45,8 @@ from maze_sim.maze import ACTION_VECTORS
 
 from tmgwr_agent.core import kernels
 from tmgwr_agent.core.exploration import EpsilonGreedy, ExplorationConfig
-from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
+from tmgwr_agent.core.outcome import Outcome
+from tmgwr_agent.core.sensorimotor_map import Links
 from tmgwr_common.params import param
 
 
@@ -71,10 +72,17 @@ class ActionSelector:
         self.try_untried = config.try_untried
         self.tried: dict[int, int] = {}   # node id -> bitmask of primitives taken from it
 
-    def observe(self, node: int, action: int) -> None:
-        """The agent took ``action`` from ``node`` (its winner when it acted)."""
-        if node >= 0:
-            self.tried[node] = self.tried.get(node, 0) | (1 << int(action))
+    def record(self, node: int, outcome: Outcome, learn: bool = True) -> None:
+        """What the last action did, taken from ``node`` (the winner it acted from): an
+        episode start ends the goal search; otherwise the primitive counts as tried at the
+        node and the exploration policy continues from the outcome (walk direction,
+        Eq. 7 at the goal). A greedy probe (``learn`` False) marks nothing tried."""
+        if outcome.episode_start:
+            self.searching = False
+            return
+        if learn and node >= 0:
+            self.tried[node] = self.tried.get(node, 0) | (1 << outcome.action)
+        self.policy.observe(outcome.action, outcome.bumped, outcome.goal_reached, learn)
 
     def untried(self, node: int) -> int | None:
         """A primitive never taken from ``node`` (uniform among them), or None."""
@@ -84,40 +92,37 @@ class ActionSelector:
             return None
         return free[0] if len(free) == 1 else free[int(self.rng.integers(len(free)))]
 
-    def begin_episode(self) -> None:
-        self.searching = False
-
-    def greedy(self, m: SensorimotorMap, i: int, V: np.ndarray) -> int | None:
-        """Eq. 6 at node i: the discrete action of a_{i k_max}, or None without opinion."""
-        if i < 0:
-            return None
-        best = kernels.best_links(m.out[i], m.E[i], V)
+    def greedy(self, links: Links, V: np.ndarray) -> int | None:
+        """Eq. 6 over a node's links: the discrete action of a_{i k_max}, or None without
+        opinion (no link, or no neighbour with motivation)."""
+        best = kernels.best_links(links.targets, links.E, V)
         if not len(best):
             return None
         slot = best[0] if len(best) == 1 else best[self.rng.integers(len(best))]
-        return self.action_index(m.a[i, slot])
+        return self.action_index(links.actions[slot])
 
     @staticmethod
     def action_index(a: np.ndarray) -> int:
         """The motor primitive nearest the action vector (the action map's codebook)."""
         return int(kernels.nearest_row(ACTION_VECTORS, a))
 
-    def select(self, m: SensorimotorMap, i: int, V: np.ndarray, explore: bool = True,
-               at_goal_node: bool = False, node: int | None = None) -> tuple[int, bool]:
-        """(action, explored): the random walk with probability epsilon, else an untried
-        primitive of the winner (``try_untried``), else Eq. 6; the random walk for the
-        rest of the episode once the agent stood on the goal node (``at_goal_node``, the
-        episode still running) when ``goal_search`` is on. ``node`` is the winner's id when
-        ``m`` is a view holding it in row ``i`` (the ROS selector); default ``i``."""
-        if explore and self.goal_search and at_goal_node:
+    def select(self, links: Links | None, node: int, V: np.ndarray, goal_node: int,
+               explore: bool = True) -> tuple[int, bool]:
+        """(action, explored) at the winner ``node`` with outgoing ``links``, under the
+        potentials V (``V[-1]`` = 0 for empty slots) of the goal node ``goal_node``: the
+        random walk with probability epsilon, else an untried primitive of the node
+        (``try_untried``), else Eq. 6; the random walk for the rest of the episode once
+        the agent stood on the goal node with the episode still running (``goal_search``).
+        """
+        if explore and self.goal_search and node >= 0 and node == goal_node:
             self.searching = True
         if self.policy.explores(explore) or (explore and self.searching):
             return self.policy.walk.action(), True
-        if explore and self.try_untried and i >= 0:
-            u = self.untried(i if node is None else node)
+        if explore and self.try_untried and node >= 0:
+            u = self.untried(node)
             if u is not None:
                 return u, True
-        a = self.greedy(m, i, V)
+        a = self.greedy(links, V) if node >= 0 else None
         if a is None:
             return self.policy.walk.action(), True
         return a, False

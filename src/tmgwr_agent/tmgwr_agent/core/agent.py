@@ -25,6 +25,7 @@ from maze_sim.world import StepInfo
 
 from tmgwr_agent.core.action_selector import ActionSelector, SelectorConfig
 from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
+from tmgwr_agent.core.outcome import EPISODE_START, Outcome
 from tmgwr_agent.core.preprocessor import PreprocessorConfig, SensoryPreprocessor
 from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap
 from tmgwr_common.params import make_config, resolve, specs
@@ -90,30 +91,28 @@ class TMGWRAgent:
 
     def begin_episode(self, obs: np.ndarray, cell: Cell | None = None,
                       learn: bool = True) -> None:
-        self.map.begin_episode()
-        self.selector.begin_episode()
-        x = self.preprocessor(obs, episode_start=True)
-        self.winner = self.map.step(x, None, learn=learn)
-        if learn:
-            self.motivation.update(self.map)
+        self.step(obs, EPISODE_START, learn)
+
+    def observe(self, obs: np.ndarray, info: StepInfo, learn: bool = True) -> None:
+        self.step(obs, Outcome.of_step(info), learn)
 
     def act(self, explore: bool = True) -> int:
-        at_goal_node = self.winner >= 0 and self.winner == self.motivation.goal_node
-        a, self.last_explored = self.selector.select(self.map, self.winner,
-                                                     self.motivation.V, explore, at_goal_node)
+        links = self.map.links_of(self.winner) if self.winner >= 0 else None
+        a, self.last_explored = self.selector.select(links, self.winner, self.motivation.V,
+                                                     self.motivation.goal_node, explore)
         self.last_action = a
         return a
 
-    def observe(self, obs: np.ndarray, info: StepInfo, learn: bool = True) -> None:
-        x = self.preprocessor(obs)
+    # -------------------------------------------------------------- one pass of Fig. 1a
+    def step(self, obs: np.ndarray, outcome: Outcome, learn: bool = True) -> None:
+        """Everything the agent does with one observation, in the order of the node ring
+        (each line is what one node of the graph calls): the sensation is preprocessed,
+        the map learns it (Eq. 1-2 on the link just traversed), the potentials are
+        re-solved (Eq. 4-5) and the selector records what its last action did. A greedy
+        probe (``learn`` False) only finds the winner and moves the walk on."""
+        x = self.preprocessor(obs, episode_start=outcome.episode_start)  # sensory_preprocessor
+        acted_from = self.winner
+        self.winner = self.map.experience(x, outcome, learn)             # map_learner
         if learn:
-            self.selector.observe(self.winner, info.action)
-        self.winner = self.map.step(x, ACTION_VECTORS[info.action], learn=learn)
-        if learn and info.terminated and not info.reached_goal:
-            self.map.mark_terminal(self.winner)     # ended here, short of the goal
-        self.selector.policy.walk.observe(info.action, info.bumped)
-        if learn:
-            self.motivation.update(self.map)
-
-    def goal_attained(self) -> None:
-        self.selector.policy.schedule.goal_attained()
+            self.motivation.update(self.map)                             # motivation_estimator
+        self.selector.record(acted_from, outcome, learn)                 # action_selector

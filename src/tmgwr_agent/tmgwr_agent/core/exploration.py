@@ -90,6 +90,15 @@ class EpsilonGreedy:
     def epsilon(self) -> float:
         return self.schedule.eps
 
+    def observe(self, action: int, bumped: bool, goal_reached: bool, learn: bool = True
+                ) -> None:
+        """The outcome of the last action, whatever chose it: the walk continues from what
+        happened, and Eq. 7 decays epsilon each time the goal is attained (never during a
+        greedy probe, ``learn`` False)."""
+        self.walk.observe(action, bumped)
+        if learn and goal_reached:
+            self.schedule.goal_attained()
+
     def explores(self, explore: bool = True) -> bool:
         """Draw whether this step explores (always draws when ``explore``, for determinism)."""
         return explore and self.rng.random() < self.schedule.eps

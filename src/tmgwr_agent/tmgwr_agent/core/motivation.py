@@ -96,8 +96,19 @@ class MotivationEstimator:
         self._scale = 1.0
 
     def set_goal(self, goal_x: np.ndarray) -> None:
+        """A new goal state: the potentials restart from 0 (Algorithm 1, line 5)."""
         self.goal_x = np.asarray(goal_x, dtype=float)
         self.V[:] = 0.0
+
+    def follow_goal(self, goal_x: np.ndarray) -> bool:
+        """The goal sensation that came with this step: :meth:`set_goal` when it differs
+        from the current goal (the graph's estimator learns goal changes this way);
+        returns whether it did."""
+        goal_x = np.asarray(goal_x, dtype=float)
+        if self.goal_x is not None and np.array_equal(goal_x, self.goal_x):
+            return False
+        self.set_goal(goal_x)
+        return True
 
     @staticmethod
     def link_scale(m: SensorimotorMap) -> float:

@@ -7,8 +7,8 @@ The loop is the same for all agents, in-process and over ROS::
     while True:
         action = agent.act(explore=True)        # epsilon-greedy, section 5.1 / Eq. 7
         obs, _, terminated, truncated, info = world.step(action)
-        agent.observe(obs, info, learn=True)    # learn from (previous, action, now)
-        if info.reached_goal: agent.goal_attained()   # Eq. 7 decay
+        agent.observe(obs, info, learn=True)    # learn from (previous, action, now);
+                                                # Eq. 7 decays epsilon at the goal
         if terminated or truncated: break
 
 A greedy rollout (convergence checks) calls ``begin_episode(..., learn=False)``,
@@ -43,10 +43,8 @@ class Agent(Protocol):
         """The action for the current observation."""
 
     def observe(self, obs: np.ndarray, info: StepInfo, learn: bool = True) -> None:
-        """The outcome of the last action."""
-
-    def goal_attained(self) -> None:
-        """The current goal was reached (Eq. 7 schedule)."""
+        """The outcome of the last action (when learning, epsilon decays by Eq. 7 if it
+        reached the goal)."""
 
     @property
     def epsilon(self) -> float:

@@ -51,10 +51,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
+from maze_sim.maze import ACTION_VECTORS
 
 from tmgwr_agent.core import kernels
+from tmgwr_agent.core.outcome import Outcome
 from tmgwr_common.params import Config, param
 
 @dataclass(frozen=True)
@@ -97,6 +100,39 @@ class MapConfig(Config):
                          "that traversed it (0 = fixed at creation)", low=0.0, high=1.0)
     link_rule: str = param("credit", "Eq. 1-2 reading: 'literal' or 'credit' (DESIGN.md 3)",
                            choices=("literal", "credit"))
+
+
+class Links(NamedTuple):
+    """The outgoing sensorimotor links of one node, what Eq. 6 ranks: target ids
+    (-1 = empty slot), reliabilities E and action vectors a_ij, one row per slot."""
+
+    targets: np.ndarray
+    E: np.ndarray
+    actions: np.ndarray
+
+
+@dataclass
+class MapSnapshot:
+    """What Eq. 4-5 read of the map, as the motivation estimator receives it over the
+    graph: weights, alive mask, links and their reliabilities, terminal flags (rows
+    ``[0, n)``). :class:`SensorimotorMap` offers the same attributes, so the estimator
+    runs on either."""
+
+    w: np.ndarray
+    alive: np.ndarray
+    out: np.ndarray
+    E: np.ndarray
+    terminal: np.ndarray
+    version: int
+
+    @property
+    def n(self) -> int:
+        return len(self.alive)
+
+    def nearest_by_weight(self, x: np.ndarray) -> int:
+        """The node whose sensory weight is nearest x (Algorithm 1, line 2: SM.Map(x_g))."""
+        return int(kernels.nearest_weight(self.w, self.alive, self.n, x))
+
 
 _INITIAL_CAPACITY = 64
 _INITIAL_DEGREE = 4
@@ -167,6 +203,10 @@ class SensorimotorMap:
         return (src, self.out[src, slot], self.a[src, slot], self.E[src, slot],
                 self.age[src, slot])
 
+    def links_of(self, i: int) -> Links:
+        """The outgoing links of node i (views into the map's storage)."""
+        return Links(self.out[i], self.E[i], self.a[i])
+
     def link_count(self) -> int:
         return int((self.out[: self.n] >= 0).sum())
 
@@ -213,6 +253,21 @@ class SensorimotorMap:
         treats flagged nodes as absorbing (no successor in Eq. 5)."""
         if 0 <= i < self.n:
             self.terminal[i] = True
+
+    def experience(self, x: np.ndarray, outcome: Outcome, learn: bool = True) -> int:
+        """The map stage of one agent step (Fig. 1a): input x, reached by the outcome's
+        motor primitive (or placed at an episode start); returns the winner. A node where
+        the episode ended short of the goal is flagged terminal (:meth:`mark_terminal`).
+        With ``learn`` False only the winner is found (greedy rollouts)."""
+        if outcome.episode_start:
+            self.begin_episode()
+            motor = None
+        else:
+            motor = ACTION_VECTORS[outcome.action]
+        winner = self.step(x, motor, learn=learn)
+        if learn and outcome.ended_short_of_goal:
+            self.mark_terminal(winner)
+        return winner
 
     def step(self, x: np.ndarray, action: np.ndarray | None, learn: bool = True) -> int:
         """Present input x reached by motor vector ``action``; returns the winner.
@@ -315,18 +370,29 @@ class SensorimotorMap:
         self.n = n
         self.version, self.prev, self.winner = (int(v) for v in s["meta"])
 
-    def save(self, path: str | Path) -> Path:
-        """Write the whole map to a .npz file (atomic: a crash never leaves half a file)."""
+    def save(self, path: str | Path, step_id: int = -1) -> Path:
+        """Write the whole map and the last step it learnt (``step_id``) to a .npz file,
+        atomically: a crash never leaves half a file."""
         path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(path.name + ".tmp")
         with open(tmp, "wb") as f:
-            np.savez(f, **self.state_dict())
+            np.savez(f, **self.state_dict(), step_id=np.array(step_id, dtype=np.int64))
         tmp.replace(path)
         return path
 
-    def load(self, path: str | Path) -> None:
+    @classmethod
+    def load(cls, path: str | Path, config: MapConfig = MapConfig()
+             ) -> tuple[SensorimotorMap, int]:
+        """A map read from a :meth:`save` file (its dimensions from the file, the
+        hyperparameters ``config``) and the last step id it learnt (-1 if unknown)."""
         try:
             with np.load(Path(path)) as data:
-                self.load_state_dict({k: data[k] for k in data.files})
-        except (OSError, KeyError, ValueError) as exc:
+                state = {k: data[k] for k in data.files}
+            step_id = int(state.pop("step_id", -1))
+            m = cls(dim=int(state["w"].shape[1]), action_dim=int(state["a"].shape[2]),
+                    config=config)
+            m.load_state_dict(state)
+        except (OSError, KeyError, ValueError, IndexError) as exc:
             raise ValueError(f"{path}: not a saved sensorimotor map ({exc})") from exc
+        return m, step_id

@@ -6,8 +6,8 @@ The graph and this loop produce the same sequence of observations for the same s
 ``numpy.random.default_rng(seed)`` handed to :class:`TMGWRAgent`):
 
 * observation 0 is ``world.reset()`` (``agent.begin_episode``); after each action
-  ``world.step`` (``agent.observe``, then ``agent.goal_attained`` when the goal was
-  reached); after a terminal observation (goal, previous goal or truncation) the next
+  ``world.step`` (``agent.observe``, which decays epsilon when the goal was reached);
+  after a terminal observation (goal, previous goal or truncation) the next
   observation is a ``world.reset()`` again. Observation ids count all of them.
 * a goal change that the simulator applied at observation ``k`` (its ``SUMMARY`` /
   trajectory file reports ``k``) moves the world's goal right after that observation was
@@ -60,8 +60,6 @@ def run_reference(maze_path: str | Path, steps: int, goal: str | tuple = "G",
             if new_goal:
                 world.set_goal(new_goal)
             agent.observe(obs, info)
-            if info.reached_goal:
-                agent.goal_attained()
             terminal = terminated or truncated
         if new_goal:
             agent.set_goal(world.goal, world.goal_observation())

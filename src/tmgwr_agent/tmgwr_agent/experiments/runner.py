@@ -3,8 +3,8 @@
 The loop is the one of :mod:`tmgwr_agent.core.protocol`: a *training episode* starts at S
 (``world.reset()``), the agent acts epsilon-greedily and learns from every step, and the
 episode ends at the current goal, at the previous goal while one is set (goal-change
-scenario), or when the episode step cap truncates it. ``goal_attained()`` (the Eq. 7
-epsilon decay) is called only when the *current* goal is reached.
+scenario), or when the episode step cap truncates it. The Eq. 7 epsilon decay happens in
+``observe`` only when the *current* goal is reached.
 
 A *greedy rollout* is the convergence probe: from S, ``learn=False`` and
 ``explore=False`` (epsilon 0, nothing learnt), at most ``D`` steps where ``D`` is the BFS
@@ -93,8 +93,6 @@ def run_episode(world: GridWorld, agent: Agent, learn: bool = True, explore: boo
         obs, _, terminated, truncated, info = world.step(action)
         agent.observe(obs, info, learn=learn)
         steps += 1
-        if info.reached_goal and learn:
-            agent.goal_attained()
         if terminated:
             return Episode(steps, info.reached_goal, info.reached_previous_goal)
         if truncated or (cap is not None and steps >= cap):

@@ -135,8 +135,6 @@ def in_process_rate(steps: int, warmup: int = 200, seed: int = 0,
         a = agent.act()
         obs, _, terminated, truncated, info = world.step(a)
         agent.observe(obs, info)
-        if info.reached_goal:
-            agent.goal_attained()
         if terminated or truncated:
             obs, _ = world.reset()
             agent.begin_episode(obs, world.cell)

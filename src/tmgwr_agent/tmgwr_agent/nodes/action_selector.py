@@ -1,18 +1,16 @@
 """``ros2 run tmgwr_agent action_selector``: Eq. 6 plus the exploration of section 5.1.
 
 Per step (lockstep): ``MotivationField`` in (this step's potentials V and the winner's
-outgoing links), ``Action`` out. The core :class:`~tmgwr_agent.core.action_selector.ActionSelector`
-is called exactly as :class:`~tmgwr_agent.core.agent.TMGWRAgent` calls it in-process: first
-the random walk learns what the last action did (``walk.observe``), the Eq. 7 schedule
-decays when the goal was reached, and then ``select`` draws from the selector's generator
-``numpy.random.default_rng(seed)``, the same generator the in-process agent is given, so
-a seed fixes the trajectory over the graph as in-process. A terminal observation is
-answered with ``Action.NONE`` (no draw: the episode is over).
+outgoing links), ``Action`` out. The core
+:class:`~tmgwr_agent.core.action_selector.ActionSelector` is called as
+:class:`~tmgwr_agent.core.agent.TMGWRAgent` calls it in-process: ``record`` what the last
+action did (walk direction, tried primitives, the Eq. 7 decay at the goal), then ``select``,
+which draws from ``numpy.random.default_rng(seed)``, the generator the in-process agent is
+given, so a seed fixes the trajectory over the graph as in-process. A terminal observation
+is answered with ``Action.NONE`` (no draw: the episode is over).
 """
 
 from __future__ import annotations
-
-from types import SimpleNamespace
 
 import numpy as np
 from rclpy.node import Node
@@ -24,9 +22,11 @@ from maze_sim.maze import ACTION_VECTORS
 from tmgwr_common import topics
 from tmgwr_agent.core.action_selector import ActionSelector, SelectorConfig
 from tmgwr_common.params import Param
+from tmgwr_agent.core.sensorimotor_map import Links
+from tmgwr_agent.nodes.step_messages import outcome_of
+from tmgwr_common.lockstep import Lockstep
 from tmgwr_common.node import (
     STEP_QOS,
-    CallbackTimer,
     NODE_OPTIONS,
     declare_parameters,
     f64,
@@ -47,56 +47,43 @@ class ActionSelectorNode(Node):
         super().__init__("action_selector", **NODE_OPTIONS)
         config, self.p = declare_parameters(self, SelectorConfig, NODE_SPECS)
         self.core = ActionSelector(np.random.default_rng(self.p["seed"]), config)
-        self.last_step = -1
-        self.last_out: Action | None = None
         self.prev_winner = -1               # the winner this selector last acted from
-        self.pub = self.create_publisher(Action, topics.ACTION, STEP_QOS)
+        pub = self.create_publisher(Action, topics.ACTION, STEP_QOS)
+        self.lockstep = Lockstep(pub)
         self.create_subscription(MotivationField, topics.MOTIVATION, self.on_motivation,
                                  STEP_QOS)
-        self.timer = CallbackTimer()
         self.get_logger().info(f"action_selector ready: seed {self.p['seed']}, "
                                f"{config.as_dict()}")
 
     def on_motivation(self, f: MotivationField):
-        if f.step_id <= self.last_step:      # a resent step: answer again, draw nothing
-            if f.step_id == self.last_step and self.last_out is not None:
-                self.pub.publish(self.last_out)
-            return
-        with self.timer:
-            policy = self.core.policy
-            if f.episode_start:             # TMGWRAgent.begin_episode
-                self.core.begin_episode()
-            else:                           # TMGWRAgent.observe / goal_attained
-                self.core.observe(self.prev_winner, f.action)
-                policy.walk.observe(f.action, f.bumped)
-                if f.goal_reached:
-                    policy.schedule.goal_attained()
-            a = Action()
-            a.header = f.header
-            a.step_id = f.step_id
-            a.epsilon = float(policy.epsilon)
-            if f.terminal:
-                a.action = Action.NONE
-            else:
-                # The winner's links as row 0 of a one-node map: the core's own select().
+        self.lockstep.on_step(f.step_id, lambda: self.choose(f))
+
+    def choose(self, f: MotivationField) -> Action:
+        self.core.record(self.prev_winner, outcome_of(f))   # what TMGWRAgent.step does here
+        a = Action()
+        a.header = f.header
+        a.step_id = f.step_id
+        a.epsilon = float(self.core.policy.epsilon)
+        if f.terminal:
+            a.action = Action.NONE          # no draw: the episode is over
+        else:                               # what TMGWRAgent.act does
+            links = None
+            if f.winner >= 0:
                 K = len(f.winner_link_targets)
-                links = SimpleNamespace(
-                    out=np_i64(f.winner_link_targets).reshape(1, K),
-                    E=np_f64(f.winner_link_reliability).reshape(1, K),
-                    a=np_f64(f.winner_link_actions).reshape(1, K, f.action_dim or 1))
-                V = np.append(np_f64(f.potentials), 0.0)    # V[n] = 0: empty link slots
-                i = 0 if f.winner >= 0 else -1
-                at_goal_node = f.winner >= 0 and f.winner == f.goal_node
-                action, a.explored = self.core.select(links, i, V, self.p["explore"],
-                                                      at_goal_node, node=int(f.winner))
-                a.action = int(action)
-                a.motor = f64(ACTION_VECTORS[action])
-            self.prev_winner = int(f.winner)
-            self.last_step, self.last_out = f.step_id, a
-            self.timer.publish(self.pub, a)
+                links = Links(targets=np_i64(f.winner_link_targets),
+                              E=np_f64(f.winner_link_reliability),
+                              actions=np_f64(f.winner_link_actions).reshape(
+                                  K, f.action_dim or 1))
+            V = np.append(np_f64(f.potentials), 0.0)    # V[-1] = 0: empty link slots
+            action, a.explored = self.core.select(links, int(f.winner), V, int(f.goal_node),
+                                                  self.p["explore"])
+            a.action = int(action)
+            a.motor = f64(ACTION_VECTORS[action])
+        self.prev_winner = int(f.winner)
+        return a
 
     def on_shutdown(self):
-        print(f"action_selector: {self.timer.summary()}", flush=True)
+        print(f"action_selector: {self.lockstep.timer.summary()}", flush=True)
 
 
 def main(args=None):

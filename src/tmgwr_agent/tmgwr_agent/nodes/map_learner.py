@@ -1,9 +1,8 @@
 """``ros2 run tmgwr_agent map_learner``: the TMGWR sensorimotor map (section 3.1, Eq. 1-2).
 
-Per step (lockstep): ``Features`` in, :meth:`SensorimotorMap.step` with the motor vector of
-the action that was executed (``None`` at an episode start, after
-:meth:`~SensorimotorMap.begin_episode`), exactly as :class:`~tmgwr_agent.core.agent.TMGWRAgent`
-does in-process; ``SensorimotorState`` out. The state carries this step's map as flat
+Per step (lockstep): ``Features`` in, :meth:`SensorimotorMap.experience` with the step's
+:class:`~tmgwr_agent.core.outcome.Outcome`, the call :class:`~tmgwr_agent.core.agent.TMGWRAgent`
+makes in-process; ``SensorimotorState`` out. The state carries this step's map as flat
 arrays (alive mask, weights, link targets and reliabilities E, the winner's link action
 vectors): what the motivation estimator needs to run Eq. 4-5 on the map of *this* step
 without building a nested message per step.
@@ -38,11 +37,12 @@ from maze_sim.maze import ACTION_VECTORS
 from tmgwr_common import topics
 from tmgwr_common.params import Param
 from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap
+from tmgwr_agent.nodes.step_messages import outcome_of
+from tmgwr_common.lockstep import Lockstep
 from tmgwr_common.node import (
     LATCHED_QOS,
     SENSOR_QOS,
     STEP_QOS,
-    CallbackTimer,
     NODE_OPTIONS,
     declare_parameters,
     f64,
@@ -61,51 +61,25 @@ NODE_SPECS = (
 )
 
 
-def save_map(m: SensorimotorMap, path: Path, step_id: int) -> Path:
-    """The map's state_dict plus the last learnt step id, written atomically (.npz)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as f:
-        np.savez(f, **m.state_dict(), step_id=np.array(step_id, dtype=np.int64))
-    tmp.replace(path)
-    return path
-
-
-def load_map(m: SensorimotorMap | None, path: Path, config: MapConfig
-             ) -> tuple[SensorimotorMap, int]:
-    """A map loaded from ``path`` (its dimensions from the file) and its last step id."""
-    try:
-        with np.load(path) as data:
-            dim = int(data["w"].shape[1])
-            action_dim = int(data["a"].shape[2])
-            step_id = int(data["step_id"]) if "step_id" in data.files else -1
-    except (OSError, KeyError, ValueError, IndexError) as exc:
-        raise ValueError(f"{path}: not a saved sensorimotor map ({exc})") from exc
-    if m is None or m.dim != dim or m.action_dim != action_dim:
-        m = SensorimotorMap(dim=dim, action_dim=action_dim, config=config)
-    m.load(path)
-    return m, step_id
-
-
 class MapLearnerNode(Node):
     def __init__(self):
         super().__init__("map_learner", **NODE_OPTIONS)
         self.config, self.p = declare_parameters(self, MapConfig, NODE_SPECS)
         self.map: SensorimotorMap | None = None
-        self.last_step = -1
-        self.last_out: SensorimotorState | None = None
+        last_step = -1
         self.gain = 1.0
         self.prev_winner = -1
         if self.p["initial_map"]:
             path = Path(self.p["initial_map"]).expanduser()
-            self.map, self.last_step = load_map(None, path, self.config)
+            self.map, last_step = SensorimotorMap.load(path, self.config)
             self.get_logger().info(f"started from {path}: {self.map.size} nodes, "
-                                   f"{self.map.link_count()} links, step {self.last_step}")
+                                   f"{self.map.link_count()} links, step {last_step}")
         self.V = np.zeros(0)
         self.published = (-1, -1)        # (step, version) of the last latched snapshot
 
-        self.state_pub = self.create_publisher(SensorimotorState, topics.SENSORIMOTOR_STATE,
-                                               STEP_QOS)
+        state_pub = self.create_publisher(SensorimotorState, topics.SENSORIMOTOR_STATE,
+                                          STEP_QOS)
+        self.lockstep = Lockstep(state_pub, last_step=last_step)
         self.map_pub = self.create_publisher(MapMsg, topics.MAP, LATCHED_QOS)
         self.marker_pub = self.create_publisher(MarkerArray, topics.MAP_MARKERS, LATCHED_QOS)
         self.create_subscription(Features, topics.FEATURES, self.on_features, STEP_QOS)
@@ -117,32 +91,25 @@ class MapLearnerNode(Node):
         self.create_service(SaveMap, topics.SAVE_MAP, self.on_save)
         self.create_service(LoadMap, topics.LOAD_MAP, self.on_load)
         self.create_timer(1.0 / self.p["publish_rate"], self.publish_map)
-        self.timer = CallbackTimer()
         if self.map is not None:
             self.publish_map()
         self.get_logger().info(f"map_learner ready: {self.config.as_dict()}")
 
     # ------------------------------------------------------------------ per step
     def on_features(self, f: Features):
-        if f.step_id <= self.last_step:      # a resent step: answer again, learn nothing
-            if f.step_id == self.last_step:
-                self.state_pub.publish(self.last_out or self.make_state(f))
-            return
-        with self.timer:
-            x = np_f64(f.features)
-            if self.map is None:
-                self.map = SensorimotorMap(dim=len(x), action_dim=ACTION_VECTORS.shape[1],
-                                           config=self.config)
-            self.gain = f.gain or 1.0
-            if f.episode_start:
-                self.map.begin_episode()
-            self.prev_winner = int(self.map.prev)
-            self.map.step(x, None if f.episode_start else np_f64(f.motor), learn=True)
-            if f.terminal and not (f.truncated or f.goal_reached):  # TMGWRAgent.observe
-                self.map.mark_terminal(self.map.winner)
-            self.last_step = f.step_id
-            self.last_out = self.make_state(f)
-            self.timer.publish(self.state_pub, self.last_out)
+        self.lockstep.on_step(f.step_id, lambda: self.learn(f),
+                              answer_again=lambda: self.make_state(f))
+
+    def learn(self, f: Features) -> SensorimotorState:
+        x = np_f64(f.features)
+        if self.map is None:
+            self.map = SensorimotorMap(dim=len(x), action_dim=ACTION_VECTORS.shape[1],
+                                       config=self.config)
+        self.gain = f.gain or 1.0
+        outcome = outcome_of(f)
+        self.prev_winner = -1 if outcome.episode_start else int(self.map.prev)
+        self.map.experience(x, outcome)              # what TMGWRAgent.step does here
+        return self.make_state(f)
 
     def make_state(self, f: Features) -> SensorimotorState:
         m = self.map
@@ -187,13 +154,14 @@ class MapLearnerNode(Node):
     # ------------------------------------------------------------------ latched map
     def publish_map(self):
         m = self.map
-        if m is None or self.published == (self.last_step, m.version) and self.last_step >= 0:
+        step = self.lockstep.last_step
+        if m is None or self.published == (step, m.version) and step >= 0:
             return
-        self.published = (self.last_step, m.version)
+        self.published = (step, m.version)
         stamp = self.get_clock().now().to_msg()
         msg = MapMsg()
         msg.header.stamp, msg.header.frame_id = stamp, "maze"
-        msg.map_version, msg.step_id = int(m.version), max(self.last_step, 0)
+        msg.map_version, msg.step_id = int(m.version), max(step, 0)
         ids = m.node_ids()
         msg.nodes = [MapNode(id=int(i), weight=f64(m.w[i]), context=f64(m.c[i]),
                              habituation=float(m.h[i]), terminal=bool(m.terminal[i]))
@@ -238,24 +206,24 @@ class MapLearnerNode(Node):
             resp.success, resp.message = False, "the map is empty: nothing learnt yet"
             return resp
         try:
-            save_map(self.map, path, self.last_step)
+            self.map.save(path, self.lockstep.last_step)
         except OSError as exc:
             resp.success, resp.message = False, f"cannot write {path}: {exc}"
             return resp
         resp.success, resp.path = True, str(path)
         resp.message = (f"saved {self.map.size} nodes, {self.map.link_count()} links "
-                        f"(step {self.last_step}) to {path}")
+                        f"(step {self.lockstep.last_step}) to {path}")
         self.get_logger().info(resp.message)
         return resp
 
     def on_load(self, req, resp):
         path = Path(req.path or self.p["map_path"]).expanduser()
         try:
-            self.map, step = load_map(self.map, path, self.config)
+            self.map, _ = SensorimotorMap.load(path, self.config)
         except ValueError as exc:
             resp.success, resp.message = False, str(exc)
             return resp
-        self.last_out = None
+        self.lockstep.last_out = None
         resp.success = True
         resp.message = f"loaded {self.map.size} nodes, {self.map.link_count()} links from {path}"
         self.get_logger().info(resp.message)
@@ -263,11 +231,12 @@ class MapLearnerNode(Node):
         return resp
 
     def on_shutdown(self):
-        print(f"map_learner: {self.timer.summary()}", flush=True)
+        print(f"map_learner: {self.lockstep.timer.summary()}", flush=True)
+        step = self.lockstep.last_step
         if self.map is not None and self.p["map_path"]:
-            path = save_map(self.map, Path(self.p["map_path"]).expanduser(), self.last_step)
+            path = self.map.save(Path(self.p["map_path"]).expanduser(), step)
             print(f"map_learner: saved {self.map.size} nodes, {self.map.link_count()} links "
-                  f"(step {self.last_step}) to {path}", flush=True)
+                  f"(step {step}) to {path}", flush=True)
 
 
 def main(args=None):

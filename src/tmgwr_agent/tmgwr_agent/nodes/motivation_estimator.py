@@ -26,15 +26,13 @@ from nav_msgs.msg import OccupancyGrid
 from tmgwr_interfaces.msg import MotivationField, SensorimotorState
 from tmgwr_interfaces.srv import SetGoal
 
-from maze_sim.maze import ACTION_VECTORS
-
 from tmgwr_common import topics
 from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
-from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
+from tmgwr_agent.core.sensorimotor_map import MapSnapshot
+from tmgwr_common.lockstep import Lockstep
 from tmgwr_common.node import (
     LATCHED_QOS,
     STEP_QOS,
-    CallbackTimer,
     NODE_OPTIONS,
     declare_parameters,
     f64,
@@ -47,21 +45,14 @@ from tmgwr_common.node import (
 
 
 
-def map_view(m: SensorimotorMap | None, s: SensorimotorState) -> SensorimotorMap:
-    """A SensorimotorMap holding the flat arrays of a SensorimotorState (no link actions,
-    contexts or ages: Eq. 4-5 needs weights, alive mask, link targets and E only)."""
+def snapshot_of(s: SensorimotorState) -> MapSnapshot:
+    """The map of this step from the flat arrays of a SensorimotorState (no link actions,
+    contexts or ages: Eq. 4-5 need weights, alive mask, link targets and E only)."""
     n, K, dim = s.n_slots, s.degree, s.dim
-    if m is None or m.dim != dim:
-        m = SensorimotorMap(dim=dim, action_dim=s.action_dim or ACTION_VECTORS.shape[1])
-    m.n = n
-    m.alive = np_bool(s.alive)
-    m.terminal = np_bool(s.terminal_nodes)
-    m.w = np_f64(s.weights).reshape(n, dim)
-    m.out = np_i64(s.link_targets).reshape(n, K)
-    m.E = np_f64(s.link_reliability).reshape(n, K)
-    m.version = s.map_version
-    m.winner = s.winner
-    return m
+    return MapSnapshot(w=np_f64(s.weights).reshape(n, dim), alive=np_bool(s.alive),
+                       out=np_i64(s.link_targets).reshape(n, K),
+                       E=np_f64(s.link_reliability).reshape(n, K),
+                       terminal=np_bool(s.terminal_nodes), version=s.map_version)
 
 
 class MotivationEstimatorNode(Node):
@@ -69,13 +60,9 @@ class MotivationEstimatorNode(Node):
         super().__init__("motivation_estimator", **NODE_OPTIONS)
         config = declare_parameters(self, MotivationConfig)
         self.core = MotivationEstimator(config)
-        self.view: SensorimotorMap | None = None
-        self.goal_x: np.ndarray | None = None
-        self.last_step = -1
-        self.last_out: MotivationField | None = None
         self._ids = np.zeros(0, dtype=np.int32)
-
-        self.pub = self.create_publisher(MotivationField, topics.MOTIVATION, STEP_QOS)
+        pub = self.create_publisher(MotivationField, topics.MOTIVATION, STEP_QOS)
+        self.lockstep = Lockstep(pub)
         self.create_subscription(SensorimotorState, topics.SENSORIMOTOR_STATE, self.on_state,
                                  STEP_QOS)
         # /set_goal checks the cell against the simulator's grid (latched: it arrives
@@ -84,46 +71,40 @@ class MotivationEstimatorNode(Node):
         self.create_subscription(OccupancyGrid, topics.GRID, self.on_grid, LATCHED_QOS)
         self.sim_goal = self.create_client(SetGoal, topics.SIM_SET_GOAL)
         self.create_service(SetGoal, topics.SET_GOAL, self.on_set_goal)
-        self.timer = CallbackTimer()
         self.get_logger().info(f"motivation_estimator ready: {config.as_dict()}")
 
     # ------------------------------------------------------------------ per step
     def on_state(self, s: SensorimotorState):
-        if s.step_id <= self.last_step:      # a resent step: answer again, compute nothing
-            if s.step_id == self.last_step and self.last_out is not None:
-                self.pub.publish(self.last_out)
-            return
-        with self.timer:
-            goal_x = np_f64(s.goal_features)
-            if self.goal_x is None or not np.array_equal(goal_x, self.goal_x):
-                self.goal_x = goal_x        # a new goal: V restarts from 0 (Algorithm 1)
-                self.core.set_goal(goal_x)
-                self.get_logger().info(f"step {s.step_id}: goal sensation {goal_x.tolist()}")
-            self.view = map_view(self.view, s)
-            V = self.core.update(self.view)
-            out = MotivationField()
-            out.header = s.header
-            out.step_id = s.step_id
-            out.map_version = s.map_version
-            out.goal_node = int(self.core.goal_node)
-            out.sweeps = int(self.core.sweeps)
-            if len(self._ids) != len(V):
-                self._ids = np.arange(len(V), dtype=np.int32)
-            out.node_ids = i32(self._ids)
-            out.potentials = f64(V)
-            out.winner = s.winner
-            if s.winner >= 0:
-                out.winner_link_targets = i32(self.view.out[s.winner])
-                out.winner_link_reliability = f64(self.view.E[s.winner])
-            out.action_dim = s.action_dim
-            out.winner_link_actions = s.winner_link_actions
-            out.episode_start = s.episode_start
-            out.action = s.action
-            out.bumped = s.bumped
-            out.goal_reached = s.goal_reached
-            out.terminal = s.terminal
-            self.last_step, self.last_out = s.step_id, out
-            self.timer.publish(self.pub, out)
+        self.lockstep.on_step(s.step_id, lambda: self.motivate(s))
+
+    def motivate(self, s: SensorimotorState) -> MotivationField:
+        goal_x = np_f64(s.goal_features)
+        if self.core.follow_goal(goal_x):       # a new goal: V restarts from 0 (Algorithm 1)
+            self.get_logger().info(f"step {s.step_id}: goal sensation {goal_x.tolist()}")
+        m = snapshot_of(s)
+        V = self.core.update(m)
+        out = MotivationField()
+        out.header = s.header
+        out.step_id = s.step_id
+        out.map_version = s.map_version
+        out.goal_node = int(self.core.goal_node)
+        out.sweeps = int(self.core.sweeps)
+        if len(self._ids) != len(V):
+            self._ids = np.arange(len(V), dtype=np.int32)
+        out.node_ids = i32(self._ids)
+        out.potentials = f64(V)
+        out.winner = s.winner
+        if s.winner >= 0:
+            out.winner_link_targets = i32(m.out[s.winner])
+            out.winner_link_reliability = f64(m.E[s.winner])
+        out.action_dim = s.action_dim
+        out.winner_link_actions = s.winner_link_actions
+        out.episode_start = s.episode_start
+        out.action = s.action
+        out.bumped = s.bumped
+        out.goal_reached = s.goal_reached
+        out.terminal = s.terminal
+        return out
 
     # ------------------------------------------------------------------ runtime goal
     def on_grid(self, grid: OccupancyGrid):
@@ -171,7 +152,7 @@ class MotivationEstimatorNode(Node):
                                     f"{answer.message if answer else 'no answer'}")
 
     def on_shutdown(self):
-        print(f"motivation_estimator: {self.timer.summary()}", flush=True)
+        print(f"motivation_estimator: {self.lockstep.timer.summary()}", flush=True)
 
 
 def main(args=None):

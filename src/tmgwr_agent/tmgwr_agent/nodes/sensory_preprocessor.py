@@ -13,9 +13,9 @@ from tmgwr_interfaces.msg import Features, Observation
 
 from tmgwr_common import topics
 from tmgwr_agent.core.preprocessor import PreprocessorConfig, SensoryPreprocessor
+from tmgwr_common.lockstep import Lockstep
 from tmgwr_common.node import (
     STEP_QOS,
-    CallbackTimer,
     NODE_OPTIONS,
     declare_parameters,
     f64,
@@ -29,40 +29,35 @@ class SensoryPreprocessorNode(Node):
         super().__init__("sensory_preprocessor", **NODE_OPTIONS)
         config = declare_parameters(self, PreprocessorConfig)
         self.core = SensoryPreprocessor(config)
-        self.pub = self.create_publisher(Features, topics.FEATURES, STEP_QOS)
+        pub = self.create_publisher(Features, topics.FEATURES, STEP_QOS)
+        self.lockstep = Lockstep(pub)
         self.create_subscription(Observation, topics.OBSERVATION, self.on_observation,
                                  STEP_QOS)
-        self.last_step = -1
-        self.last_out: Features | None = None
-        self.timer = CallbackTimer()
         self.get_logger().info(f"sensory_preprocessor ready: {config.as_dict()}")
 
     def on_observation(self, m: Observation):
-        if m.step_id <= self.last_step:     # a resent step: answer it again, learn nothing
-            if m.step_id == self.last_step and self.last_out is not None:
-                self.pub.publish(self.last_out)
-            return
-        with self.timer:
-            x = self.core(np_f64(m.sensors), episode_start=m.episode_start)
-            f = Features()
-            f.header = m.header
-            f.step_id = m.step_id
-            f.episode = m.episode
-            f.features = f64(x)
-            f.goal_features = f64(self.core.goal_features(np_f64(m.goal_sensors)))
-            f.gain = float(self.core.gain)
-            f.episode_start = m.episode_start
-            f.action = m.action
-            f.motor = m.motor
-            f.bumped = m.bumped
-            f.goal_reached = m.goal_reached
-            f.terminal = m.terminal
-            f.truncated = m.truncated
-            self.last_step, self.last_out = m.step_id, f
-            self.timer.publish(self.pub, f)
+        self.lockstep.on_step(m.step_id, lambda: self.features(m))
+
+    def features(self, m: Observation) -> Features:
+        x = self.core(np_f64(m.sensors), episode_start=m.episode_start)
+        f = Features()
+        f.header = m.header
+        f.step_id = m.step_id
+        f.episode = m.episode
+        f.features = f64(x)
+        f.goal_features = f64(self.core.goal_features(np_f64(m.goal_sensors)))
+        f.gain = float(self.core.gain)
+        f.episode_start = m.episode_start
+        f.action = m.action
+        f.motor = m.motor
+        f.bumped = m.bumped
+        f.goal_reached = m.goal_reached
+        f.terminal = m.terminal
+        f.truncated = m.truncated
+        return f
 
     def on_shutdown(self):
-        print(f"sensory_preprocessor: {self.timer.summary()}", flush=True)
+        print(f"sensory_preprocessor: {self.lockstep.timer.summary()}", flush=True)
 
 
 def main(args=None):
