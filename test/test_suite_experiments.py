@@ -18,8 +18,9 @@ AGENTS = "tmgwr,q_learning"
 TRIALS = 2
 
 SUMMARY_KEYS = {"mazes", "skipped", "trials", "oracle_ratio", "steps",
-                "episodes_to_optimal", "win_rate", "failures", "worst_trial_ratio",
-                "optimal_within_10", "optimal_found", "episodes_win_rate"}
+                "episodes_to_optimal", "win_rate", "failures", "train_failures",
+                "worst_trial_ratio", "optimal_within_10", "optimal_found",
+                "episodes_win_rate"}
 
 
 def cli(*args, check=True):

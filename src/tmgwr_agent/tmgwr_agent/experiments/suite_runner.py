@@ -46,6 +46,8 @@ env-change ``SUMMARY`` (over the mazes of the family, or over all of them)::
      "episodes_to_optimal": {NAME: STAT + "median" of the per-maze median},
      "win_rate": {NAME: {OTHER: fraction of mazes where NAME's score < OTHER's}},
      "failures": {NAME: trials with steps null},
+     "train_failures": {NAME: trials that did not converge before the event (they still
+                        go on to it: env_change's step 1)},
      "worst_trial_ratio": {NAME: largest steps / oracle_steps of a trial that reached
                            the goal (null if none)},
      "optimal_within_10": {NAME: fraction of trials with episodes_to_optimal <= 10},
@@ -144,8 +146,9 @@ def _env_summary(mazes: list[dict], agents: list[str], trials: int, skipped: int
         a: _stat_median([_median_score(m["agents"][a]["episodes_to_optimal"]["values"])
                          for m in mazes]) for a in agents}
     out["win_rate"] = _wins(scores)
-    out["failures"] = {a: sum(v is None for m in mazes
-                              for v in m["agents"][a]["steps"]["values"]) for a in agents}
+    for key, field in (("failures", "steps"), ("train_failures", "train_episodes")):
+        out[key] = {a: sum(v is None for m in mazes for v in m["agents"][a][field]["values"])
+                    for a in agents}
     worst = {}
     for a in agents:
         ratios = [v / m["oracle_steps"] for m in mazes
