@@ -5,7 +5,6 @@
 """
 
 import pytest
-
 from ros_helpers import allocate_domain, release_domain
 
 

@@ -49,15 +49,15 @@ from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
 ROOT = Path(__file__).resolve().parent.parent
-VENV_PYTHON = ROOT / '.venv' / 'bin' / 'python'
-ENV_SCRIPT = ROOT / 'tools' / 'env.sh'
+VENV_PYTHON = ROOT / ".venv" / "bin" / "python"
+ENV_SCRIPT = ROOT / "tools" / "env.sh"
 
 DOMAIN_MIN, DOMAIN_MAX = 1, 101          # Fast DDS on Linux: ids above ~101 clash with ports
-_LOCK_DIR = Path(tempfile.gettempdir()) / 'tmgwr-ros-domains'
+_LOCK_DIR = Path(tempfile.gettempdir()) / "tmgwr-ros-domains"
 
 # Harmless Fast DDS noise that may appear in a process's output (the shared-memory
 # transport's `RTPS_TRANSPORT_SHM Error ... open_and_lock_file failed`; delivery goes on).
-HARMLESS_OUTPUT = (re.compile(r'RTPS_TRANSPORT_SHM Error'),)
+HARMLESS_OUTPUT = (re.compile(r"RTPS_TRANSPORT_SHM Error"),)
 
 
 # --------------------------------------------------------------------------- environment
@@ -68,18 +68,19 @@ def base_env() -> dict[str, str]:
     """The environment after ``source tools/env.sh`` (computed once per process)."""
     global _BASE_ENV
     if _BASE_ENV is None:
-        if not (ROOT / 'install' / 'setup.bash').is_file():
-            raise RuntimeError(f'{ROOT}/install/setup.bash missing: run {ROOT}/tools/bootstrap.sh')
+        if not (ROOT / "install" / "setup.bash").is_file():
+            raise RuntimeError(f"{ROOT}/install/setup.bash missing: run {ROOT}/tools/bootstrap.sh")
         proc = subprocess.run(
-            ['bash', '-c', 'source "$1" >&2 && env -0', 'env', str(ENV_SCRIPT)],
+            ["bash", "-c", 'source "$1" >&2 && env -0', "env", str(ENV_SCRIPT)],
             capture_output=True, env=os.environ.copy(), timeout=60)
         if proc.returncode != 0:
-            raise RuntimeError(f'sourcing {ENV_SCRIPT} failed:\n{proc.stderr.decode(errors="replace")}')
+            err = proc.stderr.decode(errors="replace")
+            raise RuntimeError(f"sourcing {ENV_SCRIPT} failed:\n{err}")
         env = {}
-        for item in proc.stdout.split(b'\0'):
-            if b'=' in item:
-                key, _, value = item.partition(b'=')
-                env[key.decode()] = value.decode(errors='surrogateescape')
+        for item in proc.stdout.split(b"\0"):
+            if b"=" in item:
+                key, _, value = item.partition(b"=")
+                env[key.decode()] = value.decode(errors="surrogateescape")
         _BASE_ENV = env
     return dict(_BASE_ENV)
 
@@ -87,10 +88,10 @@ def base_env() -> dict[str, str]:
 def ros_env(domain: int, extra: Mapping[str, str] | None = None) -> dict[str, str]:
     """Environment for a ROS process in ``domain`` (LOCALHOST discovery, unbuffered output)."""
     env = base_env()
-    env['ROS_DOMAIN_ID'] = str(int(domain))
-    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    env['PYTHONUNBUFFERED'] = '1'
-    env.pop('ROS_LOCALHOST_ONLY', None)   # deprecated in Jazzy, conflicts with the range
+    env["ROS_DOMAIN_ID"] = str(int(domain))
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env["PYTHONUNBUFFERED"] = "1"
+    env.pop("ROS_LOCALHOST_ONLY", None)   # deprecated in Jazzy, conflicts with the range
     if extra:
         env.update(extra)
     return env
@@ -110,14 +111,14 @@ def allocate_domain() -> int:
     except OSError:
         pass
     span = DOMAIN_MAX - DOMAIN_MIN + 1
-    worker = os.environ.get('PYTEST_XDIST_WORKER', 'main')
-    start = zlib.crc32(f'{worker}:{os.getpid()}'.encode()) % span
-    avoid = os.environ.get('ROS_DOMAIN_ID', '0')
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
+    start = zlib.crc32(f"{worker}:{os.getpid()}".encode()) % span
+    avoid = os.environ.get("ROS_DOMAIN_ID", "0")
     for i in range(span):
         domain = DOMAIN_MIN + (start + i) % span
         if str(domain) == avoid or domain in _held:
             continue
-        fd = os.open(_LOCK_DIR / f'{domain}.lock', os.O_RDWR | os.O_CREAT, 0o666)
+        fd = os.open(_LOCK_DIR / f"{domain}.lock", os.O_RDWR | os.O_CREAT, 0o666)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
@@ -125,7 +126,7 @@ def allocate_domain() -> int:
             continue
         _held[domain] = fd
         return domain
-    raise RuntimeError(f'no free ROS_DOMAIN_ID in {DOMAIN_MIN}..{DOMAIN_MAX}')
+    raise RuntimeError(f"no free ROS_DOMAIN_ID in {DOMAIN_MIN}..{DOMAIN_MAX}")
 
 
 def release_domain(domain: int) -> None:
@@ -138,19 +139,19 @@ def release_domain(domain: int) -> None:
 class RosProcess:
     """A child process whose merged output is collected in the background."""
 
-    def __init__(self, cmd: Sequence[str], env: Mapping[str, str], name: str = '',
+    def __init__(self, cmd: Sequence[str], env: Mapping[str, str], name: str = "",
                  cwd: str | os.PathLike | None = None):
         self.cmd = list(cmd)
         self.name = name or Path(self.cmd[0]).name
-        self.domain = env.get('ROS_DOMAIN_ID', '?')
+        self.domain = env.get("ROS_DOMAIN_ID", "?")
         self._lines: list[str] = []
         self._cond = threading.Condition()
         self._eof = False
         self.proc = subprocess.Popen(
             self.cmd, env=dict(env), cwd=str(cwd or ROOT), stdin=subprocess.DEVNULL,
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, errors='replace',
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, errors="replace",
             bufsize=1, start_new_session=True)
-        self._reader = threading.Thread(target=self._read, name=f'reader-{self.name}', daemon=True)
+        self._reader = threading.Thread(target=self._read, name=f"reader-{self.name}", daemon=True)
         self._reader.start()
 
     # -- output
@@ -158,7 +159,7 @@ class RosProcess:
         assert self.proc.stdout is not None
         for line in self.proc.stdout:
             with self._cond:
-                self._lines.append(line.rstrip('\n'))
+                self._lines.append(line.rstrip("\n"))
                 self._cond.notify_all()
         with self._cond:
             self._eof = True
@@ -167,7 +168,7 @@ class RosProcess:
     @property
     def output(self) -> str:
         with self._cond:
-            return '\n'.join(self._lines)
+            return "\n".join(self._lines)
 
     @property
     def lines(self) -> list[str]:
@@ -176,9 +177,10 @@ class RosProcess:
 
     def describe(self, why: str) -> str:
         rc = self.proc.poll()
-        return (f'{why}\n--- process {self.name!r} (pid {self.proc.pid}, ROS_DOMAIN_ID={self.domain}, '
-                f'exit code {rc}) ---\ncommand: {" ".join(self.cmd)}\n--- output ---\n'
-                f'{self.output}\n--- end of {self.name!r} ---')
+        return (f"{why}\n--- process {self.name!r} (pid {self.proc.pid}, "
+                f"ROS_DOMAIN_ID={self.domain}, exit code {rc}) ---\n"
+                f"command: {' '.join(self.cmd)}\n--- output ---\n"
+                f"{self.output}\n--- end of {self.name!r} ---")
 
     def wait_for_line(self, pattern: str, timeout: float = 30.0) -> str:
         """First output line matching regex ``pattern``; AssertionError on exit or timeout."""
@@ -192,10 +194,12 @@ class RosProcess:
                         return line
                 seen = len(self._lines)
                 if self._eof:
-                    raise AssertionError(self.describe(f'{self.name} exited before printing /{pattern}/'))
+                    raise AssertionError(
+                        self.describe(f"{self.name} exited before printing /{pattern}/"))
                 left = deadline - time.monotonic()
                 if left <= 0:
-                    raise AssertionError(self.describe(f'no /{pattern}/ from {self.name} within {timeout} s'))
+                    raise AssertionError(
+                        self.describe(f"no /{pattern}/ from {self.name} within {timeout} s"))
                 self._cond.wait(min(left, 0.5))
 
     def wait(self, timeout: float = 30.0, check: bool = True) -> str:
@@ -204,10 +208,11 @@ class RosProcess:
             self.proc.wait(timeout=timeout)
         except subprocess.TimeoutExpired:
             self.stop()
-            raise AssertionError(self.describe(f'{self.name} did not exit within {timeout} s')) from None
+            raise AssertionError(
+                self.describe(f"{self.name} did not exit within {timeout} s")) from None
         self._reader.join(timeout=5)
         if check and self.proc.returncode != 0:
-            raise AssertionError(self.describe(f'{self.name} exited with {self.proc.returncode}'))
+            raise AssertionError(self.describe(f"{self.name} exited with {self.proc.returncode}"))
         return self.output
 
     def running(self) -> bool:
@@ -231,26 +236,26 @@ def _python() -> str:
     return str(VENV_PYTHON) if VENV_PYTHON.exists() else sys.executable
 
 
-def spawn_python(code: str, *args: str, domain: int, name: str = 'python',
+def spawn_python(code: str, *args: str, domain: int, name: str = "python",
                  env: Mapping[str, str] | None = None) -> RosProcess:
     """Run ``python -c code args...`` in the ROS environment of ``domain``."""
-    return RosProcess([_python(), '-u', '-c', code, *args], ros_env(domain, env), name=name)
+    return RosProcess([_python(), "-u", "-c", code, *args], ros_env(domain, env), name=name)
 
 
-def spawn_module(module: str, *args: str, domain: int, name: str = '',
+def spawn_module(module: str, *args: str, domain: int, name: str = "",
                  env: Mapping[str, str] | None = None) -> RosProcess:
     """Run ``python -m module args...`` (modules resolve to the source trees)."""
-    return RosProcess([_python(), '-u', '-m', module, *args], ros_env(domain, env),
-                      name=name or module.rsplit('.', 1)[-1])
+    return RosProcess([_python(), "-u", "-m", module, *args], ros_env(domain, env),
+                      name=name or module.rsplit(".", 1)[-1])
 
 
-def ros2_run(package: str, executable: str, *args: str, domain: int, name: str = '',
+def ros2_run(package: str, executable: str, *args: str, domain: int, name: str = "",
              env: Mapping[str, str] | None = None) -> RosProcess:
     """Start what ``ros2 run package executable args...`` starts (the colcon-installed script)."""
-    path = ROOT / 'install' / package / 'lib' / package / executable
+    path = ROOT / "install" / package / "lib" / package / executable
     if not path.is_file():
-        raise FileNotFoundError(f'{path} missing: is {package}/{executable} declared in setup.py '
-                                f'and the workspace built (tools/bootstrap.sh)?')
+        raise FileNotFoundError(f"{path} missing: is {package}/{executable} declared in setup.py "
+                                f"and the workspace built (tools/bootstrap.sh)?")
     return RosProcess([str(path), *args], ros_env(domain, env), name=name or executable)
 
 
@@ -264,15 +269,15 @@ def parse_json_line(output: str, prefix: str):
     for line in reversed(output.splitlines()):
         if line.startswith(prefix):
             return json.loads(line[len(prefix):])
-    raise AssertionError(f'no line starting with {prefix!r} in output:\n{output}')
+    raise AssertionError(f"no line starting with {prefix!r} in output:\n{output}")
 
 
 def unexpected_errors(output: str) -> list[str]:
     """Output lines that look like DDS / rcl errors, minus the known harmless ones."""
     bad = []
-    output = re.sub(r'\x1b\[[0-9;]*m', '', output)     # Fast DDS colours its log lines
+    output = re.sub(r"\x1b\[[0-9;]*m", "", output)     # Fast DDS colours its log lines
     for line in output.splitlines():
-        if re.search(r'\b(Error|ERROR|XMLPARSER|Traceback)\b', line) and \
+        if re.search(r"\b(Error|ERROR|XMLPARSER|Traceback)\b", line) and \
                 not any(h.search(line) for h in HARMLESS_OUTPUT):
             bad.append(line)
     return bad

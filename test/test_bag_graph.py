@@ -22,9 +22,8 @@ import time
 
 import pytest
 import yaml
-
 from ros_helpers import ROOT, RosProcess, ros_env
-from test_recorder import foxglove_decoder, mcap_files, tmgwr_cli  # noqa: F401 (fixture)
+from test_recorder import foxglove_decoder, mcap_files, tmgwr_cli  # noqa: F401, F811 (fixtures)
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -37,9 +36,9 @@ MAZE = """\
 """
 # The simulator's own log line for every episode that reaches the goal (forwarded by up);
 # on this maze every episode ends at the goal (no step cap, no kept previous goal).
-EPISODE = re.compile(r'\[maze_sim\].*episode (\d+): goal \(\d+, \d+\) reached in (\d+) steps '
-                     r'\(step (\d+)\)')
-PER_STEP = ('/observation', '/features', '/sensorimotor_state', '/motivation', '/action')
+EPISODE = re.compile(r"\[maze_sim\].*episode (\d+): goal \(\d+, \d+\) reached in (\d+) steps "
+                     r"\(step (\d+)\)")
+PER_STEP = ("/observation", "/features", "/sensorimotor_state", "/motivation", "/action")
 
 
 def live_episodes(up: RosProcess) -> list[tuple[int, int, str, int]]:
@@ -48,7 +47,7 @@ def live_episodes(up: RosProcess) -> list[tuple[int, int, str, int]]:
     for line in up.lines:
         m = EPISODE.search(line)
         if m:
-            out.append((int(m.group(1)), int(m.group(2)), 'goal', int(m.group(3))))
+            out.append((int(m.group(1)), int(m.group(2)), "goal", int(m.group(3))))
     return out
 
 
@@ -56,42 +55,42 @@ def wait_episodes(up: RosProcess, n: int, timeout: float) -> None:
     deadline = time.monotonic() + timeout
     while len(live_episodes(up)) < n:
         if not up.running() or time.monotonic() > deadline:
-            raise AssertionError(up.describe(f'fewer than {n} episodes within {timeout} s'))
+            raise AssertionError(up.describe(f"fewer than {n} episodes within {timeout} s"))
         time.sleep(0.2)
 
 
-@pytest.fixture(scope='module')
+@pytest.fixture(scope="module")
 def graph_run(tmp_path_factory):
     """Run the graph once for the module: (bag directory, live episodes, goal step)."""
     from ros_helpers import allocate_domain, release_domain
     domain = allocate_domain()
-    tmp = tmp_path_factory.mktemp('graph')
-    maze = tmp / 'small.txt'
+    tmp = tmp_path_factory.mktemp("graph")
+    maze = tmp / "small.txt"
     maze.write_text(MAZE)
-    bag = tmp / 'run'
-    up = RosProcess([str(ROOT / '.venv/bin/python'), '-m', 'tmgwr_agent.cli', 'up', '--maze',
-                     str(maze), '--seed', '3', '--record-dir', str(bag),
-                     '--domain-id', str(domain)], ros_env(domain), name='up')
+    bag = tmp / "run"
+    up = RosProcess([str(ROOT / ".venv/bin/python"), "-m", "tmgwr_agent.cli", "up", "--maze",
+                     str(maze), "--seed", "3", "--record-dir", str(bag),
+                     "--domain-id", str(domain)], ros_env(domain), name="up")
     try:
         with up:
-            up.wait_for_line(r'^recording to ', timeout=90)
+            up.wait_for_line(r"^recording to ", timeout=90)
             wait_episodes(up, 4, timeout=90)
-            goal = tmgwr_cli('goal', '2', '3', '--domain-id', str(domain), domain=domain)
-            assert goal.returncode == 0 and 'accepted' in goal.stdout, goal.stdout + goal.stderr
+            goal = tmgwr_cli("goal", "2", "3", "--domain-id", str(domain), domain=domain)
+            assert goal.returncode == 0 and "accepted" in goal.stdout, goal.stdout + goal.stderr
             # the simulator's own log line (forwarded by up) says where the change landed
-            line = up.wait_for_line(r'step \d+: goal -> row 3, col 2', timeout=30)
-            goal_step = int(re.search(r'step (\d+): goal ->', line).group(1))
+            line = up.wait_for_line(r"step \d+: goal -> row 3, col 2", timeout=30)
+            goal_step = int(re.search(r"step (\d+): goal ->", line).group(1))
             n = len(live_episodes(up))
             wait_episodes(up, n + 4, timeout=90)
-            event = tmgwr_cli('event', 'a', '--domain-id', str(domain), domain=domain)
-            assert event.returncode == 0 and 'accepted' in event.stdout, \
+            event = tmgwr_cli("event", "a", "--domain-id", str(domain), domain=domain)
+            assert event.returncode == 0 and "accepted" in event.stdout, \
                 event.stdout + event.stderr
             n = len(live_episodes(up))
             wait_episodes(up, n + 3, timeout=90)
             up.proc.send_signal(2)             # Ctrl-C: the nodes stop, the recorder last
-            up.wait_for_line(r'^recording: ', timeout=60)
+            up.wait_for_line(r"^recording: ", timeout=60)
             up.wait(timeout=60, check=False)
-        assert up.proc.returncode == 0, up.describe('./tmgwr up failed')
+        assert up.proc.returncode == 0, up.describe("./tmgwr up failed")
         yield bag, live_episodes(up), goal_step, up.output
     finally:
         release_domain(domain)
@@ -111,78 +110,78 @@ def test_graph_recording_is_complete_and_decodes_everywhere(graph_run, foxglove_
                 steps.setdefault(conn.topic, []).append(int(msg.step_id))
         meta_counts = {c.topic: c.msgcount for c in reader.connections}
     assert counts == {t: n for t, n in meta_counts.items() if n}
-    last = max(steps['/observation'])
+    last = max(steps["/observation"])
     assert last > 100
     for topic in PER_STEP:
         ids = sorted(set(steps[topic]))
         # the ring answers every step; the newest step may still be in flight at the stop
         assert ids[0] == 0 and ids == list(range(ids[-1] + 1)), topic
         assert ids[-1] >= last - 1, (topic, ids[-1], last)
-    for topic in ('/maze_grid', '/goal', '/map', '/map_markers', '/maze_events'):
+    for topic in ("/maze_grid", "/goal", "/map", "/map_markers", "/maze_events"):
         assert counts.get(topic, 0) >= 1, topic
 
     result = foxglove_decoder(files)
     fox: dict[str, int] = {}
     for path in files:
-        for topic, t in result['files'][str(path)]['topics'].items():
-            assert not t['errors'], (topic, t['errors'])
-            fox[topic] = fox.get(topic, 0) + t['count']
+        for topic, t in result["files"][str(path)]["topics"].items():
+            assert not t["errors"], (topic, t["errors"])
+            fox[topic] = fox.get(topic, 0) + t["count"]
     assert {t: n for t, n in fox.items() if n} == counts
 
 
 def test_recorder_lost_nothing(graph_run):
     bag, _live, _goal_step, out = graph_run
-    m = re.search(r'recorded: received (\d+), written (\d+) messages', out)
+    m = re.search(r"recorded: received (\d+), written (\d+) messages", out)
     assert m, out[-3000:]
     assert m.group(1) == m.group(2)
-    info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
-    assert info['message_count'] == int(m.group(2))
+    info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert info["message_count"] == int(m.group(2))
 
 
 def test_report_states_the_runs_own_figures(graph_run, tmp_path):
     bag, live, goal_step, _out = graph_run
-    maze = tmp_path / 'small.txt'
+    maze = tmp_path / "small.txt"
     maze.write_text(MAZE)
-    proc = tmgwr_cli('report', str(bag), '-o', str(tmp_path / 'report'), '--maze', str(maze))
+    proc = tmgwr_cli("report", str(bag), "-o", str(tmp_path / "report"), "--maze", str(maze))
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    rep = json.loads((tmp_path / 'report' / 'report.json').read_text())
-    for name in ('steps_per_episode', 'goal_change_visits', 'steps_to_goal', 'map_over_time',
-                 'final_map'):
-        png = tmp_path / 'report' / f'{name}.png'
-        assert png.is_file() and png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    rep = json.loads((tmp_path / "report" / "report.json").read_text())
+    for name in ("steps_per_episode", "goal_change_visits", "steps_to_goal", "map_over_time",
+                 "final_map"):
+        png = tmp_path / "report" / f"{name}.png"
+        assert png.is_file() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
     # the same episodes as logged live (the bag may hold more: the simulator's last lines
     # can be cut off by the stop)
     n = len(live)
     assert n >= 11
-    assert rep['episodes']['steps_per_episode'][:n] == [s for _e, s, _o, _end in live]
-    assert rep['episodes']['end_steps'][:n] == [end for _e, _s, _o, end in live]
-    assert rep['episodes']['outcomes'] == {'goal': rep['episodes']['count']}
-    assert rep['steps']['missed'] == 0
+    assert rep["episodes"]["steps_per_episode"][:n] == [s for _e, s, _o, _end in live]
+    assert rep["episodes"]["end_steps"][:n] == [end for _e, _s, _o, end in live]
+    assert rep["episodes"]["outcomes"] == {"goal": rep["episodes"]["count"]}
+    assert rep["steps"]["missed"] == 0
 
     # the goal change at the step the simulator announced, with the live figures
-    (change,) = rep['goal_changes']
-    assert change['step'] == goal_step
-    assert change['to'] == [3, 2] and change['from'] == [1, 5]
-    assert (change['from_name'], change['to_name']) == ('G', '1')
-    assert f'goal change at step {goal_step} [1, 5] -> [3, 2]' in proc.stdout
+    (change,) = rep["goal_changes"]
+    assert change["step"] == goal_step
+    assert change["to"] == [3, 2] and change["from"] == [1, 5]
+    assert (change["from_name"], change["to_name"]) == ("G", "1")
+    assert f"goal change at step {goal_step} [1, 5] -> [3, 2]" in proc.stdout
     after = [e for e in live if e[3] > goal_step - 1]
-    first = next(e for e in after if e[2] == 'goal')
-    assert change['first_goal_steps_after'] == first[3] - (goal_step - 1)
-    (event,) = rep['events']
-    assert "event 'a'" in event['what']
-    in_phase = [e for e in after if e[3] <= event['step']]
-    assert change['episodes'] == len(in_phase)
-    assert change['previous_pct'] <= change['previous_visit_pct'] <= 100.0
-    assert change['current_pct'] == pytest.approx(
-        100.0 * sum(e[2] == 'goal' for e in in_phase) / len(in_phase))
-    first = next(e for e in live if e[3] > event['step'] and e[2] == 'goal')
-    assert event['first_goal_steps_after'] == first[3] - event['step']
-    assert rep['map']['nodes'] > 0 and 0.0 <= rep['map']['mean_reliability'] <= 1.0
+    first = next(e for e in after if e[2] == "goal")
+    assert change["first_goal_steps_after"] == first[3] - (goal_step - 1)
+    (event,) = rep["events"]
+    assert "event 'a'" in event["what"]
+    in_phase = [e for e in after if e[3] <= event["step"]]
+    assert change["episodes"] == len(in_phase)
+    assert change["previous_pct"] <= change["previous_visit_pct"] <= 100.0
+    assert change["current_pct"] == pytest.approx(
+        100.0 * sum(e[2] == "goal" for e in in_phase) / len(in_phase))
+    first = next(e for e in live if e[3] > event["step"] and e[2] == "goal")
+    assert event["first_goal_steps_after"] == first[3] - event["step"]
+    assert rep["map"]["nodes"] > 0 and 0.0 <= rep["map"]["mean_reliability"] <= 1.0
     # shortest paths of the maze in force (from /maze_grid): G 4 steps from S, goal 1 3 steps
     # (before and after event a, which only blocks the top corridor)
-    assert rep['start_cell'] == [1, 1]
-    assert rep['learning']['optimal_steps'] == 4
-    assert change['optimal_steps'] == 3 and event['optimal_steps'] == 3
-    k = change['episodes_to_optimal']
-    assert k is None or change['steps_per_episode'][k - 1] == 3
+    assert rep["start_cell"] == [1, 1]
+    assert rep["learning"]["optimal_steps"] == 4
+    assert change["optimal_steps"] == 3 and event["optimal_steps"] == 3
+    k = change["episodes_to_optimal"]
+    assert k is None or change["steps_per_episode"][k - 1] == 3

@@ -25,72 +25,72 @@ def observation_bytes(step: int) -> bytes:
 
 
 def topic() -> TopicInfo:
-    t = 'geometry_msgs/msg/Point'
-    return TopicInfo('/observation', t, definitions.ros2msg_definition(t),
-                     [{'history': 'unknown', 'depth': 0, 'reliability': 'reliable',
-                       'durability': 'volatile'}], definitions.type_hash(t))
+    t = "geometry_msgs/msg/Point"
+    return TopicInfo("/observation", t, definitions.ros2msg_definition(t),
+                     [{"history": "unknown", "depth": 0, "reliability": "reliable",
+                       "durability": "volatile"}], definitions.type_hash(t))
 
 
 def test_definition_uses_the_short_msg_form_and_each_dependency_once():
-    text = definitions.ros2msg_definition('visualization_msgs/msg/MarkerArray')
-    names = [line[5:] for line in text.splitlines() if line.startswith('MSG: ')]
-    assert names[0] == 'visualization_msgs/Marker'
-    assert 'std_msgs/Header' in names and 'builtin_interfaces/Time' in names
+    text = definitions.ros2msg_definition("visualization_msgs/msg/MarkerArray")
+    names = [line[5:] for line in text.splitlines() if line.startswith("MSG: ")]
+    assert names[0] == "visualization_msgs/Marker"
+    assert "std_msgs/Header" in names and "builtin_interfaces/Time" in names
     assert len(names) == len(set(names))
-    assert all('/msg/' not in n for n in names)
-    assert definitions.type_hash('std_msgs/msg/Header').startswith('RIHS01_')
-    with pytest.raises(definitions.DefinitionError, match='no_such_pkg'):
-        definitions.ros2msg_definition('no_such_pkg/msg/Thing')
+    assert all("/msg/" not in n for n in names)
+    assert definitions.type_hash("std_msgs/msg/Header").startswith("RIHS01_")
+    with pytest.raises(definitions.DefinitionError, match="no_such_pkg"):
+        definitions.ros2msg_definition("no_such_pkg/msg/Thing")
 
 
-@pytest.mark.parametrize('compression', ['zstd', 'lz4', 'none'])
+@pytest.mark.parametrize("compression", ["zstd", "lz4", "none"])
 def test_split_by_duration_every_file_complete(tmp_path, compression):
-    bag = tmp_path / 'b'
+    bag = tmp_path / "b"
     w = BagWriter(bag, compression=compression, chunk_size=4096,
                   max_file_duration_ns=10**9)
     w.add_topic(topic())
     t0 = 1_700_000_000 * 10**9
     for i in range(300):                          # 3 s of log time at 100 msg/s
-        w.write('/observation', observation_bytes(i), t0 + i * 10**7, t0 + i * 10**7 - 1000, i)
+        w.write("/observation", observation_bytes(i), t0 + i * 10**7, t0 + i * 10**7 - 1000, i)
     meta = w.close()
-    assert len(meta['files']) == 3 and meta['message_count'] == 300
+    assert len(meta["files"]) == 3 and meta["message_count"] == 300
     total = 0
-    for f in meta['files']:
-        with open(bag / f['path'], 'rb') as fh:
+    for f in meta["files"]:
+        with open(bag / f["path"], "rb") as fh:
             reader = make_reader(fh)
             s = reader.get_summary()
-            assert s.statistics.message_count == f['message_count'] == 100
-            rec = next(m for m in reader.iter_metadata() if m.name == 'rosbag2')
-            assert yaml.safe_load(rec.metadata['serialized_metadata'])['message_count'] == 100
+            assert s.statistics.message_count == f["message_count"] == 100
+            rec = next(m for m in reader.iter_metadata() if m.name == "rosbag2")
+            assert yaml.safe_load(rec.metadata["serialized_metadata"])["message_count"] == 100
             total += s.statistics.message_count
     assert total == 300
-    on_disk = yaml.safe_load((bag / 'metadata.yaml').read_text())
-    assert on_disk['rosbag2_bagfile_information']['relative_file_paths'] == \
-        [f['path'] for f in meta['files']]
+    on_disk = yaml.safe_load((bag / "metadata.yaml").read_text())
+    assert on_disk["rosbag2_bagfile_information"]["relative_file_paths"] == \
+        [f["path"] for f in meta["files"]]
     with pytest.raises(FileExistsError):          # never overwrite a bag
         BagWriter(bag)
 
 
 def test_recover_a_directory_whose_last_file_was_cut(tmp_path):
-    bag = tmp_path / 'cut'
-    w = BagWriter(bag, compression='none', chunk_size=2048, max_file_size=20000)
+    bag = tmp_path / "cut"
+    w = BagWriter(bag, compression="none", chunk_size=2048, max_file_size=20000)
     w.add_topic(topic())
     for i in range(1000):
-        w.write('/observation', observation_bytes(i), 10**18 + i * 10**6, 10**18 + i * 10**6, i)
+        w.write("/observation", observation_bytes(i), 10**18 + i * 10**6, 10**18 + i * 10**6, i)
     meta = w.close()
-    files = [bag / f['path'] for f in meta['files']]
+    files = [bag / f["path"] for f in meta["files"]]
     assert len(files) >= 3
     last = files[-1]
     data = last.read_bytes()
     last.write_bytes(data[:len(data) // 2])        # the writer "died" in the last file
     with pytest.raises(Exception):
-        with open(last, 'rb') as fh:
+        with open(last, "rb") as fh:
             make_reader(fh).get_summary()
     results = recover(bag)
-    out = bag.with_name('cut.recovered')
+    out = bag.with_name("cut.recovered")
     assert [r.complete for r in results] == [True] * (len(files) - 1) + [False]
     saved = sum(r.messages for r in results)
-    assert sum(f['message_count'] for f in meta['files'][:-1]) < saved < 1000
+    assert sum(f["message_count"] for f in meta["files"][:-1]) < saved < 1000
     from rosbags.highlevel import AnyReader
     with AnyReader([out]) as reader:
         ids = [int(reader.deserialize(raw, c.msgtype).x) for c, _t, raw in reader.messages()]

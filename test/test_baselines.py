@@ -5,6 +5,7 @@ its hard-coded model does not know."""
 
 import numpy as np
 import pytest
+from small_mazes import CORRIDOR, SMALL
 
 from maze_sim import GridWorld, Maze
 from maze_sim.world import StepInfo
@@ -18,8 +19,6 @@ from tmgwr_agent.experiments.runner import (
     set_goal,
     train_until_converged,
 )
-
-from small_mazes import CORRIDOR, SMALL
 
 UP, DOWN, LEFT, RIGHT = range(4)
 

@@ -10,16 +10,15 @@ import sys
 
 import numpy as np
 import pytest
+from small_mazes import SMALL
 
 from maze_sim import Maze
+from maze_sim.maze import maze_file
 from tmgwr_agent.experiments.env_change import oracle_steps
 from tmgwr_agent.experiments.runner import Caps
 from tmgwr_agent.experiments.stats import stat
-from maze_sim.maze import maze_file
 
 DEFAULT_MAZE = maze_file()
-
-from small_mazes import SMALL
 
 
 @pytest.fixture(scope="module")

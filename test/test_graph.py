@@ -13,7 +13,6 @@ import signal
 import time
 
 import pytest
-
 from ros_helpers import allocate_domain, release_domain, spawn_module
 
 pytestmark = pytest.mark.ros

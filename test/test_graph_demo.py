@@ -14,7 +14,6 @@ from __future__ import annotations
 import ast
 
 import pytest
-
 from ros_helpers import ROOT, parse_json_line, spawn_module, spawn_python
 
 pytestmark = pytest.mark.ros
@@ -56,11 +55,12 @@ def test_demo_scenario_end_to_end(ros_domain, tmp_path):
 
 
 def test_ring_bench_returns_sane_numbers(ros_domain):
-    code = r'''
+    code = r"""
 import json
 from tmgwr_agent.graph.bench import ring
-print("RESULT " + json.dumps({"2": ring(2, laps=300, warmup=20), "5": ring(5, laps=200, warmup=20)}))
-'''
+rings = {"2": ring(2, laps=300, warmup=20), "5": ring(5, laps=200, warmup=20)}
+print("RESULT " + json.dumps(rings))
+"""
     proc = spawn_python(code, domain=ros_domain, name="ring bench")
     with proc:
         output = proc.wait(timeout=150)

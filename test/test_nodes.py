@@ -17,7 +17,6 @@ import time
 
 import numpy as np
 import pytest
-
 from ros_helpers import ROOT, parse_json_line, ros2_run, spawn_python
 
 pytestmark = pytest.mark.ros
@@ -27,7 +26,7 @@ AGENT_NODES = ("sensory_preprocessor", "map_learner", "motivation_estimator",
                "action_selector")
 
 # A service client: argv[1] = JSON list of [service, type, request fields].
-CALL = r'''
+CALL = r"""
 import json, sys, time
 import rclpy
 from geometry_msgs.msg import Point
@@ -58,10 +57,10 @@ for name, typ, fields in json.loads(sys.argv[1]):
 print("RESULT " + json.dumps(results), flush=True)
 node.destroy_node()
 rclpy.shutdown()
-'''
+"""
 
 # Prints the latched map (node count, link count, weights) once it arrives.
-MAP_ECHO = r'''
+MAP_ECHO = r"""
 import ast
 import json
 import rclpy
@@ -77,7 +76,7 @@ def show(m):
 node.create_subscription(SensorimotorMap, "/map", show, qos)
 print("ECHO READY", flush=True)
 rclpy.spin(node)
-'''
+"""
 
 
 def start_graph(domain, tmp_path, sim_args=(), learner_args=(), seed=1, goal="2"):

@@ -21,84 +21,83 @@ from __future__ import annotations
 
 import importlib.util
 import os
-from pathlib import Path
 import shutil
 import subprocess
 import sys
 import time
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import pytest
-
 from ros_helpers import ROOT
 
-SRC = ROOT / 'src'
-CHECKER = 'test/test_package_xml.py'
+SRC = ROOT / "src"
+CHECKER = "test/test_package_xml.py"
 
 
 def _package_xml(pkg_dir: Path):
-    root = ET.parse(pkg_dir / 'package.xml').getroot()
-    deps = {e.text.strip() for tag in ('depend', 'exec_depend', 'build_depend', 'test_depend')
+    root = ET.parse(pkg_dir / "package.xml").getroot()
+    deps = {e.text.strip() for tag in ("depend", "exec_depend", "build_depend", "test_depend")
             for e in root.findall(tag)}
-    build_type = root.findtext('export/build_type', default='').strip()
-    return root.findtext('name').strip(), deps, build_type
+    build_type = root.findtext("export/build_type", default="").strip()
+    return root.findtext("name").strip(), deps, build_type
 
 
 PACKAGES = {}
-for _xml in sorted(SRC.glob('*/package.xml')):
+for _xml in sorted(SRC.glob("*/package.xml")):
     _name, _deps, _type = _package_xml(_xml.parent)
     PACKAGES[_name] = (_xml.parent, _deps, _type)
-PYTHON_PACKAGES = sorted(n for n, (_, _, t) in PACKAGES.items() if t == 'ament_python')
+PYTHON_PACKAGES = sorted(n for n, (_, _, t) in PACKAGES.items() if t == "ament_python")
 
 
 def _load_checker(pkg: str):
     """The package's own copy of test_package_xml.py, as a module (its PKG_DIR is its package)."""
     path = PACKAGES[pkg][0] / CHECKER
-    spec = importlib.util.spec_from_file_location(f'_package_xml_check_{pkg}', path)
+    spec = importlib.util.spec_from_file_location(f"_package_xml_check_{pkg}", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
 
 
 def test_workspace_packages():
-    assert set(PACKAGES) == {'tmgwr_common', 'maze_sim', 'tmgwr_agent', 'tmgwr_interfaces'}
-    assert PYTHON_PACKAGES == ['maze_sim', 'tmgwr_agent', 'tmgwr_common']
+    assert set(PACKAGES) == {"tmgwr_common", "maze_sim", "tmgwr_agent", "tmgwr_interfaces"}
+    assert PYTHON_PACKAGES == ["maze_sim", "tmgwr_agent", "tmgwr_common"]
 
 
 def test_every_python_package_carries_the_same_checker():
-    texts = {pkg: (PACKAGES[pkg][0] / CHECKER).read_text(encoding='utf-8')
+    texts = {pkg: (PACKAGES[pkg][0] / CHECKER).read_text(encoding="utf-8")
              for pkg in PYTHON_PACKAGES}
-    reference = texts['tmgwr_common']
+    reference = texts["tmgwr_common"]
     differ = [pkg for pkg, text in texts.items() if text != reference]
-    assert not differ, (f'{CHECKER} differs from src/tmgwr_common/{CHECKER} in {differ}: '
-                        f'edit one and copy it to the others')
+    assert not differ, (f"{CHECKER} differs from src/tmgwr_common/{CHECKER} in {differ}: "
+                        f"edit one and copy it to the others")
 
 
-@pytest.mark.parametrize('pkg', PYTHON_PACKAGES)
+@pytest.mark.parametrize("pkg", PYTHON_PACKAGES)
 def test_package_checks(pkg):
     """Runs every test of the package's test_package_xml.py (what `colcon test` runs)."""
     checker = _load_checker(pkg)
     skipped = []
-    for name in sorted(n for n in dir(checker) if n.startswith('test_')):
+    for name in sorted(n for n in dir(checker) if n.startswith("test_")):
         try:
             getattr(checker, name)()
         except pytest.skip.Exception as exc:
-            skipped.append(f'{name}: {exc}')
+            skipped.append(f"{name}: {exc}")
     # The repository's install/ is built (make test bootstraps first): only "no console
     # scripts" may skip.
-    assert all('no console scripts' in s for s in skipped), skipped
+    assert all("no console scripts" in s for s in skipped), skipped
 
 
 def test_dependency_graph_has_no_cycle_and_maze_sim_stays_below_the_agent():
     inside = {n: deps & set(PACKAGES) for n, (_, deps, _) in PACKAGES.items()}
-    assert inside['tmgwr_common'] == set()
-    assert 'tmgwr_agent' not in inside['maze_sim']
-    assert {'maze_sim', 'tmgwr_common', 'tmgwr_interfaces'} <= inside['tmgwr_agent']
+    assert inside["tmgwr_common"] == set()
+    assert "tmgwr_agent" not in inside["maze_sim"]
+    assert {"maze_sim", "tmgwr_common", "tmgwr_interfaces"} <= inside["tmgwr_agent"]
     # topological order exists (colcon refuses a cycle)
     done: set[str] = set()
     while len(done) < len(inside):
         ready = {n for n, deps in inside.items() if n not in done and deps <= done}
-        assert ready, f'dependency cycle among {sorted(set(inside) - done)}'
+        assert ready, f"dependency cycle among {sorted(set(inside) - done)}"
         done |= ready
 
 
@@ -106,32 +105,32 @@ def test_dependency_graph_has_no_cycle_and_maze_sim_stays_below_the_agent():
 def _build_env(venv: Path) -> dict[str, str]:
     """tools/bootstrap.sh's build_env: the venv as the only underlay, no source trees."""
     env = {k: v for k, v in os.environ.items()
-           if k not in ('PYTHONPATH', 'COLCON_PREFIX_PATH', 'AMENT_CURRENT_PREFIX',
-                        '_ROS_WHEELS_BOOTSTRAP_COMPLETE', 'LD_LIBRARY_PATH')
-           and not k.startswith('PYTEST_')}
+           if k not in ("PYTHONPATH", "COLCON_PREFIX_PATH", "AMENT_CURRENT_PREFIX",
+                        "_ROS_WHEELS_BOOTSTRAP_COMPLETE", "LD_LIBRARY_PATH")
+           and not k.startswith("PYTEST_")}
     env.update(VIRTUAL_ENV=str(venv), PATH=f"{venv / 'bin'}:{os.environ.get('PATH', '')}",
                AMENT_PREFIX_PATH=str(venv), CMAKE_PREFIX_PATH=str(venv),
-               PYTHONDONTWRITEBYTECODE='1', MAKEFLAGS=f'-j{os.cpu_count() or 2}')
+               PYTHONDONTWRITEBYTECODE="1", MAKEFLAGS=f"-j{os.cpu_count() or 2}")
     return env
 
 
 @pytest.mark.slow
 @pytest.mark.timeout(400)
 def test_fresh_workspace_colcon_build_and_test(tmp_path):
-    venv = ROOT / '.venv'
-    colcon = venv / 'bin' / 'colcon'
+    venv = ROOT / ".venv"
+    colcon = venv / "bin" / "colcon"
     if not colcon.exists():
-        pytest.skip(f'{colcon} missing: run tools/bootstrap.sh')
-    shutil.copytree(SRC, tmp_path / 'src',
-                    ignore=shutil.ignore_patterns('__pycache__', '.pytest_cache'))
+        pytest.skip(f"{colcon} missing: run tools/bootstrap.sh")
+    shutil.copytree(SRC, tmp_path / "src",
+                    ignore=shutil.ignore_patterns("__pycache__", ".pytest_cache"))
     env = _build_env(venv)
-    handlers = ['--event-handlers', 'console_direct-', 'desktop_notification-',
-                'terminal_title-']
+    handlers = ["--event-handlers", "console_direct-", "desktop_notification-",
+                "terminal_title-"]
     steps = [
-        ('build', [str(colcon), 'build', *handlers,
-                   '--cmake-args', f"-DPython3_EXECUTABLE={venv / 'bin' / 'python'}"]),
-        ('test', [str(colcon), 'test', *handlers]),
-        ('test-result', [str(colcon), 'test-result', '--verbose']),
+        ("build", [str(colcon), "build", *handlers,
+                   "--cmake-args", f"-DPython3_EXECUTABLE={venv / 'bin' / 'python'}"]),
+        ("test", [str(colcon), "test", *handlers]),
+        ("test-result", [str(colcon), "test-result", "--verbose"]),
     ]
     timings = {}
     for step, cmd in steps:
@@ -140,11 +139,11 @@ def test_fresh_workspace_colcon_build_and_test(tmp_path):
                               timeout=360)
         timings[step] = round(time.monotonic() - t0, 1)
         out = proc.stdout + proc.stderr
-        assert proc.returncode == 0, f'colcon {step} failed ({timings}):\n{out[-6000:]}'
-    summary = [line for line in proc.stdout.splitlines() if line.startswith('Summary:')]
-    assert summary and ' 0 errors, 0 failures' in summary[-1], proc.stdout
+        assert proc.returncode == 0, f"colcon {step} failed ({timings}):\n{out[-6000:]}"
+    summary = [line for line in proc.stdout.splitlines() if line.startswith("Summary:")]
+    assert summary and " 0 errors, 0 failures" in summary[-1], proc.stdout
     n_tests = int(summary[-1].split()[1])
     assert n_tests >= 3 * 6, summary
     for pkg in PYTHON_PACKAGES:
-        assert (tmp_path / 'build' / pkg / 'pytest.xml').is_file(), f'no tests ran for {pkg}'
-    print(f'fresh workspace: {timings}, {summary[-1]}', file=sys.stderr)
+        assert (tmp_path / "build" / pkg / "pytest.xml").is_file(), f"no tests ran for {pkg}"
+    print(f"fresh workspace: {timings}, {summary[-1]}", file=sys.stderr)

@@ -20,15 +20,14 @@ from pathlib import Path
 
 import pytest
 import yaml
-
 from ros_helpers import ROOT, RosProcess, base_env, ros2_run, ros_env, spawn_python
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
-JS_DIR = ROOT / 'test' / 'js'
-NODE = os.environ.get('TMGWR_NODE', '/usr/bin/node')
+JS_DIR = ROOT / "test" / "js"
+NODE = os.environ.get("TMGWR_NODE", "/usr/bin/node")
 
-PUBLISHER = r'''
+PUBLISHER = r"""
 import sys, time
 import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy, DurabilityPolicy
@@ -66,40 +65,40 @@ for i in range(n):
 print('DONE %d %.3f' % (n, time.perf_counter() - t0), flush=True)
 sys.stdin.readline() if len(sys.argv) > 3 else time.sleep(1.0)
 node.destroy_node(); rclpy.shutdown()
-'''
+"""
 
 
 # ----------------------------------------------------------------------------- helpers
-def start_recorder(domain: int, out: Path, *params: str, name: str = 'recorder') -> RosProcess:
-    args = ['--ros-args', '-p', f'output_dir:={out}']
+def start_recorder(domain: int, out: Path, *params: str, name: str = "recorder") -> RosProcess:
+    args = ["--ros-args", "-p", f"output_dir:={out}"]
     for p in params:
-        args += ['-p', p]
-    return ros2_run('tmgwr_agent', 'recorder', *args, domain=domain, name=name)
+        args += ["-p", p]
+    return ros2_run("tmgwr_agent", "recorder", *args, domain=domain, name=name)
 
 
 def record(domain: int, out: Path, n: int, rate: float, *params: str,
            stop_signal=signal.SIGINT) -> str:
     """Record ``n`` test messages; the recorder is stopped with ``stop_signal``."""
     rec = start_recorder(domain, out, *params)
-    pub = spawn_python(PUBLISHER, str(n), str(rate), domain=domain, name='publisher')
+    pub = spawn_python(PUBLISHER, str(n), str(rate), domain=domain, name="publisher")
     with rec, pub:
-        rec.wait_for_line(r'recording .* to ', timeout=30)
-        pub.wait_for_line(r'^DONE', timeout=30 + n / rate)
+        rec.wait_for_line(r"recording .* to ", timeout=30)
+        pub.wait_for_line(r"^DONE", timeout=30 + n / rate)
         pub.wait(timeout=20)
         time.sleep(0.3)
         os.killpg(rec.proc.pid, stop_signal)
-        rec.wait_for_line(r'recorded: received', timeout=20)
+        rec.wait_for_line(r"recorded: received", timeout=20)
         rec.wait(timeout=20, check=False)
-    assert rec.proc.returncode == 0, rec.describe('recorder did not exit cleanly')
+    assert rec.proc.returncode == 0, rec.describe("recorder did not exit cleanly")
     return rec.output
 
 
 def mcap_files(bag: Path) -> list[Path]:
-    meta = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
-    return [bag / p for p in meta['relative_file_paths']]
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    return [bag / p for p in meta["relative_file_paths"]]
 
 
-def read_step_ids(paths: list[Path], topic: str = '/observation') -> list[int]:
+def read_step_ids(paths: list[Path], topic: str = "/observation") -> list[int]:
     from rosbags.highlevel import AnyReader
     with AnyReader(paths) as reader:
         conns = [c for c in reader.connections if c.topic == topic]
@@ -107,23 +106,23 @@ def read_step_ids(paths: list[Path], topic: str = '/observation') -> list[int]:
                 for c, _t, raw in reader.messages(connections=conns)]
 
 
-@pytest.fixture(scope='session')
+@pytest.fixture(scope="session")
 def foxglove_decoder():
     """``node test/js/decode.js FILES`` with the pinned npm packages installed by ``npm ci``."""
-    lock = JS_DIR / 'package-lock.json'
-    stamp = JS_DIR / 'node_modules' / '.package-lock.json'
+    lock = JS_DIR / "package-lock.json"
+    stamp = JS_DIR / "node_modules" / ".package-lock.json"
     if not stamp.is_file() or stamp.stat().st_mtime < lock.stat().st_mtime:
-        proc = subprocess.run(['npm', 'ci', '--no-audit', '--no-fund'], cwd=JS_DIR,
+        proc = subprocess.run(["npm", "ci", "--no-audit", "--no-fund"], cwd=JS_DIR,
                               capture_output=True, text=True, timeout=300)
-        assert proc.returncode == 0, f'npm ci failed in {JS_DIR}:\n{proc.stdout}\n{proc.stderr}'
+        assert proc.returncode == 0, f"npm ci failed in {JS_DIR}:\n{proc.stdout}\n{proc.stderr}"
 
     def decode(paths: list[Path]) -> dict:
-        proc = subprocess.run([NODE, str(JS_DIR / 'decode.js'), *map(str, paths)],
+        proc = subprocess.run([NODE, str(JS_DIR / "decode.js"), *map(str, paths)],
                               capture_output=True, text=True, timeout=120)
-        assert proc.stdout, f'decode.js printed nothing:\n{proc.stderr}'
+        assert proc.stdout, f"decode.js printed nothing:\n{proc.stderr}"
         result = json.loads(proc.stdout)
         assert proc.returncode == 0, \
-            f'Foxglove readers failed:\n{json.dumps(result)[:4000]}\n{proc.stderr}'
+            f"Foxglove readers failed:\n{json.dumps(result)[:4000]}\n{proc.stderr}"
         return result
     return decode
 
@@ -132,7 +131,7 @@ def tmgwr_cli(*args: str, domain: int | None = None,
               timeout: float = 120) -> subprocess.CompletedProcess:
     """``./tmgwr ARGS`` (python -m tmgwr_agent.cli) in ``domain`` when it talks ROS."""
     env = ros_env(domain) if domain is not None else base_env()
-    return subprocess.run([str(ROOT / '.venv/bin/python'), '-m', 'tmgwr_agent.cli', *args],
+    return subprocess.run([str(ROOT / ".venv/bin/python"), "-m", "tmgwr_agent.cli", *args],
                           env=env, capture_output=True, text=True, timeout=timeout)
 
 
@@ -142,22 +141,22 @@ RATE = 500.0
 
 
 def test_recording_opens_everywhere_and_counts_match(ros_domain, tmp_path, foxglove_decoder):
-    bag = tmp_path / 'run'
+    bag = tmp_path / "run"
     # lz4 chunks of 16 KiB, split every 64 KiB: several complete files; stopped by SIGTERM
-    out = record(ros_domain, bag, N, RATE, 'compression:=lz4', 'chunk_size:=16384',
-                 'max_bag_size:=65536', 'flush_period:=0.2', stop_signal=signal.SIGTERM)
-    assert f'/observation: received {N}, written {N}' in out, out
+    out = record(ros_domain, bag, N, RATE, "compression:=lz4", "chunk_size:=16384",
+                 "max_bag_size:=65536", "flush_period:=0.2", stop_signal=signal.SIGTERM)
+    assert f"/observation: received {N}, written {N}" in out, out
 
     files = mcap_files(bag)
-    assert len(files) >= 2, f'expected a split bag, got {files}'
+    assert len(files) >= 2, f"expected a split bag, got {files}"
     # rosbag2 directory (metadata.yaml version 9) read by rosbags' rosbag2 reader
     from rosbags.rosbag2 import Reader
     with Reader(bag) as r2:
         counts = {c.topic: c.msgcount for c in r2.connections}
-        assert counts['/observation'] == N
-        assert counts['/goal'] == 1                   # latched before the recorder started
-        qos_goal = next(c for c in r2.connections if c.topic == '/goal').ext.offered_qos_profiles
-        assert qos_goal[0].durability.name == 'TRANSIENT_LOCAL'
+        assert counts["/observation"] == N
+        assert counts["/goal"] == 1                   # latched before the recorder started
+        qos_goal = next(c for c in r2.connections if c.topic == "/goal").ext.offered_qos_profiles
+        assert qos_goal[0].durability.name == "TRANSIENT_LOCAL"
     # every message through AnyReader, from the directory and file by file
     assert read_step_ids([bag]) == list(range(N))
     assert read_step_ids(files) == list(range(N))
@@ -166,114 +165,114 @@ def test_recording_opens_everywhere_and_counts_match(ros_domain, tmp_path, foxgl
     from mcap.reader import make_reader
     total = 0
     for path in files:
-        with open(path, 'rb') as f:
+        with open(path, "rb") as f:
             reader = make_reader(f)
-            assert reader.get_header().profile == 'ros2'
+            assert reader.get_header().profile == "ros2"
             summary = reader.get_summary()
             assert summary.statistics is not None and summary.chunk_indexes
             total += summary.statistics.message_count
             for ch in summary.channels.values():
                 schema = summary.schemas[ch.schema_id]
-                assert schema.encoding == 'ros2msg' and ch.message_encoding == 'cdr'
+                assert schema.encoding == "ros2msg" and ch.message_encoding == "cdr"
                 text = schema.data.decode()
-                assert 'MSG: std_msgs/msg/' not in text
-                if ch.topic == '/observation':
-                    assert '\nMSG: std_msgs/Header\n' in text
-                    assert '\nMSG: builtin_interfaces/Time\n' in text
-                    qos = yaml.safe_load(ch.metadata['offered_qos_profiles'])
-                    assert qos[0]['reliability'] == 'reliable'
-                    assert qos[0]['durability'] == 'volatile'
+                assert "MSG: std_msgs/msg/" not in text
+                if ch.topic == "/observation":
+                    assert "\nMSG: std_msgs/Header\n" in text
+                    assert "\nMSG: builtin_interfaces/Time\n" in text
+                    qos = yaml.safe_load(ch.metadata["offered_qos_profiles"])
+                    assert qos[0]["reliability"] == "reliable"
+                    assert qos[0]["durability"] == "volatile"
                     expected_hash = json.loads(
-                        (ROOT / 'install/tmgwr_interfaces/share/tmgwr_interfaces/msg/'
-                                'Observation.json').read_text())['type_hashes'][0]['hash_string']
-                    assert ch.metadata['topic_type_hash'] == expected_hash
-                if ch.topic == '/agent_pose':
-                    qos = yaml.safe_load(ch.metadata['offered_qos_profiles'])
-                    assert qos[0]['reliability'] == 'best_effort'
-            meta = [m for m in reader.iter_metadata() if m.name == 'rosbag2']
+                        (ROOT / "install/tmgwr_interfaces/share/tmgwr_interfaces/msg/"
+                                "Observation.json").read_text())["type_hashes"][0]["hash_string"]
+                    assert ch.metadata["topic_type_hash"] == expected_hash
+                if ch.topic == "/agent_pose":
+                    qos = yaml.safe_load(ch.metadata["offered_qos_profiles"])
+                    assert qos[0]["reliability"] == "best_effort"
+            meta = [m for m in reader.iter_metadata() if m.name == "rosbag2"]
             assert len(meta) == 1
-            info = yaml.safe_load(meta[0].metadata['serialized_metadata'])
-            assert info['version'] == 9 and info['storage_identifier'] == 'mcap'
-            assert info['message_count'] == summary.statistics.message_count
-            assert info['relative_file_paths'] == [path.name]
-            for key in ('duration', 'starting_time', 'topics_with_message_count', 'files',
-                        'compression_format', 'compression_mode', 'custom_data', 'ros_distro'):
+            info = yaml.safe_load(meta[0].metadata["serialized_metadata"])
+            assert info["version"] == 9 and info["storage_identifier"] == "mcap"
+            assert info["message_count"] == summary.statistics.message_count
+            assert info["relative_file_paths"] == [path.name]
+            for key in ("duration", "starting_time", "topics_with_message_count", "files",
+                        "compression_format", "compression_mode", "custom_data", "ros_distro"):
                 assert key in info
-            for _s, _c, m in reader.iter_messages(topics=['/observation']):
+            for _s, _c, m in reader.iter_messages(topics=["/observation"]):
                 assert 0 < m.publish_time <= m.log_time < m.publish_time + 5 * 10**9
-    top = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
-    assert top['message_count'] == total
+    top = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert top["message_count"] == total
 
     # Foxglove's own readers decode every message of every file
     result = foxglove_decoder(files)
     steps, fox_counts = [], {}
     for path in files:
-        res = result['files'][str(path)]
-        assert res['profile'] == 'ros2'
-        for topic, t in res['topics'].items():
-            assert not t['errors'], (path, topic, t['errors'])
-            assert t['trailing'] == 0, (path, topic)
-            fox_counts[topic] = fox_counts.get(topic, 0) + t['count']
-        steps += res['topics'].get('/observation', {}).get('step_ids', [])
+        res = result["files"][str(path)]
+        assert res["profile"] == "ros2"
+        for topic, t in res["topics"].items():
+            assert not t["errors"], (path, topic, t["errors"])
+            assert t["trailing"] == 0, (path, topic)
+            fox_counts[topic] = fox_counts.get(topic, 0) + t["count"]
+        steps += res["topics"].get("/observation", {}).get("step_ids", [])
     assert steps == list(range(N))
-    assert fox_counts['/goal'] == 1
-    assert fox_counts['/observation'] == N
+    assert fox_counts["/goal"] == 1
+    assert fox_counts["/observation"] == N
 
 
 def test_bad_parameters_are_refused_by_name(ros_domain, tmp_path):
-    for param, word in (('compression:=brotli', 'compression'), ('chunk_size:=10', 'chunk_size'),
-                        ('max_bag_duration:=-1.0', 'max_bag_duration'),
-                        ("exclude:='(('", 'exclude')):
-        rec = start_recorder(ros_domain, tmp_path / 'x', param)
+    for param, word in (("compression:=brotli", "compression"), ("chunk_size:=10", "chunk_size"),
+                        ("max_bag_duration:=-1.0", "max_bag_duration"),
+                        ("exclude:='(('", "exclude")):
+        rec = start_recorder(ros_domain, tmp_path / "x", param)
         with rec:
             out = rec.wait(timeout=30, check=False)
         assert rec.proc.returncode != 0, out
-        assert word in out and 'cannot start' in out, out
+        assert word in out and "cannot start" in out, out
 
 
 def test_kill9_mid_run_then_recover_saves_what_was_written(ros_domain, tmp_path):
-    bag = tmp_path / 'killed'
+    bag = tmp_path / "killed"
     # flush the open chunk every 10 ms: what a kill -9 can lose is bounded by that
-    rec = start_recorder(ros_domain, bag, 'flush_period:=0.01')
-    pub = spawn_python(PUBLISHER, str(N), '250', 'hold', domain=ros_domain, name='publisher')
+    rec = start_recorder(ros_domain, bag, "flush_period:=0.01")
+    pub = spawn_python(PUBLISHER, str(N), "250", "hold", domain=ros_domain, name="publisher")
     with rec, pub:
-        rec.wait_for_line(r'recording .* to ', timeout=30)
-        line = pub.wait_for_line(r'^PUBLISHED (6\d\d|[7-9]\d\d)', timeout=60)
+        rec.wait_for_line(r"recording .* to ", timeout=30)
+        line = pub.wait_for_line(r"^PUBLISHED (6\d\d|[7-9]\d\d)", timeout=60)
         published = int(line.split()[1])     # at least this many were out before the kill
         time.sleep(0.05)
         os.killpg(rec.proc.pid, signal.SIGKILL)      # mid-run: the publisher goes on
         rec.proc.wait(timeout=10)
-        assert 'DONE' not in pub.output
-    path = bag / f'{bag.name}_0.mcap'
+        assert "DONE" not in pub.output
+    path = bag / f"{bag.name}_0.mcap"
     from mcap.reader import make_reader
     with pytest.raises(Exception):            # the indexed reader refuses the broken file
-        with open(path, 'rb') as f:
+        with open(path, "rb") as f:
             make_reader(f).get_summary()
 
-    proc = tmgwr_cli('recover', str(path))
+    proc = tmgwr_cli("recover", str(path))
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    fixed = bag / f'{bag.name}_0.recovered.mcap'
+    fixed = bag / f"{bag.name}_0.recovered.mcap"
     assert str(fixed) in proc.stdout
     steps = read_step_ids([fixed])
-    print(f'kill -9 after >= {published} published: {len(steps)} recovered')
+    print(f"kill -9 after >= {published} published: {len(steps)} recovered")
     assert len(steps) >= 0.99 * published, proc.stdout
     assert steps == list(range(len(steps)))
-    with open(fixed, 'rb') as f:
+    with open(fixed, "rb") as f:
         summary = make_reader(f).get_summary()
-    assert summary.statistics.message_count == int(proc.stdout.split(' messages saved')[0]
-                                                   .rsplit(' ', 1)[-1])
+    assert summary.statistics.message_count == int(proc.stdout.split(" messages saved")[0]
+                                                   .rsplit(" ", 1)[-1])
 
 
 def test_replay_rerecorded_is_byte_identical_with_timing(ros_domain, tmp_path):
-    first = tmp_path / 'first'
-    record(ros_domain, first, 600, 300.0, 'compression:=zstd')
-    second = tmp_path / 'second'
-    rec = start_recorder(ros_domain, second, 'topics:=[/observation,/goal]',
-                         'discovery_period:=0.1', name='rerecorder')
+    first = tmp_path / "first"
+    record(ros_domain, first, 600, 300.0, "compression:=zstd")
+    second = tmp_path / "second"
+    rec = start_recorder(ros_domain, second, "topics:=[/observation,/goal]",
+                         "discovery_period:=0.1", name="rerecorder")
     with rec:
-        rec.wait_for_line(r'recording .* to ', timeout=30)
-        proc = tmgwr_cli('replay', str(first), '--topics', '/observation', '/goal',
-                         '--wait-subscribers', '1', '--delay', '0.5', domain=ros_domain,
+        rec.wait_for_line(r"recording .* to ", timeout=30)
+        proc = tmgwr_cli("replay", str(first), "--topics", "/observation", "/goal",
+                         "--wait-subscribers", "1", "--delay", "0.5", domain=ros_domain,
                          timeout=60)
         assert proc.returncode == 0, proc.stdout + proc.stderr
         rec.stop()
@@ -284,46 +283,46 @@ def test_replay_rerecorded_is_byte_identical_with_timing(ros_domain, tmp_path):
     def messages(bag):
         out = {}
         for path in mcap_files(bag):
-            with open(path, 'rb') as f:
+            with open(path, "rb") as f:
                 for _s, ch, m in make_reader(f).iter_messages(log_time_order=True):
                     out.setdefault(ch.topic, []).append((m.log_time, bytes(m.data)))
         return out
 
     a, b = messages(first), messages(second)
-    assert len(b['/observation']) == len(a['/observation']) == 600
-    assert [d for _t, d in b['/observation']] == [d for _t, d in a['/observation']]
-    assert [d for _t, d in b['/goal']] == [d for _t, d in a['/goal']]
-    ta = [t for t, _d in a['/observation']]
-    tb = [t for t, _d in b['/observation']]
+    assert len(b["/observation"]) == len(a["/observation"]) == 600
+    assert [d for _t, d in b["/observation"]] == [d for _t, d in a["/observation"]]
+    assert [d for _t, d in b["/goal"]] == [d for _t, d in a["/goal"]]
+    ta = [t for t, _d in a["/observation"]]
+    tb = [t for t, _d in b["/observation"]]
     offsets = [(y - tb[0]) - (x - ta[0]) for x, y in zip(ta, tb)]
     # Both recordings carry reception jitter of a loaded 2-core machine: judge the typical
     # error and the tail, print the whole picture.
     err = sorted(abs(o) / 1e6 for o in offsets)
     median, p95, worst = err[len(err) // 2], err[int(0.95 * (len(err) - 1))], err[-1]
-    print(f'replay timing error (ms): median {median:.3f}, p95 {p95:.3f}, max {worst:.3f}')
+    print(f"replay timing error (ms): median {median:.3f}, p95 {p95:.3f}, max {worst:.3f}")
     assert median < 1.0 and p95 < 5.0, (median, p95, worst)
     assert worst < 50.0, (median, p95, worst)
 
     # --rate 4 --loop: the same bytes again and again, four times faster
-    third = tmp_path / 'third'
-    rec = start_recorder(ros_domain, third, 'topics:=[/observation]', 'discovery_period:=0.1',
-                         name='looprecorder')
+    third = tmp_path / "third"
+    rec = start_recorder(ros_domain, third, "topics:=[/observation]", "discovery_period:=0.1",
+                         name="looprecorder")
     with rec:
-        rec.wait_for_line(r'recording .* to ', timeout=30)
-        player = RosProcess([str(ROOT / '.venv/bin/python'), '-m', 'tmgwr_agent.cli', 'replay',
-                             str(first), '--topics', '/observation', '--rate', '4', '--loop',
-                             '--wait-subscribers', '1', '--delay', '0.2'],
-                            ros_env(ros_domain), name='replay-loop')
+        rec.wait_for_line(r"recording .* to ", timeout=30)
+        player = RosProcess([str(ROOT / ".venv/bin/python"), "-m", "tmgwr_agent.cli", "replay",
+                             str(first), "--topics", "/observation", "--rate", "4", "--loop",
+                             "--wait-subscribers", "1", "--delay", "0.2"],
+                            ros_env(ros_domain), name="replay-loop")
         with player:
-            player.wait_for_line(r'^replay: 1 topics', timeout=30)
+            player.wait_for_line(r"^replay: 1 topics", timeout=30)
             time.sleep(0.2 + 1.0 + 2 * 2.0 / 4)    # delay, matching, two passes at 4x
             player.stop()
         rec.stop()
-    c = messages(third)['/observation']
+    c = messages(third)["/observation"]
     passes = len(c) // 600
     assert passes >= 2, len(c)
     data = [d for _t, d in c]
-    assert data[:600 * passes] == [d for _t, d in a['/observation']] * passes
+    assert data[:600 * passes] == [d for _t, d in a["/observation"]] * passes
     orig = (ta[-1] - ta[0]) / 1e9
     fast = (c[599][0] - c[0][0]) / 1e9
     assert fast == pytest.approx(orig / 4, rel=0.1), (orig, fast)

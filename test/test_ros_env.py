@@ -10,16 +10,14 @@ import subprocess
 import time
 
 import pytest
-
-from ros_helpers import (ROOT, base_env, parse_json_line, spawn_python,
-                         unexpected_errors)
+from ros_helpers import ROOT, base_env, parse_json_line, spawn_python, unexpected_errors
 
 pytestmark = pytest.mark.ros
 
 
 # --------------------------------------------------------------------------- environment
 def test_fresh_process_imports_generated_types_and_source_trees():
-    code = r'''
+    code = r"""
 import json, os
 import rclpy
 from tmgwr_interfaces.msg import (Observation, Action, Features, SensorimotorState, MapNode,
@@ -38,70 +36,71 @@ print("RESULT " + json.dumps({
     "share": get_package_share_directory("tmgwr_interfaces"),
     "save_map_response_path": SaveMap.Response(path="x").path,
 }))
-'''
+"""
     env = base_env()
-    proc = subprocess.run([str(ROOT / '.venv/bin/python'), '-c', code], env=env,
+    proc = subprocess.run([str(ROOT / ".venv/bin/python"), "-c", code], env=env,
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    res = parse_json_line(proc.stdout, 'RESULT ')
-    assert res['interfaces'].startswith(str(ROOT / 'install'))
+    res = parse_json_line(proc.stdout, "RESULT ")
+    assert res["interfaces"].startswith(str(ROOT / "install"))
     # the ROS-free core is imported from src/, not from the installed copy
-    assert res['tmgwr_common'] == [str(ROOT / 'src/tmgwr_common/tmgwr_common')]
-    assert res['maze_sim'] == [str(ROOT / 'src/maze_sim/maze_sim')]
-    assert res['tmgwr_agent'][0] == str(ROOT / 'src/tmgwr_agent/tmgwr_agent')
-    assert res['actions'] == [0, 1, 2, 3]
-    assert res['prefix'] == str(ROOT / 'install/tmgwr_agent')
-    assert res['share'] == str(ROOT / 'install/tmgwr_interfaces/share/tmgwr_interfaces')
-    assert res['save_map_response_path'] == 'x'
+    assert res["tmgwr_common"] == [str(ROOT / "src/tmgwr_common/tmgwr_common")]
+    assert res["maze_sim"] == [str(ROOT / "src/maze_sim/maze_sim")]
+    assert res["tmgwr_agent"][0] == str(ROOT / "src/tmgwr_agent/tmgwr_agent")
+    assert res["actions"] == [0, 1, 2, 3]
+    assert res["prefix"] == str(ROOT / "install/tmgwr_agent")
+    assert res["share"] == str(ROOT / "install/tmgwr_interfaces/share/tmgwr_interfaces")
+    assert res["save_map_response_path"] == "x"
 
 
 def test_environment_variables():
     env = base_env()
-    assert env['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
-    assert env['RMW_IMPLEMENTATION'] == 'rmw_fastrtps_cpp'
-    assert os.path.isfile(env['FASTRTPS_DEFAULT_PROFILES_FILE'])
-    prefixes = env['AMENT_PREFIX_PATH'].split(':')
+    assert env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    assert env["RMW_IMPLEMENTATION"] == "rmw_fastrtps_cpp"
+    assert os.path.isfile(env["FASTRTPS_DEFAULT_PROFILES_FILE"])
+    prefixes = env["AMENT_PREFIX_PATH"].split(":")
     # the workspace overlays the venv (the wheels' prefix)
-    assert prefixes.index(str(ROOT / 'install/tmgwr_agent')) < prefixes.index(str(ROOT / '.venv'))
+    assert prefixes.index(str(ROOT / "install/tmgwr_agent")) < prefixes.index(str(ROOT / ".venv"))
     # the source trees come first, the shared package first of all (tools/env.sh)
-    assert env['PYTHONPATH'].split(':')[:3] == [str(ROOT / 'src/tmgwr_common'),
-                                                str(ROOT / 'src/maze_sim'),
-                                                str(ROOT / 'src/tmgwr_agent')]
+    assert env["PYTHONPATH"].split(":")[:3] == [str(ROOT / "src/tmgwr_common"),
+                                                str(ROOT / "src/maze_sim"),
+                                                str(ROOT / "src/tmgwr_agent")]
 
 
 def test_ros2_run_layout():
     """`ros2 run <pkg> <exe>` resolves install/<pkg>/lib/<pkg>/<exe>: the contract names."""
     expected = {
-        'tmgwr_common': [],
-        'maze_sim': ['maze_sim'],
-        'tmgwr_agent': ['sensory_preprocessor', 'map_learner', 'motivation_estimator',
-                        'action_selector', 'recorder'],
+        "tmgwr_common": [],
+        "maze_sim": ["maze_sim"],
+        "tmgwr_agent": ["sensory_preprocessor", "map_learner", "motivation_estimator",
+                        "action_selector", "recorder"],
     }
     for pkg, exes in expected.items():
-        assert (ROOT / 'install' / pkg / 'share/ament_index/resource_index/packages' / pkg).is_file()
-        assert (ROOT / 'install' / pkg / 'share' / pkg / 'package.xml').is_file()
+        index = ROOT / "install" / pkg / "share/ament_index/resource_index/packages"
+        assert (index / pkg).is_file()
+        assert (ROOT / "install" / pkg / "share" / pkg / "package.xml").is_file()
         for exe in exes:
-            path = ROOT / 'install' / pkg / 'lib' / pkg / exe
+            path = ROOT / "install" / pkg / "lib" / pkg / exe
             assert path.is_file() and os.access(path, os.X_OK), path
 
 
 def test_cmake_include_path_fix_applied():
-    leftovers = [p for p in glob.glob(str(ROOT / '.venv/share/*/cmake/*.cmake'))
-                 if '/opt/python/' in open(p, encoding='utf-8', errors='replace').read()]
+    leftovers = [p for p in glob.glob(str(ROOT / ".venv/share/*/cmake/*.cmake"))
+                 if "/opt/python/" in open(p, encoding="utf-8", errors="replace").read()]
     assert leftovers == []
 
 
 def test_bootstrap_second_run_is_a_noop():
     t0 = time.monotonic()
-    proc = subprocess.run([str(ROOT / 'tools/bootstrap.sh'), '--status'],
+    proc = subprocess.run([str(ROOT / "tools/bootstrap.sh"), "--status"],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
-    assert 'up to date' in proc.stderr
+    assert "up to date" in proc.stderr
     assert time.monotonic() - t0 < 5
 
 
 # --------------------------------------------------------------------------- pub/sub
-PUBLISHER = r'''
+PUBLISHER = r"""
 import sys, time
 import rclpy
 from rclpy.executors import ExternalShutdownException
@@ -142,9 +141,9 @@ except (KeyboardInterrupt, ExternalShutdownException):
 finally:
     node.destroy_node()
     rclpy.try_shutdown()
-'''
+"""
 
-SUBSCRIBER = r'''
+SUBSCRIBER = r"""
 import json, sys, time
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -179,41 +178,41 @@ ex.shutdown()
 node.destroy_node()
 rclpy.try_shutdown()
 sys.exit(0 if len(got) == N else 3)
-'''
+"""
 
 
 def _expected_observations(n):
     out = []
     for k in range(n):
         out.append({
-            'stamp': [1_700_000_000 + k, 999_999_999 - k], 'frame_id': 'maze/\u00e9t\u00e9',
-            'step_id': 2**64 - 1 - k, 'episode': 2**32 - 1 - k,
-            'sensors': [x.hex() for x in (k + 0.1, -0.0, 1e-300, 1.7976931348623157e308,
+            "stamp": [1_700_000_000 + k, 999_999_999 - k], "frame_id": "maze/\u00e9t\u00e9",
+            "step_id": 2**64 - 1 - k, "episode": 2**32 - 1 - k,
+            "sensors": [x.hex() for x in (k + 0.1, -0.0, 1e-300, 1.7976931348623157e308,
                                           math.inf, -math.inf)],
-            'bumped': bool(k % 2), 'goal_reached': k == n - 1, 'previous_goal_reached': k == 0,
-            'row': -(2**31) + k, 'col': 2**31 - 1 - k})
+            "bumped": bool(k % 2), "goal_reached": k == n - 1, "previous_goal_reached": k == 0,
+            "row": -(2**31) + k, "col": 2**31 - 1 - k})
     return out
 
 
 @pytest.mark.timeout(120)
 def test_observation_pubsub_between_processes(ros_domain):
     n = 5
-    sub = spawn_python(SUBSCRIBER, str(n), domain=ros_domain, name='subscriber')
-    pub = spawn_python(PUBLISHER, str(n), domain=ros_domain, name='publisher')
+    sub = spawn_python(SUBSCRIBER, str(n), domain=ros_domain, name="subscriber")
+    pub = spawn_python(PUBLISHER, str(n), domain=ros_domain, name="publisher")
     with sub, pub:
-        sub.wait_for_line('SUBSCRIBER READY', timeout=30)
-        pub.wait_for_line('PUBLISHER READY', timeout=30)
+        sub.wait_for_line("SUBSCRIBER READY", timeout=30)
+        pub.wait_for_line("PUBLISHER READY", timeout=30)
         out = sub.wait(timeout=60)
         pub.stop()
-        assert pub.proc.returncode == 0, pub.describe('publisher did not shut down cleanly')
-    res = parse_json_line(out, 'RESULT ')
-    assert res['messages'] == _expected_observations(n)
-    assert unexpected_errors(out) == [], sub.describe('errors in subscriber output')
-    assert unexpected_errors(pub.output) == [], pub.describe('errors in publisher output')
+        assert pub.proc.returncode == 0, pub.describe("publisher did not shut down cleanly")
+    res = parse_json_line(out, "RESULT ")
+    assert res["messages"] == _expected_observations(n)
+    assert unexpected_errors(out) == [], sub.describe("errors in subscriber output")
+    assert unexpected_errors(pub.output) == [], pub.describe("errors in publisher output")
 
 
 # --------------------------------------------------------------------------- service
-SERVER = r'''
+SERVER = r"""
 import math
 import rclpy
 from rclpy.executors import ExternalShutdownException
@@ -241,9 +240,9 @@ except (KeyboardInterrupt, ExternalShutdownException):
 finally:
     node.destroy_node()
     rclpy.try_shutdown()
-'''
+"""
 
-CLIENT = r'''
+CLIENT = r"""
 import json, sys, time
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -265,7 +264,8 @@ for x, y in [(16.0, 12.0), (17.0, 0.0), (float('nan'), 1.0), (3.0, 4.0)]:
     req.goal.x, req.goal.y = x, y
     fut = cli.call_async(req)
     t = time.monotonic()
-    while not fut.done() and time.monotonic() - t < 10:   # not spin_until_future_complete (rclpy#1374)
+    # not spin_until_future_complete (rclpy#1374)
+    while not fut.done() and time.monotonic() - t < 10:
         ex.spin_once(timeout_sec=0.05)
     if not fut.done():
         print(f'no response for goal {(x, y)} within 10 s', flush=True)
@@ -276,28 +276,28 @@ print('RESULT ' + json.dumps({'results': results, 'discovered_s': discovered}), 
 ex.shutdown()
 node.destroy_node()
 rclpy.try_shutdown()
-'''
+"""
 
 
 @pytest.mark.timeout(120)
 def test_set_goal_service_round_trip_between_processes(ros_domain):
-    server = spawn_python(SERVER, domain=ros_domain, name='set_goal_server')
+    server = spawn_python(SERVER, domain=ros_domain, name="set_goal_server")
     with server:
-        server.wait_for_line('SERVER READY', timeout=30)
-        client = spawn_python(CLIENT, domain=ros_domain, name='set_goal_client')
+        server.wait_for_line("SERVER READY", timeout=30)
+        client = spawn_python(CLIENT, domain=ros_domain, name="set_goal_client")
         with client:
             out = client.wait(timeout=60)
         server.stop()
-        assert server.proc.returncode == 0, server.describe('server did not shut down cleanly')
-    res = parse_json_line(out, 'RESULT ')
-    got = [r[:2] for r in res['results']]
+        assert server.proc.returncode == 0, server.describe("server did not shut down cleanly")
+    res = parse_json_line(out, "RESULT ")
+    got = [r[:2] for r in res["results"]]
     assert got == [
-        [True, 'goal set to row 12 col 16'],
-        [False, 'goal (17.0, 0.0) is outside the maze'],
-        [False, 'goal is not finite'],
-        [True, 'goal set to row 4 col 3'],
+        [True, "goal set to row 12 col 16"],
+        [False, "goal (17.0, 0.0) is outside the maze"],
+        [False, "goal is not finite"],
+        [True, "goal set to row 4 col 3"],
     ]
-    assert unexpected_errors(out) == [], client.describe('errors in client output')
+    assert unexpected_errors(out) == [], client.describe("errors in client output")
 
 
 @pytest.mark.timeout(120)
@@ -306,19 +306,19 @@ def test_domains_isolate(ros_domain):
     from ros_helpers import allocate_domain, release_domain
     other = allocate_domain()
     try:
-        server = spawn_python(SERVER, domain=ros_domain, name='server_domain_a')
-        probe = (r'''
+        server = spawn_python(SERVER, domain=ros_domain, name="server_domain_a")
+        probe = (r"""
 import rclpy, sys
 from tmgwr_interfaces.srv import SetGoal
 rclpy.init(); node = rclpy.create_node('probe')
 cli = node.create_client(SetGoal, 'set_goal')
 print('FOUND' if cli.wait_for_service(timeout_sec=3.0) else 'NOT FOUND', flush=True)
 node.destroy_node(); rclpy.try_shutdown()
-''')
+""")
         with server:
-            server.wait_for_line('SERVER READY', timeout=30)
-            with spawn_python(probe, domain=other, name='probe_domain_b') as p:
+            server.wait_for_line("SERVER READY", timeout=30)
+            with spawn_python(probe, domain=other, name="probe_domain_b") as p:
                 out = p.wait(timeout=30)
-        assert 'NOT FOUND' in out
+        assert "NOT FOUND" in out
     finally:
         release_domain(other)

@@ -6,14 +6,13 @@ import pytest
 
 from maze_sim import GridWorld, Maze
 from maze_sim.maze import ACTION_VECTORS, maze_file
-
-from tmgwr_agent.core.outcome import EPISODE_START, Outcome
+from tmgwr_agent.core.action_selector import ActionSelector, SelectorConfig
 from tmgwr_agent.core.agent import TMGWRAgent, tmgwr_config
 from tmgwr_agent.core.exploration import EpsilonSchedule, RandomWalk
 from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
-from tmgwr_common.params import ParamError, make_config
+from tmgwr_agent.core.outcome import EPISODE_START, Outcome
 from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap
-from tmgwr_agent.core.action_selector import ActionSelector, SelectorConfig
+from tmgwr_common.params import ParamError, make_config
 
 UP, DOWN, LEFT, RIGHT = range(4)
 
@@ -87,7 +86,8 @@ def test_context_is_merge_gng_blend_of_previous_winner():
     m = SensorimotorMap(dim=2, config=MapConfig(beta_c=0.25, alpha_c=0.5))
     m.step(np.array([1.0, 2.0]), None)
     m.c[0] = [3.0, 5.0]
-    np.testing.assert_allclose(m.context(), 0.75 * np.array([1.0, 2.0]) + 0.25 * np.array([3.0, 5.0]))
+    expected = 0.75 * np.array([1.0, 2.0]) + 0.25 * np.array([3.0, 5.0])
+    np.testing.assert_allclose(m.context(), expected)
     C = m.context()
     x = np.array([1.5, 2.0])
     d = m.distances(x, C)
@@ -335,6 +335,7 @@ def test_defaults_are_declared_once_in_the_config_dataclasses():
     """The specs are derived from the config fields; the agent's config is their union and
     the constructors take no literal defaults of their own."""
     import inspect
+
     from tmgwr_agent.core.agent import SPECS
     from tmgwr_agent.core.exploration import EpsilonGreedy
     from tmgwr_agent.core.preprocessor import SensoryPreprocessor

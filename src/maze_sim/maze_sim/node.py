@@ -27,32 +27,30 @@ import time
 from pathlib import Path
 
 import numpy as np
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.node import Node
-
 from geometry_msgs.msg import PointStamped, PoseStamped
 from nav_msgs.msg import OccupancyGrid
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.node import Node
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
-from tmgwr_interfaces.msg import Action, Observation
-from tmgwr_interfaces.srv import FireEvent, SetCell, SetGoal
 
+from maze_sim.maze import DEFAULT_MAZE, N_ACTIONS, Maze, MazeError, maze_file
+from maze_sim.world import GridWorld
 from tmgwr_common import topics
 from tmgwr_common.node import (
     LATCHED_QOS,
+    NODE_OPTIONS,
     SENSOR_QOS,
     STEP_QOS,
-    NODE_OPTIONS,
     CallbackTimer,
     declare_parameters,
     f64,
     run,
 )
 from tmgwr_common.params import Param, ParamError
-
-from maze_sim.maze import DEFAULT_MAZE, N_ACTIONS, Maze, MazeError, maze_file
 from tmgwr_common.share import DataFileError
-from maze_sim.world import GridWorld
+from tmgwr_interfaces.msg import Action, Observation
+from tmgwr_interfaces.srv import FireEvent, SetCell, SetGoal
 
 FRAME = "maze"
 WARMUP_STEPS = 200    # the SUMMARY's steady rate leaves out discovery and the first steps

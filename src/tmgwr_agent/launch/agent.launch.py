@@ -24,26 +24,26 @@ from launch_ros.parameter_descriptions import ParameterValue
 
 #: (package, executable) of the graph in data-flow order; the names are a contract.
 GRAPH = (
-    ('maze_sim', 'maze_sim'),
-    ('tmgwr_agent', 'sensory_preprocessor'),
-    ('tmgwr_agent', 'map_learner'),
-    ('tmgwr_agent', 'motivation_estimator'),
-    ('tmgwr_agent', 'action_selector'),
+    ("maze_sim", "maze_sim"),
+    ("tmgwr_agent", "sensory_preprocessor"),
+    ("tmgwr_agent", "map_learner"),
+    ("tmgwr_agent", "motivation_estimator"),
+    ("tmgwr_agent", "action_selector"),
 )
 
 
 def graph_nodes(context):
     """The five nodes, each with the user's parameter file (if any), then its overrides."""
-    params_file = LaunchConfiguration('params_file').perform(context)
+    params_file = LaunchConfiguration("params_file").perform(context)
     files = [params_file] if params_file else []
-    seed = ParameterValue(LaunchConfiguration('seed'), value_type=int)
+    seed = ParameterValue(LaunchConfiguration("seed"), value_type=int)
     overrides = {
-        'maze_sim': {'maze': LaunchConfiguration('maze'), 'goal': LaunchConfiguration('goal'),
-                     'seed': seed},
-        'action_selector': {'seed': seed},
+        "maze_sim": {"maze": LaunchConfiguration("maze"), "goal": LaunchConfiguration("goal"),
+                     "seed": seed},
+        "action_selector": {"seed": seed},
     }
     return [
-        Node(package=package, executable=executable, name=executable, output='screen',
+        Node(package=package, executable=executable, name=executable, output="screen",
              parameters=[*files, overrides.get(executable, {})])
         for package, executable in GRAPH
     ]
@@ -51,23 +51,23 @@ def graph_nodes(context):
 
 def generate_launch_description():
     arguments = [
-        DeclareLaunchArgument('maze', default_value='paper_13x17.txt',
-                              description='maze file: a path, or a file name in '
-                                          'share/maze_sim/mazes'),
-        DeclareLaunchArgument('goal', default_value='G',
+        DeclareLaunchArgument("maze", default_value="paper_13x17.txt",
+                              description="maze file: a path, or a file name in "
+                                          "share/maze_sim/mazes"),
+        DeclareLaunchArgument("goal", default_value="G",
                               description="initial goal: a goal name ('G', '1'-'9') or 'row,col'"),
-        DeclareLaunchArgument('seed', default_value='0',
-                              description='seed of the simulator and the exploration policy'),
-        DeclareLaunchArgument('record', default_value='false',
-                              description='record every topic to MCAP (tmgwr_agent recorder)'),
-        DeclareLaunchArgument('output_dir', default_value='',
+        DeclareLaunchArgument("seed", default_value="0",
+                              description="seed of the simulator and the exploration policy"),
+        DeclareLaunchArgument("record", default_value="false",
+                              description="record every topic to MCAP (tmgwr_agent recorder)"),
+        DeclareLaunchArgument("output_dir", default_value="",
                               description="recorder bag directory ('' = runs/<UTC timestamp>/)"),
-        DeclareLaunchArgument('params_file', default_value='',
+        DeclareLaunchArgument("params_file", default_value="",
                               description="ROS 2 parameter file of overrides for the five "
                                           "nodes ('' = every parameter at its default)"),
     ]
     recorder = Node(
-        package='tmgwr_agent', executable='recorder', name='recorder', output='screen',
-        parameters=[{'output_dir': LaunchConfiguration('output_dir')}],
-        condition=IfCondition(LaunchConfiguration('record')))
+        package="tmgwr_agent", executable="recorder", name="recorder", output="screen",
+        parameters=[{"output_dir": LaunchConfiguration("output_dir")}],
+        condition=IfCondition(LaunchConfiguration("record")))
     return LaunchDescription(arguments + [recorder, OpaqueFunction(function=graph_nodes)])

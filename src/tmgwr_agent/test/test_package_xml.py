@@ -14,9 +14,9 @@ import ast
 import glob
 import importlib
 import os
-from pathlib import Path
 import sys
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import pytest
 
@@ -26,35 +26,35 @@ PKG_DIR = Path(__file__).absolute().parents[1]
 #: rosdep/python.yaml; ``*-pip`` marks a library that has no key there (rosdep's pip
 #: convention: the rule goes into a local rosdep source).
 PYTHON_KEYS = {
-    'numpy': {'python3-numpy'},
-    'yaml': {'python3-yaml'},
-    'matplotlib': {'python3-matplotlib'},
-    'tqdm': {'python3-tqdm'},
-    'numba': {'python3-numba'},
-    'pytest': {'python3-pytest'},
-    'mcap': {'python3-mcap-pip'},
-    'rosbags': {'python3-rosbags-pip'},
-    'gymnasium': {'python3-gymnasium-pip', 'python3-gymnasium'},
+    "numpy": {"python3-numpy"},
+    "yaml": {"python3-yaml"},
+    "matplotlib": {"python3-matplotlib"},
+    "tqdm": {"python3-tqdm"},
+    "numba": {"python3-numba"},
+    "pytest": {"python3-pytest"},
+    "mcap": {"python3-mcap-pip"},
+    "rosbags": {"python3-rosbags-pip"},
+    "gymnasium": {"python3-gymnasium-pip", "python3-gymnasium"},
 }
 
 #: Top-level directories of a package that are not installed data.
-NOT_DATA = {'test', 'resource', '__pycache__', 'build', 'install', 'log'}
+NOT_DATA = {"test", "resource", "__pycache__", "build", "install", "log"}
 
 
 def package_xml(pkg_dir=PKG_DIR):
     """(name, {dependency tag: set of names}) of ``pkg_dir/package.xml``."""
-    root = ET.parse(pkg_dir / 'package.xml').getroot()
+    root = ET.parse(pkg_dir / "package.xml").getroot()
     deps = {}
-    for tag in ('depend', 'exec_depend', 'build_depend', 'build_export_depend',
-                'buildtool_depend', 'test_depend'):
+    for tag in ("depend", "exec_depend", "build_depend", "build_export_depend",
+                "buildtool_depend", "test_depend"):
         deps[tag] = {e.text.strip() for e in root.findall(tag)}
-    return root.findtext('name').strip(), deps
+    return root.findtext("name").strip(), deps
 
 
 def python_files(*dirs):
     for d in dirs:
-        for path in sorted(Path(d).rglob('*.py')):
-            if '__pycache__' not in path.parts:
+        for path in sorted(Path(d).rglob("*.py")):
+            if "__pycache__" not in path.parts:
                 yield path
 
 
@@ -62,7 +62,7 @@ def imports(files):
     """{top-level module: ['file:line', ...]} of every absolute import, lazy ones included."""
     found = {}
     for path in files:
-        tree = ast.parse(path.read_text(encoding='utf-8'), filename=str(path))
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
         for node in ast.walk(tree):
             if isinstance(node, ast.Import):
                 names = [a.name for a in node.names]
@@ -71,8 +71,8 @@ def imports(files):
             else:
                 continue
             for name in names:
-                where = f'{path.relative_to(PKG_DIR.parent)}:{node.lineno}'
-                found.setdefault(name.split('.')[0], []).append(where)
+                where = f"{path.relative_to(PKG_DIR.parent)}:{node.lineno}"
+                found.setdefault(name.split(".")[0], []).append(where)
     return found
 
 
@@ -83,28 +83,28 @@ def undeclared(found, declared, own):
             continue
         keys = PYTHON_KEYS.get(module, {module})
         if not keys & declared:
-            missing[' or '.join(sorted(keys))] = where[:3]
+            missing[" or ".join(sorted(keys))] = where[:3]
     return missing
 
 
 def runtime_files(name):
-    return list(python_files(PKG_DIR / name, *(p for p in [PKG_DIR / 'launch'] if p.is_dir())))
+    return list(python_files(PKG_DIR / name, *(p for p in [PKG_DIR / "launch"] if p.is_dir())))
 
 
 def test_runtime_imports_are_exec_depends():
     name, deps = package_xml()
-    missing = undeclared(imports(runtime_files(name)), deps['exec_depend'] | deps['depend'],
+    missing = undeclared(imports(runtime_files(name)), deps["exec_depend"] | deps["depend"],
                          name)
     assert not missing, (
-        f'{name}/package.xml lacks <exec_depend> for these imports '
-        f'(a Python library also needs its rosdep key in PYTHON_KEYS): {missing}')
+        f"{name}/package.xml lacks <exec_depend> for these imports "
+        f"(a Python library also needs its rosdep key in PYTHON_KEYS): {missing}")
 
 
 def test_test_imports_are_declared():
     name, deps = package_xml()
-    declared = deps['test_depend'] | deps['exec_depend'] | deps['depend']
-    missing = undeclared(imports(python_files(PKG_DIR / 'test')), declared, name)
-    assert not missing, f'{name}/package.xml lacks <test_depend> for: {missing}'
+    declared = deps["test_depend"] | deps["exec_depend"] | deps["depend"]
+    missing = undeclared(imports(python_files(PKG_DIR / "test")), declared, name)
+    assert not missing, f"{name}/package.xml lacks <test_depend> for: {missing}"
 
 
 def test_declared_python_libraries_are_imported():
@@ -112,8 +112,8 @@ def test_declared_python_libraries_are_imported():
     name, deps = package_xml()
     used = set(imports(runtime_files(name)))
     stale = sorted(key for module, keys in PYTHON_KEYS.items() for key in keys
-                   if key in deps['exec_depend'] | deps['depend'] and module not in used)
-    assert not stale, f'{name}/package.xml declares Python libraries it never imports: {stale}'
+                   if key in deps["exec_depend"] | deps["depend"] and module not in used)
+    assert not stale, f"{name}/package.xml declares Python libraries it never imports: {stale}"
 
 
 def test_every_module_imports():
@@ -121,39 +121,40 @@ def test_every_module_imports():
     name, _ = package_xml()
     failed = []
     for path in python_files(PKG_DIR / name):
-        parts = list(path.relative_to(PKG_DIR).with_suffix('').parts)
-        if parts[-1] == '__init__':
+        parts = list(path.relative_to(PKG_DIR).with_suffix("").parts)
+        if parts[-1] == "__init__":
             parts.pop()
         try:
-            importlib.import_module('.'.join(parts))
+            importlib.import_module(".".join(parts))
         except Exception as exc:  # noqa: BLE001 - report every failing module at once
             failed.append(f"{'.'.join(parts)}: {type(exc).__name__}: {exc}")
-    assert not failed, '\n'.join(failed)
+    assert not failed, "\n".join(failed)
 
 
 def test_setup_py_stays_inside_the_package():
     """setup.py names no file outside its package directory."""
-    tree = ast.parse((PKG_DIR / 'setup.py').read_text(encoding='utf-8'))
+    tree = ast.parse((PKG_DIR / "setup.py").read_text(encoding="utf-8"))
     outside = [
-        f'setup.py:{n.lineno}: {n.value!r}' for n in ast.walk(tree)
+        f"setup.py:{n.lineno}: {n.value!r}" for n in ast.walk(tree)
         if isinstance(n, ast.Constant) and isinstance(n.value, str)
-        and '..' in Path(n.value).parts
+        and ".." in Path(n.value).parts
     ]
-    outside += [f'setup.py:{n.lineno}: {n.attr}' for n in ast.walk(tree)
-                if isinstance(n, ast.Attribute) and n.attr in ('pardir', 'parent', 'parents')]
+    outside += [f"setup.py:{n.lineno}: {n.attr}" for n in ast.walk(tree)
+                if isinstance(n, ast.Attribute) and n.attr in ("pardir", "parent", "parents")]
     assert not outside, outside
 
 
 def _installed_prefix(name):
     """The install prefix of this package in AMENT_PREFIX_PATH (what ament_index_python's
     get_package_prefix answers), or skip when it is not built."""
-    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
+    for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
         prefix = Path(prefix)
-        if prefix.parts and (prefix / 'share/ament_index/resource_index/packages' / name).is_file():
-            if not (prefix / 'share' / name / 'package.xml').is_file():
-                pytest.skip(f'{name} found in {prefix}, but without share/{name}/package.xml')
+        index = prefix / "share/ament_index/resource_index/packages"
+        if prefix.parts and (index / name).is_file():
+            if not (prefix / "share" / name / "package.xml").is_file():
+                pytest.skip(f"{name} found in {prefix}, but without share/{name}/package.xml")
             return prefix
-    pytest.skip(f'{name} is not installed in AMENT_PREFIX_PATH (colcon build first)')
+    pytest.skip(f"{name} is not installed in AMENT_PREFIX_PATH (colcon build first)")
 
 
 def test_install_holds_the_source_packages_and_data():
@@ -161,37 +162,37 @@ def test_install_holds_the_source_packages_and_data():
     (a subpackage without __init__.py is left out by find_packages)."""
     name, _ = package_xml()
     prefix = _installed_prefix(name)
-    site = glob.glob(str(prefix / 'lib' / 'python3*' / 'site-packages' / name))
-    assert site, f'{name} has no site-packages directory under {prefix}'
+    site = glob.glob(str(prefix / "lib" / "python3*" / "site-packages" / name))
+    assert site, f"{name} has no site-packages directory under {prefix}"
     site = Path(site[0])
     missing = []
     for path in python_files(PKG_DIR / name):
         rel = path.relative_to(PKG_DIR / name)
         if not (site / rel).is_file():
-            missing.append(f'lib/.../site-packages/{name}/{rel}')
-    share = prefix / 'share' / name
-    expected = [Path('package.xml')]
+            missing.append(f"lib/.../site-packages/{name}/{rel}")
+    share = prefix / "share" / name
+    expected = [Path("package.xml")]
     for top in sorted(PKG_DIR.iterdir()):
-        if top.is_dir() and top.name not in NOT_DATA | {name} and not top.name.startswith('.'):
-            expected += [p.relative_to(PKG_DIR) for p in sorted(top.rglob('*'))
-                         if p.is_file() and '__pycache__' not in p.parts]
-    missing += [f'share/{name}/{rel}' for rel in expected if not (share / rel).is_file()]
-    marker = prefix / 'share' / 'ament_index' / 'resource_index' / 'packages' / name
+        if top.is_dir() and top.name not in NOT_DATA | {name} and not top.name.startswith("."):
+            expected += [p.relative_to(PKG_DIR) for p in sorted(top.rglob("*"))
+                         if p.is_file() and "__pycache__" not in p.parts]
+    missing += [f"share/{name}/{rel}" for rel in expected if not (share / rel).is_file()]
+    marker = prefix / "share" / "ament_index" / "resource_index" / "packages" / name
     if not marker.is_file():
         missing.append(str(marker.relative_to(prefix)))
-    assert not missing, (f'{name}: not in the install (a stale build? colcon build, or '
-                         f'tools/bootstrap.sh in the repository): {missing}')
+    assert not missing, (f"{name}: not in the install (a stale build? colcon build, or "
+                         f"tools/bootstrap.sh in the repository): {missing}")
 
 
 def test_console_scripts_are_where_ros2_run_looks():
     """``ros2 run <pkg> <exe>`` runs ``<prefix>/lib/<pkg>/<exe>`` (setup.cfg script_dir)."""
     name, _ = package_xml()
-    tree = ast.parse((PKG_DIR / 'setup.py').read_text(encoding='utf-8'))
-    scripts = [n.value.split('=')[0].strip() for n in ast.walk(tree)
+    tree = ast.parse((PKG_DIR / "setup.py").read_text(encoding="utf-8"))
+    scripts = [n.value.split("=")[0].strip() for n in ast.walk(tree)
                if isinstance(n, ast.Constant) and isinstance(n.value, str)
-               and '=' in n.value and ':' in n.value.split('=', 1)[1]]
+               and "=" in n.value and ":" in n.value.split("=", 1)[1]]
     if not scripts:
-        pytest.skip(f'{name} has no console scripts')
+        pytest.skip(f"{name} has no console scripts")
     prefix = _installed_prefix(name)
-    missing = [s for s in scripts if not os.access(prefix / 'lib' / name / s, os.X_OK)]
-    assert not missing, f'not executable in {prefix}/lib/{name}: {missing}'
+    missing = [s for s in scripts if not os.access(prefix / "lib" / name / s, os.X_OK)]
+    assert not missing, f"not executable in {prefix}/lib/{name}: {missing}"

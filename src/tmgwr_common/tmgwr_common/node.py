@@ -31,12 +31,19 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
-from tmgwr_common.params import (Config, Param, ParamError, graph_parameter_names,
-                                  make_config, read_params_file, specs, unknown_name_message)
-
 # ----------------------------------------------------------------------------- QoS
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile,  # noqa: E402
-                       ReliabilityPolicy)
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+
+from tmgwr_common.params import (
+    Config,
+    Param,
+    ParamError,
+    graph_parameter_names,
+    make_config,
+    read_params_file,
+    specs,
+    unknown_name_message,
+)
 
 STEP_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                       reliability=ReliabilityPolicy.RELIABLE,
@@ -67,14 +74,20 @@ def descriptor(p: Param):
     ROS ranges are closed; an open bound (e.g. ``(0, 1]``) is stated in the description
     and enforced by :meth:`Param.check` right after declaration.
     """
-    from rcl_interfaces.msg import (FloatingPointRange, IntegerRange,
-                                    ParameterDescriptor, ParameterType)
+    from rcl_interfaces.msg import (
+        FloatingPointRange,
+        IntegerRange,
+        ParameterDescriptor,
+        ParameterType,
+    )
     d = ParameterDescriptor(name=p.name, description=p.description, read_only=True)
     if p.choices is not None:
         d.type = ParameterType.PARAMETER_STRING
         d.additional_constraints = "one of: " + ", ".join(p.choices)
     elif isinstance(p.default, bool):
         d.type = ParameterType.PARAMETER_BOOL
+    elif isinstance(p.default, tuple):
+        d.type = ParameterType.PARAMETER_STRING_ARRAY
     elif isinstance(p.default, str):
         # free-form text (paths, names): `-p goal:=2` arrives as an integer; accept it
         d.dynamic_typing = True
@@ -119,8 +132,7 @@ def declare_parameters(node, *groups: type[Config] | Iterable[Param]):
 
 
 def _declare(node, p: Param, where: str) -> Any:
-    from rclpy.exceptions import (InvalidParameterTypeException,
-                                  InvalidParameterValueException)
+    from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
     if node.has_parameter(p.name):       # declared from its override: add the descriptor
         node.undeclare_parameter(p.name)
     try:
@@ -251,12 +263,13 @@ def make_executor():
     return SingleThreadedExecutor()
 
 
-def run(factory: Callable[[], Any], name: str, args=None) -> int:
+def run(factory: Callable[[], Any], name: str, args=None,
+        executor_factory: Callable[[], Any] | None = None) -> int:
     """Init rclpy, build the node, spin it; exit code 2 when it cannot start.
 
     A node may define ``on_shutdown()`` (called once after spinning stops, for any reason:
     Ctrl-C, SIGTERM via rclpy's handler, ``rclpy.shutdown``) and ``finished`` (spinning
-    stops when it becomes true).
+    stops when it becomes true). ``executor_factory`` overrides :func:`make_executor`.
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException
@@ -277,7 +290,7 @@ def run(factory: Callable[[], Any], name: str, args=None) -> int:
         except (ParamError, ValueError, OSError) as exc:
             print(f"[{name}] cannot start: {exc}", file=sys.stderr, flush=True)
             return 2
-        executor = make_executor()
+        executor = (executor_factory or make_executor)()
         executor.add_node(node)
         try:
             # spin() is spin_once() in a loop; looping ourselves lets a node finish.

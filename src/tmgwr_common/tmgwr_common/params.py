@@ -63,6 +63,12 @@ class Param:
                 raise ParamError(f"{loc}parameter '{self.name}' must be true or false, "
                                  f"got {value!r}")
             return value
+        if isinstance(self.default, tuple):   # a list of strings (topic names...)
+            if not (isinstance(value, (list, tuple))
+                    and all(isinstance(v, str) for v in value)):
+                raise ParamError(f"{loc}parameter '{self.name}' must be a list of strings, "
+                                 f"got {value!r}")
+            return tuple(value)
         if isinstance(self.default, str):     # free-form text (paths, names)
             if isinstance(value, int) and not isinstance(value, bool):
                 value = str(value)            # `-p goal:=2` arrives as an integer

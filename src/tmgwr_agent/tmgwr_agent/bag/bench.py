@@ -22,7 +22,7 @@ import tempfile
 import time
 from pathlib import Path
 
-PUBLISHER = r'''
+PUBLISHER = r"""
 import sys, time
 import rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -48,71 +48,71 @@ dt = time.perf_counter() - t0
 print('PUBLISHED %d %.4f' % (n, dt), flush=True)
 time.sleep(1.0)
 node.destroy_node(); rclpy.shutdown()
-'''
+"""
 
 
 def _count(bag: Path) -> int:
     from rosbags.highlevel import AnyReader
     with AnyReader([bag]) as reader:
-        conns = [c for c in reader.connections if c.topic == '/bench_observation']
+        conns = [c for c in reader.connections if c.topic == "/bench_observation"]
         ids = {reader.deserialize(raw, c.msgtype).step_id
                for c, _t, raw in reader.messages(connections=conns)}
     return len(ids)
 
 
 def run_once(rate: float, seconds: float, domain: int, workdir: Path,
-             compression: str = 'zstd') -> dict:
+             compression: str = "zstd") -> dict:
     """One recorder + publisher run at ``rate`` msg/s for about ``seconds``."""
     n = max(100, int(rate * seconds))
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1')
-    bag = workdir / f'rate_{int(rate)}'
-    rec = subprocess.Popen([sys.executable, '-m', 'tmgwr_agent.nodes.recorder', '--ros-args',
-                            '-p', f'output_dir:={bag}', '-p', 'topics:=[/bench_observation]',
-                            '-p', f'compression:={compression}', '-p', 'discovery_period:=0.1'],
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED="1")
+    bag = workdir / f"rate_{int(rate)}"
+    rec = subprocess.Popen([sys.executable, "-m", "tmgwr_agent.nodes.recorder", "--ros-args",
+                            "-p", f"output_dir:={bag}", "-p", "topics:=[/bench_observation]",
+                            "-p", f"compression:={compression}", "-p", "discovery_period:=0.1"],
                            env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                            start_new_session=True)
     try:
-        pub = subprocess.run([sys.executable, '-c', PUBLISHER, str(n), str(rate)], env=env,
+        pub = subprocess.run([sys.executable, "-c", PUBLISHER, str(n), str(rate)], env=env,
                              capture_output=True, text=True, timeout=60 + seconds * 3)
     finally:
         time.sleep(0.5)
         os.killpg(rec.pid, signal.SIGINT)
         out, _ = rec.communicate(timeout=30)
-    m = re.search(r'PUBLISHED (\d+) ([\d.]+)', pub.stdout)
+    m = re.search(r"PUBLISHED (\d+) ([\d.]+)", pub.stdout)
     if not m:
-        raise RuntimeError(f'bench publisher failed:\n{pub.stdout}\n{pub.stderr}')
+        raise RuntimeError(f"bench publisher failed:\n{pub.stdout}\n{pub.stderr}")
     published, dt = int(m.group(1)), float(m.group(2))
-    if not (bag / 'metadata.yaml').is_file():
-        raise RuntimeError(f'the recorder wrote no bag at {bag}:\n{out}')
+    if not (bag / "metadata.yaml").is_file():
+        raise RuntimeError(f"the recorder wrote no bag at {bag}:\n{out}")
     recorded = _count(bag)
-    return {'target_rate': rate, 'published': published,
-            'achieved_rate': round(published / dt, 1), 'recorded': recorded,
-            'lossless': recorded == published, 'recorder_rc': rec.returncode}
+    return {"target_rate": rate, "published": published,
+            "achieved_rate": round(published / dt, 1), "recorded": recorded,
+            "lossless": recorded == published, "recorder_rc": rec.returncode}
 
 
 def _reserve_domain() -> tuple[int, int]:
     """A ROS_DOMAIN_ID nobody else uses: the flock'ed files of test/ros_helpers.py
     (``$TMPDIR/tmgwr-ros-domains/<id>.lock``), so the bench and running tests never meet."""
     import fcntl
-    lock_dir = Path(tempfile.gettempdir()) / 'tmgwr-ros-domains'
+    lock_dir = Path(tempfile.gettempdir()) / "tmgwr-ros-domains"
     lock_dir.mkdir(parents=True, exist_ok=True)
-    own = os.environ.get('ROS_DOMAIN_ID', '0')
+    own = os.environ.get("ROS_DOMAIN_ID", "0")
     for domain in range(101, 0, -1):
         if str(domain) == own:
             continue
-        fd = os.open(lock_dir / f'{domain}.lock', os.O_RDWR | os.O_CREAT, 0o666)
+        fd = os.open(lock_dir / f"{domain}.lock", os.O_RDWR | os.O_CREAT, 0o666)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             return domain, fd
         except OSError:
             os.close(fd)
-    raise RuntimeError('no free ROS_DOMAIN_ID in 1..101 for the recorder bench')
+    raise RuntimeError("no free ROS_DOMAIN_ID in 1..101 for the recorder bench")
 
 
 def run(args=None) -> dict:
     """The ``bag`` part of results/bench.json."""
-    start = float(getattr(args, 'bag_start_rate', None) or 1000)
-    seconds = float(getattr(args, 'bag_seconds', None) or 2.0)
+    start = float(getattr(args, "bag_start_rate", None) or 1000)
+    seconds = float(getattr(args, "bag_seconds", None) or 2.0)
     domain, lock = _reserve_domain()
     runs = []
     best = None
@@ -121,44 +121,44 @@ def run(args=None) -> dict:
     finally:
         os.close(lock)
     return {
-        'recorder_lossless_msg_per_s': best,
+        "recorder_lossless_msg_per_s": best,
         # to compare with graph.graph_steps_per_s: the recorder must take 5 messages a step
-        'graph_messages_per_step': 5,
-        'cpus': os.cpu_count(),
-        'load_avg_1min': round(os.getloadavg()[0], 2),
-        'method': f'one publisher process, reliable Observation messages, {seconds:g} s per '
-                  f'rate, rates doubling from {start:g} (then one bisection step); '
-                  f'lossless = every step id in the bag. The graph publishes 5 '
-                  f'messages per lockstep step (observation, features, state, motivation, '
-                  f'action) plus the pose and map topics at fixed rates',
-        'runs': runs,
+        "graph_messages_per_step": 5,
+        "cpus": os.cpu_count(),
+        "load_avg_1min": round(os.getloadavg()[0], 2),
+        "method": f"one publisher process, reliable Observation messages, {seconds:g} s per "
+                  f"rate, rates doubling from {start:g} (then one bisection step); "
+                  f"lossless = every step id in the bag. The graph publishes 5 "
+                  f"messages per lockstep step (observation, features, state, motivation, "
+                  f"action) plus the pose and map topics at fixed rates",
+        "runs": runs,
     }
 
 
 def _sweep(start: float, seconds: float, domain: int, runs: list) -> float | None:
     best = None
-    with tempfile.TemporaryDirectory(prefix='tmgwr-bag-bench-') as tmp:
+    with tempfile.TemporaryDirectory(prefix="tmgwr-bag-bench-") as tmp:
         rate = start
         while rate <= 64000:
-            print(f'bench: recorder at {rate:.0f} msg/s ...', file=sys.stderr, flush=True)
+            print(f"bench: recorder at {rate:.0f} msg/s ...", file=sys.stderr, flush=True)
             r = run_once(rate, seconds, domain, Path(tmp))
             runs.append(r)
-            if not r['lossless']:
+            if not r["lossless"]:
                 break
-            best = r['achieved_rate']
-            if r['achieved_rate'] < 0.9 * rate:      # the publisher is the limit now
+            best = r["achieved_rate"]
+            if r["achieved_rate"] < 0.9 * rate:      # the publisher is the limit now
                 break
             rate *= 2
-        if runs and not runs[-1]['lossless'] and best is not None:
-            mid = (best + runs[-1]['target_rate']) / 2  # one bisection step between the two
-            print(f'bench: recorder at {mid:.0f} msg/s ...', file=sys.stderr, flush=True)
+        if runs and not runs[-1]["lossless"] and best is not None:
+            mid = (best + runs[-1]["target_rate"]) / 2  # one bisection step between the two
+            print(f"bench: recorder at {mid:.0f} msg/s ...", file=sys.stderr, flush=True)
             r = run_once(mid, seconds, domain, Path(tmp))
             runs.append(r)
-            if r['lossless']:
-                best = r['achieved_rate']
+            if r["lossless"]:
+                best = r["achieved_rate"]
     return best
 
 
-if __name__ == '__main__':
+if __name__ == "__main__":
     import json
     print(json.dumps(run(), indent=2))

@@ -19,16 +19,16 @@ import json
 import re
 from pathlib import Path
 
-SEPARATOR = '=' * 80
+SEPARATOR = "=" * 80
 
 # Primitive field types of the ROS 2 IDL (.msg) that are not message dependencies.
 PRIMITIVES = frozenset({
-    'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16', 'uint16',
-    'int32', 'uint32', 'int64', 'uint64', 'string', 'wstring',
+    "bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
+    "int32", "uint32", "int64", "uint64", "string", "wstring",
 })
 
-_ARRAY = re.compile(r'\[[^\]]*\]$')          # T[], T[3], T[<=3]
-_BOUNDED_STRING = re.compile(r'^(w?string)<=\d+$')
+_ARRAY = re.compile(r"\[[^\]]*\]$")          # T[], T[3], T[<=3]
+_BOUNDED_STRING = re.compile(r"^(w?string)<=\d+$")
 
 
 class DefinitionError(LookupError):
@@ -37,32 +37,31 @@ class DefinitionError(LookupError):
 
 def split_type(type_name: str) -> tuple[str, str]:
     """``pkg/msg/Type`` or ``pkg/Type`` -> ``(pkg, Type)``."""
-    parts = type_name.split('/')
-    if len(parts) == 3 and parts[1] == 'msg':
+    parts = type_name.split("/")
+    if len(parts) == 3 and parts[1] == "msg":
         return parts[0], parts[2]
     if len(parts) == 2:
         return parts[0], parts[1]
-    raise DefinitionError(f'not a message type name: {type_name!r} (expected pkg/msg/Type)')
+    raise DefinitionError(f"not a message type name: {type_name!r} (expected pkg/msg/Type)")
 
 
 @functools.lru_cache(maxsize=None)
 def _msg_dir(package: str) -> Path:
-    from ament_index_python.packages import (PackageNotFoundError,
-                                             get_package_share_directory)
+    from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
     try:
-        return Path(get_package_share_directory(package)) / 'msg'
+        return Path(get_package_share_directory(package)) / "msg"
     except PackageNotFoundError:
-        raise DefinitionError(f'package {package!r} is not in the ament index '
-                              f'(AMENT_PREFIX_PATH): cannot find its .msg files') from None
+        raise DefinitionError(f"package {package!r} is not in the ament index "
+                              f"(AMENT_PREFIX_PATH): cannot find its .msg files") from None
 
 
 @functools.lru_cache(maxsize=None)
 def msg_text(type_name: str) -> str:
     """The ``.msg`` file text of ``pkg/msg/Type`` as installed."""
     package, name = split_type(type_name)
-    path = _msg_dir(package) / f'{name}.msg'
+    path = _msg_dir(package) / f"{name}.msg"
     if not path.is_file():
-        raise DefinitionError(f'no definition for {type_name}: {path} does not exist')
+        raise DefinitionError(f"no definition for {type_name}: {path} does not exist")
     return path.read_text()
 
 
@@ -70,20 +69,20 @@ def field_dependencies(text: str, package: str) -> list[str]:
     """Message types (``pkg/msg/Type``) used by the fields of a ``.msg`` text, in order."""
     deps: list[str] = []
     for raw_line in text.splitlines():
-        line = raw_line.split('#', 1)[0].strip()
+        line = raw_line.split("#", 1)[0].strip()
         if not line:
             continue
         # "TYPE NAME [DEFAULT]" or a constant "TYPE NAME=VALUE" (constants are primitive)
-        field_type = _ARRAY.sub('', line.split()[0])
+        field_type = _ARRAY.sub("", line.split()[0])
         if field_type in PRIMITIVES or _BOUNDED_STRING.match(field_type):
             continue
-        if field_type == 'Header':                   # ROS 1 shorthand, still accepted
-            dep = 'std_msgs/msg/Header'
-        elif '/' in field_type:
+        if field_type == "Header":                   # ROS 1 shorthand, still accepted
+            dep = "std_msgs/msg/Header"
+        elif "/" in field_type:
             pkg, name = split_type(field_type)
-            dep = f'{pkg}/msg/{name}'
+            dep = f"{pkg}/msg/{name}"
         else:                                        # same package
-            dep = f'{package}/msg/{field_type}'
+            dep = f"{package}/msg/{field_type}"
         if dep not in deps:
             deps.append(dep)
     return deps
@@ -96,7 +95,7 @@ def ros2msg_definition(type_name: str) -> str:
     Dependencies are listed depth-first in order of first use, each once.
     """
     package, name = split_type(type_name)
-    root = f'{package}/msg/{name}'
+    root = f"{package}/msg/{name}"
     text = msg_text(root)
     order: list[str] = []
 
@@ -108,27 +107,27 @@ def ros2msg_definition(type_name: str) -> str:
                 visit(dep)
 
     visit(root)
-    parts = [text.rstrip('\n')]
+    parts = [text.rstrip("\n")]
     for dep in order:
         dpkg, dname = split_type(dep)
-        parts.append(f'{SEPARATOR}\nMSG: {dpkg}/{dname}\n{msg_text(dep).rstrip(chr(10))}')
-    return '\n'.join(parts) + '\n'
+        parts.append(f"{SEPARATOR}\nMSG: {dpkg}/{dname}\n{msg_text(dep).rstrip(chr(10))}")
+    return "\n".join(parts) + "\n"
 
 
 @functools.lru_cache(maxsize=None)
 def type_hash(type_name: str) -> str:
     """The RIHS01 type hash of ``pkg/msg/Type`` from its installed ``.json`` ('' if none)."""
     package, name = split_type(type_name)
-    path = _msg_dir(package) / f'{name}.json'
+    path = _msg_dir(package) / f"{name}.json"
     try:
         data = json.loads(path.read_text())
     except (OSError, ValueError):
-        return ''
-    full = f'{package}/msg/{name}'
-    for entry in data.get('type_hashes', []):
-        if entry.get('type_name') == full:
-            return str(entry.get('hash_string', ''))
-    return ''
+        return ""
+    full = f"{package}/msg/{name}"
+    for entry in data.get("type_hashes", []):
+        if entry.get("type_name") == full:
+            return str(entry.get("hash_string", ""))
+    return ""
 
 
 def import_message(type_name: str):
@@ -136,7 +135,7 @@ def import_message(type_name: str):
     import importlib
     package, name = split_type(type_name)
     try:
-        module = importlib.import_module(f'{package}.msg')
+        module = importlib.import_module(f"{package}.msg")
         return getattr(module, name)
     except (ImportError, AttributeError) as exc:
-        raise DefinitionError(f'cannot import the Python class of {type_name}: {exc}') from None
+        raise DefinitionError(f"cannot import the Python class of {type_name}: {exc}") from None

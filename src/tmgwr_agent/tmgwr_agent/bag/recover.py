@@ -34,7 +34,7 @@ from tmgwr_agent.bag.writer import (
     write_metadata_yaml,
 )
 
-MAGIC = b'\x89MCAP0\r\n'     # MCAP version 0 magic, at the start of every file
+MAGIC = b"\x89MCAP0\r\n"     # MCAP version 0 magic, at the start of every file
 
 
 @dataclass
@@ -46,47 +46,47 @@ class FileRecovery:
     complete: bool = False          # the source's data section ended cleanly (DataEnd)
     stopped_at: int = 0             # bytes of the source that were read
     size: int = 0                   # size of the source
-    error: str = ''                 # why reading stopped early, if it did
+    error: str = ""                 # why reading stopped early, if it did
 
     def describe(self) -> str:
-        state = ('intact' if self.complete else
-                 f'truncated: read {self.stopped_at} of {self.size} bytes ({self.error})')
-        return f'{self.source} -> {self.output}: {self.messages} messages saved ({state})'
+        state = ("intact" if self.complete else
+                 f"truncated: read {self.stopped_at} of {self.size} bytes ({self.error})")
+        return f"{self.source} -> {self.output}: {self.messages} messages saved ({state})"
 
 
-def recover_file(source: Path, output: Path, compression: str = 'zstd',
+def recover_file(source: Path, output: Path, compression: str = "zstd",
                  chunk_size: int = 1 << 20) -> tuple[FileRecovery, list[TopicInfo], FileStats]:
     """Stream-read ``source`` and write everything readable into the new file ``output``."""
     source, output = Path(source), Path(output)
-    with open(source, 'rb') as f:
+    with open(source, "rb") as f:
         head = f.read(8)
     if head and not MAGIC.startswith(head[:len(MAGIC)]):
-        raise ValueError(f'{source} is not an MCAP file (it starts with {head!r})')
+        raise ValueError(f"{source} is not an MCAP file (it starts with {head!r})")
     result = FileRecovery(source=source, output=output, size=source.stat().st_size)
-    out = McapFile(output, compression, chunk_size, library='tmgwr_agent recover (mcap-python)')
+    out = McapFile(output, compression, chunk_size, library="tmgwr_agent recover (mcap-python)")
     schemas: dict[int, Schema] = {}
     topics: dict[int, TopicInfo] = {}
     stats = FileStats(path=output.name)
     extra_metadata: list[Metadata] = []
-    with open(source, 'rb') as stream:
+    with open(source, "rb") as stream:
         try:
             for record in StreamReader(stream, skip_magic=False, emit_chunks=False).records:
                 if isinstance(record, Header):
-                    if record.profile and record.profile != 'ros2':
-                        raise ValueError(f'{source}: profile {record.profile!r} is not ros2')
+                    if record.profile and record.profile != "ros2":
+                        raise ValueError(f"{source}: profile {record.profile!r} is not ros2")
                 elif isinstance(record, Schema):
                     schemas[record.id] = record
                 elif isinstance(record, Channel) and record.id not in topics:
                     schema = schemas.get(record.schema_id)
                     if schema is None:
-                        raise ValueError(f'{source}: channel {record.topic} refers to the '
-                                         f'unknown schema id {record.schema_id}')
+                        raise ValueError(f"{source}: channel {record.topic} refers to the "
+                                         f"unknown schema id {record.schema_id}")
                     topics[record.id] = TopicInfo(
                         name=record.topic, type=schema.name,
                         definition=schema.data.decode(),
                         offered_qos=bag_qos.load_profiles(
-                            record.metadata.get('offered_qos_profiles', '')),
-                        type_hash=record.metadata.get('topic_type_hash', ''))
+                            record.metadata.get("offered_qos_profiles", "")),
+                        type_hash=record.metadata.get("topic_type_hash", ""))
                 elif isinstance(record, Message):
                     topic = topics.get(record.channel_id)
                     if topic is None:
@@ -96,7 +96,7 @@ def recover_file(source: Path, output: Path, compression: str = 'zstd',
                                            sequence=record.sequence)
                     stats.add(topic.name, record.log_time)
                     result.messages += 1
-                elif isinstance(record, Metadata) and record.name != 'rosbag2':
+                elif isinstance(record, Metadata) and record.name != "rosbag2":
                     extra_metadata.append(record)
                 elif isinstance(record, Attachment):
                     out.writer.add_attachment(record.create_time, record.log_time, record.name,
@@ -106,15 +106,15 @@ def recover_file(source: Path, output: Path, compression: str = 'zstd',
                     break               # the summary section follows: nothing new in it
                 result.stopped_at = stream.tell()
         except (McapError, EOFError, struct.error, ValueError, UnicodeDecodeError) as exc:
-            if isinstance(exc, ValueError) and 'profile' in str(exc):
+            if isinstance(exc, ValueError) and "profile" in str(exc):
                 raise
-            result.error = f'{type(exc).__name__}: {exc}' if str(exc) else type(exc).__name__
+            result.error = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
     for m in extra_metadata:
         out.writer.add_metadata(m.name, m.metadata)
     infos = list(topics.values())
     for t in infos:                          # channels without messages are kept as well
         out.channel(t)
-    out.close(bag_metadata(infos, [stats], {'recovered_from': str(source)}))
+    out.close(bag_metadata(infos, [stats], {"recovered_from": str(source)}))
     result.counts = dict(stats.counts)
     return result, infos, stats
 
@@ -122,27 +122,27 @@ def recover_file(source: Path, output: Path, compression: str = 'zstd',
 def default_output(bag: Path) -> Path:
     bag = Path(bag)
     if bag.is_dir():
-        return bag.with_name(bag.name + '.recovered')
-    return bag.with_name(bag.stem + '.recovered.mcap')
+        return bag.with_name(bag.name + ".recovered")
+    return bag.with_name(bag.stem + ".recovered.mcap")
 
 
 def recover(bag: str | Path, output: str | Path | None = None,
-            compression: str = 'zstd') -> list[FileRecovery]:
+            compression: str = "zstd") -> list[FileRecovery]:
     """Recover a ``.mcap`` file or every ``.mcap`` file of a bag directory."""
     bag = Path(bag)
     if not bag.exists():
-        raise FileNotFoundError(f'{bag} does not exist')
+        raise FileNotFoundError(f"{bag} does not exist")
     if compression not in COMPRESSIONS:
         raise ValueError(f'compression {compression!r}: expected one of {", ".join(COMPRESSIONS)}')
     out = Path(output) if output else default_output(bag)
     if out.exists() and (out.is_file() or any(out.iterdir())):
-        raise FileExistsError(f'{out} already exists: give another output with -o')
+        raise FileExistsError(f"{out} already exists: give another output with -o")
     if bag.is_file():
         out.parent.mkdir(parents=True, exist_ok=True)
         return [recover_file(bag, out, compression)[0]]
-    sources = sorted(bag.glob('*.mcap'), key=_file_index)
+    sources = sorted(bag.glob("*.mcap"), key=_file_index)
     if not sources:
-        raise FileNotFoundError(f'{bag} holds no .mcap file')
+        raise FileNotFoundError(f"{bag} holds no .mcap file")
     out.mkdir(parents=True, exist_ok=True)
     results, all_topics, all_stats = [], {}, []
     for src in sources:
@@ -152,11 +152,11 @@ def recover(bag: str | Path, output: str | Path | None = None,
         for t in infos:
             all_topics.setdefault(t.name, t)
     write_metadata_yaml(out, bag_metadata(list(all_topics.values()), all_stats,
-                                          {'recovered_from': str(bag)}))
+                                          {"recovered_from": str(bag)}))
     return results
 
 
 def _file_index(path: Path) -> tuple[int, str]:
     """``name_12.mcap`` sorts after ``name_2.mcap``."""
-    tail = path.stem.rsplit('_', 1)[-1]
+    tail = path.stem.rsplit("_", 1)[-1]
     return (int(tail) if tail.isdigit() else -1, path.name)

@@ -42,42 +42,42 @@ def bag_files(bag: str | Path) -> list[Path]:
     if bag.is_file():
         return [bag]
     if not bag.is_dir():
-        raise FileNotFoundError(f'{bag} does not exist')
-    meta = bag / 'metadata.yaml'
+        raise FileNotFoundError(f"{bag} does not exist")
+    meta = bag / "metadata.yaml"
     if meta.is_file():
-        info = yaml.safe_load(meta.read_text())['rosbag2_bagfile_information']
-        files = [bag / p for p in info.get('relative_file_paths', [])]
+        info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
+        files = [bag / p for p in info.get("relative_file_paths", [])]
         missing = [str(f) for f in files if not f.is_file()]
         if missing:
             raise FileNotFoundError(f'{meta} lists missing files: {", ".join(missing)}')
         return files
-    files = sorted(bag.glob('*.mcap'))
+    files = sorted(bag.glob("*.mcap"))
     if not files:
-        raise FileNotFoundError(f'{bag} holds no .mcap file')
+        raise FileNotFoundError(f"{bag} holds no .mcap file")
     return files
 
 
 def read_channels(files: list[Path]) -> dict[str, Channel]:
     channels: dict[str, Channel] = {}
     for path in files:
-        with open(path, 'rb') as f:
+        with open(path, "rb") as f:
             summary = make_reader(f).get_summary()
         if summary is None:
-            raise ValueError(f'{path} has no summary (unfinished recording?): '
-                             f'run ./tmgwr recover {path} first')
+            raise ValueError(f"{path} has no summary (unfinished recording?): "
+                             f"run ./tmgwr recover {path} first")
         for ch in summary.channels.values():
             if ch.topic not in channels:
                 schema = summary.schemas[ch.schema_id]
                 channels[ch.topic] = Channel(
                     ch.topic, schema.name,
-                    bag_qos.load_profiles(ch.metadata.get('offered_qos_profiles', '')))
+                    bag_qos.load_profiles(ch.metadata.get("offered_qos_profiles", "")))
     return channels
 
 
 def iter_messages(files: list[Path], topics: set[str] | None) -> Iterator[tuple[str, int, bytes]]:
     """``(topic, log_time, data)`` in log-time order, file after file."""
     for path in files:
-        with open(path, 'rb') as f:
+        with open(path, "rb") as f:
             reader = make_reader(f)
             for _schema, channel, message in reader.iter_messages(
                     topics=sorted(topics) if topics else None, log_time_order=True):
@@ -86,13 +86,13 @@ def iter_messages(files: list[Path], topics: set[str] | None) -> Iterator[tuple[
 
 def replay_qos(offered: list[dict]):
     """Publisher QoS for a replayed topic from the recorded offered profiles."""
-    profile = dict(offered[0]) if offered else {'reliability': 'reliable',
-                                                 'durability': 'volatile'}
-    latched = profile.get('durability') == 'transient_local'
-    if not profile.get('depth') or profile.get('history') in (None, 'unknown',
-                                                              'system_default'):
-        profile['history'] = 'keep_last'
-        profile['depth'] = LATCHED_DEPTH if latched else STREAM_DEPTH
+    profile = dict(offered[0]) if offered else {"reliability": "reliable",
+                                                 "durability": "volatile"}
+    latched = profile.get("durability") == "transient_local"
+    if not profile.get("depth") or profile.get("history") in (None, "unknown",
+                                                              "system_default"):
+        profile["history"] = "keep_last"
+        profile["depth"] = LATCHED_DEPTH if latched else STREAM_DEPTH
     return bag_qos.dict_to_profile(profile)
 
 
@@ -104,12 +104,12 @@ def replay(bag: str | Path, rate: float = 1.0, topics: list[str] | None = None,
     from rclpy.executors import ExternalShutdownException
 
     if not rate > 0:
-        raise ValueError(f'--rate must be > 0 (got {rate})')
+        raise ValueError(f"--rate must be > 0 (got {rate})")
     files = bag_files(bag)
     channels = read_channels(files)
     wanted = None
     if topics:
-        wanted = {t if t.startswith('/') else '/' + t for t in topics}
+        wanted = {t if t.startswith("/") else "/" + t for t in topics}
         unknown = sorted(wanted - set(channels))
         if unknown:
             raise ValueError(f'topics not in {bag}: {", ".join(unknown)} '
@@ -117,7 +117,7 @@ def replay(bag: str | Path, rate: float = 1.0, topics: list[str] | None = None,
     selected = {t: c for t, c in channels.items() if wanted is None or t in wanted}
     published, loops = 0, 0
     rclpy.init()
-    node = rclpy.create_node('replay', enable_rosout=False)
+    node = rclpy.create_node("replay", enable_rosout=False)
     try:
         pubs = {t: node.create_publisher(definitions.import_message(c.type), t,
                                          replay_qos(c.offered_qos))
@@ -153,12 +153,12 @@ def replay(bag: str | Path, rate: float = 1.0, topics: list[str] | None = None,
             if not loop or t0_bag is None:
                 break
         seconds = time.monotonic() - started
-        log(f'replay: published {published} messages in {seconds:.3f} s ({loops} pass(es))')
+        log(f"replay: published {published} messages in {seconds:.3f} s ({loops} pass(es))")
         time.sleep(linger)           # let reliable / latched samples reach late readers
     except (KeyboardInterrupt, ExternalShutdownException):
-        seconds = time.monotonic() - started if 'started' in locals() else 0.0
-        log(f'replay: interrupted after {published} messages')
+        seconds = time.monotonic() - started if "started" in locals() else 0.0
+        log(f"replay: interrupted after {published} messages")
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
-    return {'published': published, 'loops': loops, 'seconds': seconds}
+    return {"published": published, "loops": loops, "seconds": seconds}

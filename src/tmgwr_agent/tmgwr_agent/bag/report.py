@@ -44,25 +44,25 @@ import numpy as np
 
 from tmgwr_common import topics as T
 
-GOAL_EVENT = re.compile(r'step (\d+): goal -> row (-?\d+), col (-?\d+)')
-STEP_EVENT = re.compile(r'step (\d+): (.*)')
+GOAL_EVENT = re.compile(r"step (\d+): goal -> row (-?\d+), col (-?\d+)")
+STEP_EVENT = re.compile(r"step (\d+): (.*)")
 
 
 def default_output(bag: Path) -> Path:
     bag = Path(bag)
-    return bag / 'report' if bag.is_dir() else bag.with_name(bag.stem + '_report')
+    return bag / "report" if bag.is_dir() else bag.with_name(bag.stem + "_report")
 
 
 def _bag_paths(bag: Path) -> list[Path]:
     if bag.is_dir():
-        if (bag / 'metadata.yaml').is_file():
+        if (bag / "metadata.yaml").is_file():
             return [bag]                       # rosbag2 directory: AnyReader reads it whole
-        files = sorted(bag.glob('*.mcap'))
+        files = sorted(bag.glob("*.mcap"))
         if not files:
-            raise FileNotFoundError(f'{bag} holds neither metadata.yaml nor .mcap files')
+            raise FileNotFoundError(f"{bag} holds neither metadata.yaml nor .mcap files")
         return files
     if not bag.is_file():
-        raise FileNotFoundError(f'{bag} does not exist')
+        raise FileNotFoundError(f"{bag} does not exist")
     return [bag]
 
 
@@ -74,17 +74,17 @@ def read_bag(bag: str | Path) -> dict[str, Any]:
     from tmgwr_agent.episodes import EpisodeMonitor
 
     bag = Path(bag)
-    data: dict[str, Any] = {'topics': {}, 'goals': [], 'events': [], 'map': [],
-                            'winners': {}, 'cells': {}, 'grid': None, 'motivation': None,
-                            'grids': [], 'start_cell': None}
+    data: dict[str, Any] = {"topics": {}, "goals": [], "events": [], "map": [],
+                            "winners": {}, "cells": {}, "grid": None, "motivation": None,
+                            "grids": [], "start_cell": None}
     monitor = EpisodeMonitor()
     obs_times: dict[int, int] = {}
     last_raw: dict[str, tuple[Any, bytes]] = {}
     with AnyReader(_bag_paths(bag)) as reader:
         for c in reader.connections:
-            entry = data['topics'].setdefault(c.topic, {'type': c.msgtype, 'count': 0})
-            entry['count'] += c.msgcount
-        data['start_ns'], data['end_ns'] = reader.start_time, reader.end_time
+            entry = data["topics"].setdefault(c.topic, {"type": c.msgtype, "count": 0})
+            entry["count"] += c.msgcount
+        data["start_ns"], data["end_ns"] = reader.start_time, reader.end_time
         wanted = {T.OBSERVATION, T.SENSORIMOTOR_STATE, T.MAP, T.GOAL, T.EVENTS, T.GRID}
         conns = [c for c in reader.connections if c.topic in wanted]
         for conn, t, raw in reader.messages(connections=conns):
@@ -92,38 +92,38 @@ def read_bag(bag: str | Path) -> dict[str, Any]:
             if conn.topic == T.OBSERVATION:
                 monitor.on_observation(msg)
                 sid = int(msg.step_id)
-                if msg.episode_start and data.get('start_cell') is None:
-                    data['start_cell'] = (int(msg.row), int(msg.col))
+                if msg.episode_start and data.get("start_cell") is None:
+                    data["start_cell"] = (int(msg.row), int(msg.col))
                 obs_times.setdefault(sid, t)
-                data['cells'][sid] = (int(msg.row), int(msg.col))
+                data["cells"][sid] = (int(msg.row), int(msg.col))
             elif conn.topic == T.SENSORIMOTOR_STATE:
-                data['winners'][int(msg.step_id)] = int(msg.winner)
+                data["winners"][int(msg.step_id)] = int(msg.winner)
             elif conn.topic == T.MAP:
                 E = np.array([float(lk.reliability) for lk in msg.links])
-                data['map'].append({'t': t, 'step_id': int(msg.step_id),
-                                    'nodes': len(msg.nodes), 'links': len(msg.links),
-                                    'mean_reliability': float(E.mean()) if len(E) else 0.0})
+                data["map"].append({"t": t, "step_id": int(msg.step_id),
+                                    "nodes": len(msg.nodes), "links": len(msg.links),
+                                    "mean_reliability": float(E.mean()) if len(E) else 0.0})
                 last_raw[T.MAP] = (conn, raw)
             elif conn.topic == T.GOAL:
-                data['goals'].append({'t': t, 'cell': (int(round(msg.point.y)),
+                data["goals"].append({"t": t, "cell": (int(round(msg.point.y)),
                                                        int(round(msg.point.x)))})
             elif conn.topic == T.EVENTS:
-                data['events'].append({'t': t, 'text': str(msg.data)})
+                data["events"].append({"t": t, "text": str(msg.data)})
             elif conn.topic == T.GRID:
                 walls = np.asarray(msg.data, dtype=np.int16).reshape(
                     int(msg.info.height), int(msg.info.width)) >= 50
-                data['grids'].append((t, walls))
+                data["grids"].append((t, walls))
                 last_raw[T.GRID] = (conn, raw)
         for topic in (T.MOTIVATION,):           # only the newest of these is needed
             cs = [c for c in reader.connections if c.topic == topic]
             for conn, _t, raw in reader.messages(connections=cs):
                 last_raw[topic] = (conn, raw)
-        for topic, key in ((T.MOTIVATION, 'motivation'), (T.GRID, 'grid'), (T.MAP, 'final_map')):
+        for topic, key in ((T.MOTIVATION, "motivation"), (T.GRID, "grid"), (T.MAP, "final_map")):
             if topic in last_raw:
                 conn, raw = last_raw[topic]
                 data[key] = reader.deserialize(raw, conn.msgtype)
-    data['monitor'] = monitor
-    data['obs_times'] = obs_times
+    data["monitor"] = monitor
+    data["obs_times"] = obs_times
     return data
 
 
@@ -131,33 +131,33 @@ def read_bag(bag: str | Path) -> dict[str, Any]:
 def goal_changes(data: dict) -> list[dict]:
     """Goal changes with the step whose observation first carries the new goal."""
     out = []
-    for e in data['events']:
-        m = GOAL_EVENT.search(e['text'])
+    for e in data["events"]:
+        m = GOAL_EVENT.search(e["text"])
         if m:
-            out.append({'step': int(m.group(1)), 'cell': [int(m.group(2)), int(m.group(3))],
-                        't': e['t'], 'source': T.EVENTS})
-    if out or len(data['goals']) < 2:
+            out.append({"step": int(m.group(1)), "cell": [int(m.group(2)), int(m.group(3))],
+                        "t": e["t"], "source": T.EVENTS})
+    if out or len(data["goals"]) < 2:
         return out
     # no event lines recorded: the latched /goal messages after the first one, each placed
     # at the first observation received after it
-    times = sorted((t, s) for s, t in data['obs_times'].items())
-    for g in data['goals'][1:]:
-        step = next((s for t, s in times if t >= g['t']), None)
+    times = sorted((t, s) for s, t in data["obs_times"].items())
+    for g in data["goals"][1:]:
+        step = next((s for t, s in times if t >= g["t"]), None)
         if step is not None:
-            out.append({'step': step, 'cell': list(g['cell']), 't': g['t'],
-                        'source': T.GOAL})
+            out.append({"step": step, "cell": list(g["cell"]), "t": g["t"],
+                        "source": T.GOAL})
     return out
 
 
 def maze_events(data: dict) -> list[dict]:
     """Layout events (event fired, cell blocked/opened) with their step."""
     out = []
-    for e in data['events']:
-        if GOAL_EVENT.search(e['text']):
+    for e in data["events"]:
+        if GOAL_EVENT.search(e["text"]):
             continue
-        m = STEP_EVENT.search(e['text'])
+        m = STEP_EVENT.search(e["text"])
         if m:
-            out.append({'step': int(m.group(1)), 'what': m.group(2), 't': e['t']})
+            out.append({"step": int(m.group(1)), "what": m.group(2), "t": e["t"]})
     return out
 
 
@@ -167,15 +167,15 @@ def after(episodes, after_step: int, until_step: int | None = None) -> dict:
     eps = [e for e in episodes if e.end_step > after_step
            and (until_step is None or e.end_step <= until_step)]
     n = len(eps)
-    first = next((e for e in eps if e.outcome == 'goal'), None)
+    first = next((e for e in eps if e.outcome == "goal"), None)
     return {
-        'after_step': after_step,
-        'episodes': n,
-        'steps_per_episode': [e.steps for e in eps],
-        'previous_pct': 100.0 * sum(e.outcome == 'previous_goal' for e in eps) / n if n else None,
-        'current_pct': 100.0 * sum(e.outcome == 'goal' for e in eps) / n if n else None,
-        'goal_reached_episodes': sum(e.outcome == 'goal' for e in eps),
-        'first_goal_steps_after': (first.end_step - after_step) if first else None,
+        "after_step": after_step,
+        "episodes": n,
+        "steps_per_episode": [e.steps for e in eps],
+        "previous_pct": 100.0 * sum(e.outcome == "previous_goal" for e in eps) / n if n else None,
+        "current_pct": 100.0 * sum(e.outcome == "goal" for e in eps) / n if n else None,
+        "goal_reached_episodes": sum(e.outcome == "goal" for e in eps),
+        "first_goal_steps_after": (first.end_step - after_step) if first else None,
     }
 
 
@@ -186,10 +186,10 @@ def optimal_steps(data: dict, goal, at_ns: int) -> int | None:
     """Shortest path from the start cell to ``goal`` in the maze in force at ``at_ns``
     (the newest ``/maze_grid`` recorded by then)."""
     from maze_sim.maze import bfs_distances
-    grids = [w for t, w in data['grids'] if t <= at_ns] or [w for _t, w in data['grids'][:1]]
-    if not grids or goal is None or data.get('start_cell') is None:
+    grids = [w for t, w in data["grids"] if t <= at_ns] or [w for _t, w in data["grids"][:1]]
+    if not grids or goal is None or data.get("start_cell") is None:
         return None
-    d = int(bfs_distances(grids[-1], tuple(data['start_cell']))[tuple(goal)])
+    d = int(bfs_distances(grids[-1], tuple(data["start_cell"]))[tuple(goal)])
     return d if d >= 0 else None
 
 
@@ -199,35 +199,35 @@ def convergence(eps: list, optimal: int | None) -> dict:
     first_opt = reliable = None
     if optimal:
         for k, e in enumerate(eps, 1):
-            if first_opt is None and e.outcome == 'goal' and e.steps == optimal:
+            if first_opt is None and e.outcome == "goal" and e.steps == optimal:
                 first_opt = k
             last = eps[max(0, k - STREAK):k]
             if reliable is None and len(last) == STREAK and all(
-                    x.outcome == 'goal' and x.steps <= SLACK * optimal for x in last):
+                    x.outcome == "goal" and x.steps <= SLACK * optimal for x in last):
                 reliable = k
-    return {'optimal_steps': optimal, 'episodes_to_optimal': first_opt,
-            'episodes_to_reliable': reliable}
+    return {"optimal_steps": optimal, "episodes_to_optimal": first_opt,
+            "episodes_to_reliable": reliable}
 
 
 def summarise(data: dict, bag: Path) -> dict:
-    mon = data['monitor']
+    mon = data["monitor"]
     eps = mon.episodes
     changes = goal_changes(data)
     events = maze_events(data)
-    boundaries = sorted([c['step'] - 1 for c in changes] + [e['step'] for e in events])
-    initial_goal = data['goals'][0]['cell'] if data['goals'] else None
+    boundaries = sorted([c["step"] - 1 for c in changes] + [e["step"] for e in events])
+    initial_goal = data["goals"][0]["cell"] if data["goals"] else None
 
     def next_boundary(step):
         return next((b for b in boundaries if b > step), None)
 
-    times = data['obs_times']
-    end_ns = data.get('end_ns') or 0
+    times = data["obs_times"]
+    end_ns = data.get("end_ns") or 0
 
     def goal_at(step):
         cell = list(initial_goal) if initial_goal else None
         for c in changes:
-            if c['step'] <= step:
-                cell = c['cell']
+            if c["step"] <= step:
+                cell = c["cell"]
         return cell
 
     # first step of every episode: the step after the previous episode's end
@@ -245,9 +245,9 @@ def summarise(data: dict, bag: Path) -> dict:
             # the previous goal need not end an episode (the graph's /set_goal drops it):
             # count the episodes whose path stood on its cell at all
             cell = tuple(previous_cell)
-            passed = sum(any(data['cells'].get(s) == cell
+            passed = sum(any(data["cells"].get(s) == cell
                              for s in range(starts[id(e)], e.end_step + 1)) for e in in_phase)
-            res['previous_visit_pct'] = 100.0 * passed / len(in_phase) if in_phase else None
+            res["previous_visit_pct"] = 100.0 * passed / len(in_phase) if in_phase else None
         return res
 
     transitions = []
@@ -255,43 +255,43 @@ def summarise(data: dict, bag: Path) -> dict:
     for c in changes:
         # the new goal is sensed from step c['step']: step c['step'] - 1 is the last one
         # under the old goal (the demo's "at_step" of the /set_goal call)
-        transitions.append({'step': c['step'], 'from': previous, 'to': c['cell'],
-                            **phase(c['step'] - 1, previous)})
-        previous = c['cell']
-    event_rows = [{'step': e['step'], 'what': e['what'], **phase(e['step'])} for e in events]
+        transitions.append({"step": c["step"], "from": previous, "to": c["cell"],
+                            **phase(c["step"] - 1, previous)})
+        previous = c["cell"]
+    event_rows = [{"step": e["step"], "what": e["what"], **phase(e["step"])} for e in events]
     first_phase = phase(mon.first_step_id - 1) if eps else None
-    seconds = (data['end_ns'] - data['start_ns']) / 1e9 if data.get('end_ns') else 0.0
+    seconds = (data["end_ns"] - data["start_ns"]) / 1e9 if data.get("end_ns") else 0.0
     steps_total = mon.last_step_id - mon.first_step_id + 1 if mon.first_step_id >= 0 else 0
-    final = data['map'][-1] if data['map'] else None
+    final = data["map"][-1] if data["map"] else None
     return {
-        'bag': str(bag),
-        'seconds': round(seconds, 3),
-        'topics': data['topics'],
-        'steps': {'first': mon.first_step_id, 'last': mon.last_step_id,
-                  'count': steps_total, 'seen': mon.seen, 'missed': mon.missed,
-                  'steps_per_s': round(_rate(data), 1)},
-        'episodes': {
-            'count': len(eps),
-            'steps_per_episode': [e.steps for e in eps],
-            'end_steps': [e.end_step for e in eps],
-            'outcomes': dict(Counter(e.outcome for e in eps)),
+        "bag": str(bag),
+        "seconds": round(seconds, 3),
+        "topics": data["topics"],
+        "steps": {"first": mon.first_step_id, "last": mon.last_step_id,
+                  "count": steps_total, "seen": mon.seen, "missed": mon.missed,
+                  "steps_per_s": round(_rate(data), 1)},
+        "episodes": {
+            "count": len(eps),
+            "steps_per_episode": [e.steps for e in eps],
+            "end_steps": [e.end_step for e in eps],
+            "outcomes": dict(Counter(e.outcome for e in eps)),
         },
-        'initial_goal': initial_goal,
-        'start_cell': list(data['start_cell']) if data.get('start_cell') else None,
-        'learning': ({k: first_phase[k] for k in ('episodes', 'optimal_steps',
-                                                   'episodes_to_optimal',
-                                                   'episodes_to_reliable')}
+        "initial_goal": initial_goal,
+        "start_cell": list(data["start_cell"]) if data.get("start_cell") else None,
+        "learning": ({k: first_phase[k] for k in ("episodes", "optimal_steps",
+                                                   "episodes_to_optimal",
+                                                   "episodes_to_reliable")}
                      if first_phase else None),
-        'goal_changes': transitions,
-        'events': event_rows,
-        'map': ({'snapshots': len(data['map']), 'nodes': final['nodes'],
-                 'links': final['links'], 'mean_reliability': round(final['mean_reliability'], 4),
-                 'step_id': final['step_id']} if final else None),
+        "goal_changes": transitions,
+        "events": event_rows,
+        "map": ({"snapshots": len(data["map"]), "nodes": final["nodes"],
+                 "links": final["links"], "mean_reliability": round(final["mean_reliability"], 4),
+                 "step_id": final["step_id"]} if final else None),
     }
 
 
 def _rate(data: dict) -> float:
-    times = data['obs_times']
+    times = data["obs_times"]
     if len(times) < 2:
         return 0.0
     s0, s1 = min(times), max(times)
@@ -303,27 +303,27 @@ def _rate(data: dict) -> float:
 def _figures(data: dict, summary: dict, out: Path) -> list[str]:
     """Draw every figure into ``out``; returns the files written."""
     import matplotlib
-    matplotlib.use('Agg')
+    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     t_of = _seconds_since_start(data)
     files = [
-        _steps_per_episode(data['monitor'].episodes, summary, t_of,
-                           out / 'steps_per_episode.png'),
-        _goal_change_visits(summary, out / 'goal_change_visits.png'),
-        _steps_to_goal(summary, out / 'steps_to_goal.png'),
-        _map_over_time(data, summary, t_of, out / 'map_over_time.png'),
-        _final_map(data, out / 'final_map.png'),
+        _steps_per_episode(data["monitor"].episodes, summary, t_of,
+                           out / "steps_per_episode.png"),
+        _goal_change_visits(summary, out / "goal_change_visits.png"),
+        _steps_to_goal(summary, out / "steps_to_goal.png"),
+        _map_over_time(data, summary, t_of, out / "map_over_time.png"),
+        _final_map(data, out / "final_map.png"),
     ]
-    plt.close('all')
+    plt.close("all")
     return files
 
 
 def _seconds_since_start(data: dict):
     """``t_of(step)``: seconds from the start of the recording to the step's observation
     (the figures over time share this axis)."""
-    t0 = data.get('start_ns') or 0
-    times = data['obs_times']
+    t0 = data.get("start_ns") or 0
+    times = data["obs_times"]
 
     def t_of(step):
         return (times.get(step, t0) - t0) / 1e9
@@ -333,16 +333,16 @@ def _seconds_since_start(data: dict):
 
 def _mark_changes(ax, summary: dict, t_of) -> None:
     """Vertical lines at every goal change (purple) and maze event (red), labelled."""
-    for c in summary['goal_changes']:
-        x = t_of(c['step'])
-        ax.axvline(x, color='tab:purple', ls='--', lw=1)
-        ax.annotate(f'goal -> {tuple(c["to"])}', (x, 1), xycoords=('data', 'axes fraction'),
-                    rotation=90, va='top', ha='right', fontsize=7, color='tab:purple')
-    for e in summary['events']:
-        x = t_of(e['step'])
-        ax.axvline(x, color='tab:red', ls=':', lw=1)
-        ax.annotate(e['what'], (x, 1), xycoords=('data', 'axes fraction'), rotation=90,
-                    va='top', ha='right', fontsize=7, color='tab:red')
+    for c in summary["goal_changes"]:
+        x = t_of(c["step"])
+        ax.axvline(x, color="tab:purple", ls="--", lw=1)
+        ax.annotate(f'goal -> {tuple(c["to"])}', (x, 1), xycoords=("data", "axes fraction"),
+                    rotation=90, va="top", ha="right", fontsize=7, color="tab:purple")
+    for e in summary["events"]:
+        x = t_of(e["step"])
+        ax.axvline(x, color="tab:red", ls=":", lw=1)
+        ax.annotate(e["what"], (x, 1), xycoords=("data", "axes fraction"), rotation=90,
+                    va="top", ha="right", fontsize=7, color="tab:red")
 
 
 def _steps_per_episode(eps: list, summary: dict, t_of, path: Path) -> str:
@@ -350,16 +350,16 @@ def _steps_per_episode(eps: list, summary: dict, t_of, path: Path) -> str:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(8, 4))
-    colours = {'goal': 'tab:green', 'previous_goal': 'tab:orange', 'cut': 'tab:gray'}
+    colours = {"goal": "tab:green", "previous_goal": "tab:orange", "cut": "tab:gray"}
     for outcome, colour in colours.items():
         sel = [e for e in eps if e.outcome == outcome]
         ax.scatter([t_of(e.end_step) for e in sel], [e.steps for e in sel], s=12, c=colour,
-                   label=outcome.replace('_', ' '))
-    ax.plot([t_of(e.end_step) for e in eps], [e.steps for e in eps], lw=0.5, c='k', alpha=0.4)
+                   label=outcome.replace("_", " "))
+    ax.plot([t_of(e.end_step) for e in eps], [e.steps for e in eps], lw=0.5, c="k", alpha=0.4)
     _mark_changes(ax, summary, t_of)
-    ax.set_xlabel('time since the recording started (s)')
-    ax.set_ylabel('steps in the episode')
-    ax.set_title('Steps per episode')
+    ax.set_xlabel("time since the recording started (s)")
+    ax.set_ylabel("steps in the episode")
+    ax.set_title("Steps per episode")
     ax.legend(fontsize=8)
     return _save(fig, path)
 
@@ -369,26 +369,26 @@ def _goal_change_visits(summary: dict, path: Path) -> str:
     its cell, and ended at the current goal (the goal-change scenario's figures)."""
     import matplotlib.pyplot as plt
 
-    tr = summary['goal_changes']
+    tr = summary["goal_changes"]
     fig, ax = plt.subplots(figsize=(max(4, 1.6 * len(tr) + 2), 3.5))
     if tr:
         x = np.arange(len(tr))
-        ax.bar(x - 0.27, [t['previous_pct'] or 0 for t in tr], 0.27,
-               label='ended at the previous goal', color='tab:orange')
-        ax.bar(x, [t.get('previous_visit_pct') or 0 for t in tr], 0.27,
-               label="passed the previous goal's cell", color='navajowhite')
-        ax.bar(x + 0.27, [t['current_pct'] or 0 for t in tr], 0.27,
-               label='ended at the current goal', color='tab:green')
-        ax.legend(fontsize=7, loc='upper center', ncol=1)
+        ax.bar(x - 0.27, [t["previous_pct"] or 0 for t in tr], 0.27,
+               label="ended at the previous goal", color="tab:orange")
+        ax.bar(x, [t.get("previous_visit_pct") or 0 for t in tr], 0.27,
+               label="passed the previous goal's cell", color="navajowhite")
+        ax.bar(x + 0.27, [t["current_pct"] or 0 for t in tr], 0.27,
+               label="ended at the current goal", color="tab:green")
+        ax.legend(fontsize=7, loc="upper center", ncol=1)
         ax.set_xticks(x, [f'{tuple(t["from"]) if t["from"] else "?"}->{tuple(t["to"])}\n'
                           f'step {t["step"]}, {t["episodes"]} ep.' for t in tr], fontsize=7)
     else:
-        ax.text(0.5, 0.5, 'no goal change recorded', ha='center', va='center',
+        ax.text(0.5, 0.5, "no goal change recorded", ha="center", va="center",
                 transform=ax.transAxes)
     ax.set_ylim(0, 140)                     # room for the legend above the bars
     ax.set_yticks(range(0, 101, 20))
-    ax.set_ylabel('% of the episodes after the change')
-    ax.set_title('Visits after each goal change')
+    ax.set_ylabel("% of the episodes after the change")
+    ax.set_title("Visits after each goal change")
     return _save(fig, path)
 
 
@@ -397,30 +397,30 @@ def _steps_to_goal(summary: dict, path: Path) -> str:
     shortest path then in force."""
     import matplotlib.pyplot as plt
 
-    tr, events = summary['goal_changes'], summary['events']
-    rows = [(f'goal -> {tuple(t["to"])}\n(step {t["step"]})', t['first_goal_steps_after'])
-            for t in tr] + [(f'{e["what"]}\n(step {e["step"]})', e['first_goal_steps_after'])
+    tr, events = summary["goal_changes"], summary["events"]
+    rows = [(f'goal -> {tuple(t["to"])}\n(step {t["step"]})', t["first_goal_steps_after"])
+            for t in tr] + [(f'{e["what"]}\n(step {e["step"]})', e["first_goal_steps_after"])
                             for e in events]
     fig, ax = plt.subplots(figsize=(max(4, 1.6 * len(rows) + 2), 3.5))
     if rows:
         vals = [v if v is not None else 0 for _l, v in rows]
-        bars = ax.bar(range(len(rows)), vals, color=['tab:purple'] * len(tr) +
-                      ['tab:red'] * len(events))
+        bars = ax.bar(range(len(rows)), vals, color=["tab:purple"] * len(tr) +
+                      ["tab:red"] * len(events))
         for b, (_l, v) in zip(bars, rows):
-            ax.annotate('not reached' if v is None else str(v), (b.get_x() + b.get_width() / 2,
-                        b.get_height()), ha='center', va='bottom', fontsize=8)
+            ax.annotate("not reached" if v is None else str(v), (b.get_x() + b.get_width() / 2,
+                        b.get_height()), ha="center", va="bottom", fontsize=8)
         ax.set_xticks(range(len(rows)), [label for label, _v in rows], fontsize=7)
-        optimal = [t['optimal_steps'] for t in tr] + [e['optimal_steps'] for e in events]
+        optimal = [t["optimal_steps"] for t in tr] + [e["optimal_steps"] for e in events]
         xs = [k for k, o in enumerate(optimal) if o]
         if xs:
-            ax.scatter(xs, [optimal[k] for k in xs], marker='_', s=900, c='k', zorder=3,
-                       label='shortest path')
-            ax.legend(fontsize=8, loc='upper left', markerscale=0.4)
+            ax.scatter(xs, [optimal[k] for k in xs], marker="_", s=900, c="k", zorder=3,
+                       label="shortest path")
+            ax.legend(fontsize=8, loc="upper left", markerscale=0.4)
     else:
-        ax.text(0.5, 0.5, 'no goal change or event recorded', ha='center', va='center',
+        ax.text(0.5, 0.5, "no goal change or event recorded", ha="center", va="center",
                 transform=ax.transAxes)
-    ax.set_ylabel('steps until the goal is first reached')
-    ax.set_title('Steps to the goal after each change')
+    ax.set_ylabel("steps until the goal is first reached")
+    ax.set_title("Steps to the goal after each change")
     return _save(fig, path)
 
 
@@ -429,34 +429,34 @@ def _map_over_time(data: dict, summary: dict, t_of, path: Path) -> str:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(8, 4))
-    if data['map']:
-        t0 = data.get('start_ns') or 0
-        tm = [(m['t'] - t0) / 1e9 for m in data['map']]
-        ax.plot(tm, [m['nodes'] for m in data['map']], label='nodes', c='tab:blue')
-        ax.plot(tm, [m['links'] for m in data['map']], label='links', c='tab:cyan')
-        ax.set_ylabel('count')
+    if data["map"]:
+        t0 = data.get("start_ns") or 0
+        tm = [(m["t"] - t0) / 1e9 for m in data["map"]]
+        ax.plot(tm, [m["nodes"] for m in data["map"]], label="nodes", c="tab:blue")
+        ax.plot(tm, [m["links"] for m in data["map"]], label="links", c="tab:cyan")
+        ax.set_ylabel("count")
         ax2 = ax.twinx()
-        ax2.plot(tm, [m['mean_reliability'] for m in data['map']], c='tab:green',
-                 label='mean link reliability E')
-        ax2.set_ylabel('mean reliability E (Eq. 1-2)')
+        ax2.plot(tm, [m["mean_reliability"] for m in data["map"]], c="tab:green",
+                 label="mean link reliability E")
+        ax2.set_ylabel("mean reliability E (Eq. 1-2)")
         ax2.set_ylim(0, 1.05)
         h1, l1 = ax.get_legend_handles_labels()
         h2, l2 = ax2.get_legend_handles_labels()
-        ax.legend(h1 + h2, l1 + l2, fontsize=8, loc='lower right')
+        ax.legend(h1 + h2, l1 + l2, fontsize=8, loc="lower right")
         _mark_changes(ax, summary, t_of)
     else:
-        ax.text(0.5, 0.5, f'no {T.MAP} messages recorded', ha='center', va='center',
+        ax.text(0.5, 0.5, f"no {T.MAP} messages recorded", ha="center", va="center",
                 transform=ax.transAxes)
-    ax.set_xlabel('time since the recording started (s)')
-    ax.set_title('Sensorimotor map size and reliability')
+    ax.set_xlabel("time since the recording started (s)")
+    ax.set_title("Sensorimotor map size and reliability")
     return _save(fig, path)
 
 
 def node_cells(data: dict) -> dict[int, tuple[int, int]]:
     """Each node's cell: where it most often won (winner of step s, cell of step s)."""
     votes: dict[int, Counter] = defaultdict(Counter)
-    for sid, w in data['winners'].items():
-        cell = data['cells'].get(sid)
+    for sid, w in data["winners"].items():
+        cell = data["cells"].get(sid)
         if w >= 0 and cell is not None:
             votes[w][cell] += 1
     return {n: c.most_common(1)[0][0] for n, c in votes.items()}
@@ -467,13 +467,13 @@ def _final_map(data: dict, path: Path) -> str:
     from matplotlib.collections import LineCollection
 
     fig, ax = plt.subplots(figsize=(7, 6))
-    grid = data.get('grid')
+    grid = data.get("grid")
     if grid is not None:
         walls = (np.asarray(grid.data, dtype=np.int16).reshape(grid.info.height,
                                                                 grid.info.width) >= 50)
-        ax.imshow(walls, cmap='Greys', vmin=0, vmax=1.5, origin='upper')
+        ax.imshow(walls, cmap="Greys", vmin=0, vmax=1.5, origin="upper")
     cells = node_cells(data)
-    final = data.get('final_map')
+    final = data.get("final_map")
     alive = {int(n.id) for n in final.nodes} if final is not None else set(cells)
     pos = {n: np.array([c[1], c[0]], float) for n, c in cells.items() if n in alive}
     # several nodes in one cell: spread them on a small circle so all are visible
@@ -494,32 +494,32 @@ def _final_map(data: dict, path: Path) -> str:
                 segs.append([pos[s], pos[t]])
                 rel.append(float(lk.reliability))
         if segs:
-            lc = LineCollection(segs, cmap='RdYlGn', linewidths=1.2, alpha=0.8)
+            lc = LineCollection(segs, cmap="RdYlGn", linewidths=1.2, alpha=0.8)
             lc.set_array(np.array(rel))
             lc.set_clim(0, 1)
             ax.add_collection(lc)
-            fig.colorbar(lc, ax=ax, fraction=0.04, pad=0.08, orientation='horizontal',
-                         label='link reliability E (Eq. 1-2)')
+            fig.colorbar(lc, ax=ax, fraction=0.04, pad=0.08, orientation="horizontal",
+                         label="link reliability E (Eq. 1-2)")
     potentials = {}
-    mot = data.get('motivation')
+    mot = data.get("motivation")
     if mot is not None:
         potentials = {int(i): float(v) for i, v in zip(mot.node_ids, mot.potentials)}
     if pos:
         ids = sorted(pos)
         xy = np.array([pos[i] for i in ids])
         v = np.array([potentials.get(i, np.nan) for i in ids])
-        sc = ax.scatter(xy[:, 0], xy[:, 1], c=np.nan_to_num(v, nan=0.0), cmap='plasma', s=45,
-                        edgecolors='k', linewidths=0.4, zorder=3)
-        fig.colorbar(sc, ax=ax, fraction=0.04, pad=0.02, label='motivation potential (Eq. 4-5)')
-    if data['goals']:
-        r, c = data['goals'][-1]['cell']
-        ax.scatter([c], [r], marker='*', s=300, c='gold', edgecolors='k', zorder=4,
-                   label='goal')
-        ax.legend(loc='upper right', fontsize=8)
-    ax.set_title(f'Final map: {len(pos)} nodes at the cells where they won'
-                 + (f', {len(final.links)} links' if final is not None else ''))
-    ax.set_xlabel('column')
-    ax.set_ylabel('row')
+        sc = ax.scatter(xy[:, 0], xy[:, 1], c=np.nan_to_num(v, nan=0.0), cmap="plasma", s=45,
+                        edgecolors="k", linewidths=0.4, zorder=3)
+        fig.colorbar(sc, ax=ax, fraction=0.04, pad=0.02, label="motivation potential (Eq. 4-5)")
+    if data["goals"]:
+        r, c = data["goals"][-1]["cell"]
+        ax.scatter([c], [r], marker="*", s=300, c="gold", edgecolors="k", zorder=4,
+                   label="goal")
+        ax.legend(loc="upper right", fontsize=8)
+    ax.set_title(f"Final map: {len(pos)} nodes at the cells where they won"
+                 + (f", {len(final.links)} links" if final is not None else ""))
+    ax.set_xlabel("column")
+    ax.set_ylabel("row")
     return _save(fig, path)
 
 
@@ -539,10 +539,10 @@ def name_goals(summary: dict, maze_path: str | Path) -> None:
     def name(cell):
         return names.get(tuple(cell)) if cell is not None else None
 
-    summary['maze'] = str(maze_path)
-    summary['initial_goal_name'] = name(summary['initial_goal'])
-    for t in summary['goal_changes']:
-        t['from_name'], t['to_name'] = name(t['from']), name(t['to'])
+    summary["maze"] = str(maze_path)
+    summary["initial_goal_name"] = name(summary["initial_goal"])
+    for t in summary["goal_changes"]:
+        t["from_name"], t["to_name"] = name(t["from"]), name(t["to"])
 
 
 def report(bag: str | Path, output: str | Path | None = None, figures: bool = True,
@@ -551,7 +551,7 @@ def report(bag: str | Path, output: str | Path | None = None, figures: bool = Tr
     ``maze`` (the run's maze file, optional) names the goal cells."""
     bag = Path(bag)
     data = read_bag(bag)
-    if T.OBSERVATION not in data['topics']:
+    if T.OBSERVATION not in data["topics"]:
         raise ValueError(f'{bag} has no {T.OBSERVATION} topic: not a recording of the graph '
                          f'(topics: {", ".join(sorted(data["topics"])) or "none"})')
     summary = summarise(data, bag)
@@ -559,9 +559,9 @@ def report(bag: str | Path, output: str | Path | None = None, figures: bool = Tr
         name_goals(summary, maze)
     out = Path(output) if output else default_output(bag)
     out.mkdir(parents=True, exist_ok=True)
-    summary['output'] = {'dir': str(out), 'json': str(out / 'report.json'),
-                         'figures': _figures(data, summary, out) if figures else []}
-    (out / 'report.json').write_text(json.dumps(summary, indent=2, default=_jsonable))
+    summary["output"] = {"dir": str(out), "json": str(out / "report.json"),
+                         "figures": _figures(data, summary, out) if figures else []}
+    (out / "report.json").write_text(json.dumps(summary, indent=2, default=_jsonable))
     return summary
 
 
@@ -572,4 +572,4 @@ def _jsonable(o):
         return float(o)
     if isinstance(o, tuple):
         return list(o)
-    raise TypeError(f'not JSON serialisable: {type(o)}')
+    raise TypeError(f"not JSON serialisable: {type(o)}")

@@ -30,12 +30,12 @@ from mcap.writer import CompressionType, Writer
 
 from tmgwr_agent.bag import qos as qos_yaml
 
-PROFILE = 'ros2'
-SCHEMA_ENCODING = 'ros2msg'
-MESSAGE_ENCODING = 'cdr'
+PROFILE = "ros2"
+SCHEMA_ENCODING = "ros2msg"
+MESSAGE_ENCODING = "cdr"
 METADATA_VERSION = 9
-COMPRESSIONS = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
-                'none': CompressionType.NONE}
+COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
+                "none": CompressionType.NONE}
 
 
 @dataclass
@@ -45,12 +45,12 @@ class TopicInfo:
     type: str                       # pkg/msg/Type
     definition: str                 # ros2msg schema text
     offered_qos: list[dict[str, Any]] = field(default_factory=list)
-    type_hash: str = ''             # RIHS01_...
+    type_hash: str = ""             # RIHS01_...
 
     def channel_metadata(self) -> dict[str, str]:
-        meta = {'offered_qos_profiles': qos_yaml.dump_profiles(self.offered_qos)}
+        meta = {"offered_qos_profiles": qos_yaml.dump_profiles(self.offered_qos)}
         if self.type_hash:
-            meta['topic_type_hash'] = self.type_hash
+            meta["topic_type_hash"] = self.type_hash
         return meta
 
 
@@ -84,38 +84,38 @@ def bag_metadata(topics: list[TopicInfo], files: list[FileStats],
         for name, n in f.counts.items():
             totals[name] = totals.get(name, 0) + n
     return {
-        'version': METADATA_VERSION,
-        'storage_identifier': 'mcap',
-        'duration': {'nanoseconds': int(duration)},
-        'starting_time': {'nanoseconds_since_epoch': int(start)},
-        'message_count': int(sum(totals.values())),
-        'topics_with_message_count': [
+        "version": METADATA_VERSION,
+        "storage_identifier": "mcap",
+        "duration": {"nanoseconds": int(duration)},
+        "starting_time": {"nanoseconds_since_epoch": int(start)},
+        "message_count": int(sum(totals.values())),
+        "topics_with_message_count": [
             {
-                'topic_metadata': {
-                    'name': t.name,
-                    'type': t.type,
-                    'serialization_format': MESSAGE_ENCODING,
-                    'offered_qos_profiles': [qos_yaml.complete(q) for q in t.offered_qos],
-                    'type_description_hash': t.type_hash,
+                "topic_metadata": {
+                    "name": t.name,
+                    "type": t.type,
+                    "serialization_format": MESSAGE_ENCODING,
+                    "offered_qos_profiles": [qos_yaml.complete(q) for q in t.offered_qos],
+                    "type_description_hash": t.type_hash,
                 },
-                'message_count': int(totals.get(t.name, 0)),
+                "message_count": int(totals.get(t.name, 0)),
             }
             for t in topics
         ],
-        'compression_format': '',   # MCAP chunk compression is inside the storage format
-        'compression_mode': '',
-        'relative_file_paths': [f.path for f in files],
-        'files': [
+        "compression_format": "",   # MCAP chunk compression is inside the storage format
+        "compression_mode": "",
+        "relative_file_paths": [f.path for f in files],
+        "files": [
             {
-                'path': f.path,
-                'starting_time': {'nanoseconds_since_epoch': int(f.start or 0)},
-                'duration': {'nanoseconds': int((f.end or 0) - (f.start or 0))},
-                'message_count': int(f.message_count),
+                "path": f.path,
+                "starting_time": {"nanoseconds_since_epoch": int(f.start or 0)},
+                "duration": {"nanoseconds": int((f.end or 0) - (f.start or 0))},
+                "message_count": int(f.message_count),
             }
             for f in files
         ],
-        'custom_data': dict(custom_data) if custom_data else None,
-        'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
+        "custom_data": dict(custom_data) if custom_data else None,
+        "ros_distro": os.environ.get("ROS_DISTRO", "jazzy"),
     }
 
 
@@ -125,9 +125,9 @@ def dump_yaml(data: Any) -> str:
 
 def write_metadata_yaml(directory: Path, metadata: dict[str, Any]) -> Path:
     """Write ``metadata.yaml`` atomically (a reader never sees half a file)."""
-    path = Path(directory) / 'metadata.yaml'
-    tmp = path.with_suffix('.yaml.tmp')
-    tmp.write_text(dump_yaml({'rosbag2_bagfile_information': metadata}))
+    path = Path(directory) / "metadata.yaml"
+    tmp = path.with_suffix(".yaml.tmp")
+    tmp.write_text(dump_yaml({"rosbag2_bagfile_information": metadata}))
     os.replace(tmp, path)
     return path
 
@@ -137,7 +137,7 @@ class McapFile:
 
     def __init__(self, path: Path, compression: str, chunk_size: int, library: str):
         self.path = Path(path)
-        self.stream = open(self.path, 'xb')
+        self.stream = open(self.path, "xb")
         self.writer = Writer(self.stream, chunk_size=chunk_size,
                              compression=COMPRESSIONS[compression])
         self.writer.start(profile=PROFILE, library=library)
@@ -163,7 +163,7 @@ class McapFile:
         return self.stream.tell()
 
     def close(self, metadata: dict[str, Any]) -> None:
-        self.writer.add_metadata('rosbag2', {'serialized_metadata': dump_yaml(metadata)})
+        self.writer.add_metadata("rosbag2", {"serialized_metadata": dump_yaml(metadata)})
         self.writer.finish()
         self.stream.close()
 
@@ -171,19 +171,19 @@ class McapFile:
 class BagWriter:
     """Writes serialized messages of registered topics into a rosbag2/MCAP bag directory."""
 
-    def __init__(self, directory: str | os.PathLike, compression: str = 'zstd',
+    def __init__(self, directory: str | os.PathLike, compression: str = "zstd",
                  chunk_size: int = 1 << 20, max_file_size: int = 0,
-                 max_file_duration_ns: int = 0, library: str = 'tmgwr_agent recorder',
+                 max_file_duration_ns: int = 0, library: str = "tmgwr_agent recorder",
                  custom_data: dict[str, str] | None = None):
         if compression not in COMPRESSIONS:
             raise ValueError(f'compression {compression!r}: expected one of '
                              f'{", ".join(COMPRESSIONS)}')
         self.directory = Path(directory)
         # The directory may already hold other files of the run (logs, parameters), not a bag.
-        if self.directory.exists() and ((self.directory / 'metadata.yaml').exists()
-                                        or any(self.directory.glob('*.mcap'))):
-            raise FileExistsError(f'{self.directory} already holds a bag (metadata.yaml or '
-                                  f'.mcap files): choose another output directory')
+        if self.directory.exists() and ((self.directory / "metadata.yaml").exists()
+                                        or any(self.directory.glob("*.mcap"))):
+            raise FileExistsError(f"{self.directory} already holds a bag (metadata.yaml or "
+                                  f".mcap files): choose another output directory")
         self.directory.mkdir(parents=True, exist_ok=True)
         self.compression = compression
         self.chunk_size = int(chunk_size)
@@ -199,7 +199,7 @@ class BagWriter:
 
     # -- files
     def _open_next(self) -> None:
-        name = f'{self.directory.name}_{len(self.files)}.mcap'
+        name = f"{self.directory.name}_{len(self.files)}.mcap"
         self._file = McapFile(self.directory / name, self.compression, self.chunk_size,
                               self.library)
         self.files.append(FileStats(path=name))
@@ -223,7 +223,7 @@ class BagWriter:
     # -- topics and messages
     def add_topic(self, topic: TopicInfo) -> None:
         if topic.name in self.topics:
-            raise ValueError(f'topic {topic.name} already added')
+            raise ValueError(f"topic {topic.name} already added")
         self.topics[topic.name] = topic
         assert self._file is not None
         self._file.channel(topic)

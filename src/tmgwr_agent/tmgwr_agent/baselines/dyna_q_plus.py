@@ -55,9 +55,8 @@ from typing import Any, Mapping
 import numpy as np
 
 from maze_sim.maze import Maze
-
-from tmgwr_common.params import param
 from tmgwr_agent.baselines.q_learning import N_ACTIONS, QLearningAgent, QLearningConfig
+from tmgwr_common.params import param
 
 
 @dataclass(frozen=True)

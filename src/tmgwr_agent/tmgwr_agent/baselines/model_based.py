@@ -48,7 +48,6 @@ import numpy as np
 
 from maze_sim.maze import Cell, Maze, move
 from maze_sim.world import StepInfo
-
 from tmgwr_agent.core.exploration import EpsilonGreedy, ExplorationConfig
 from tmgwr_common.params import make_config, param
 

@@ -42,7 +42,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from maze_sim.maze import ACTION_VECTORS
-
 from tmgwr_agent.core import kernels
 from tmgwr_agent.core.exploration import EpsilonGreedy, ExplorationConfig
 from tmgwr_agent.core.outcome import Outcome

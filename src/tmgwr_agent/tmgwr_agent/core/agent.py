@@ -22,7 +22,6 @@ import numpy as np
 
 from maze_sim.maze import ACTION_VECTORS, Cell, Maze
 from maze_sim.world import StepInfo
-
 from tmgwr_agent.core.action_selector import ActionSelector, SelectorConfig
 from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
 from tmgwr_agent.core.outcome import EPISODE_START, Outcome

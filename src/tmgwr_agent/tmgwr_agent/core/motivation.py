@@ -8,12 +8,12 @@ the nodes' weights, and the motivation potentials are iterated to a fixed point:
     Delta_V(i) = sim(i, g) + gamma * max_k E[i, k] V(k) - V(i)     (Eq. 5)
 
 over the sensorimotor neighbourhood ``k`` of ``i`` (its outgoing links). The sweep is
-synchronous (all nodes from the previous V) and stops when every node's change
-``|beta Delta_V(i)|`` is below ``vi_tol * V(i)`` (a relative tolerance: potentials fall
-geometrically with the distance to the goal and the choice between two far neighbours
-needs the same relative precision as near the goal), or after ``vi_max_sweeps``. V is warm-started from the
-last solution, so a step that changed the map a little costs a few sweeps; a new goal
-restarts from V = 0 (Algorithm 1 line 5).
+synchronous (all nodes from the previous V) and stops when every node's change ``|beta
+Delta_V(i)|`` is below ``vi_tol * V(i)`` (a relative tolerance: potentials fall
+geometrically with the distance to the goal and the choice between two far neighbours needs
+the same relative precision as near the goal), or after ``vi_max_sweeps``. V is
+warm-started from the last solution, so a step that changed the map a little costs a few
+sweeps; a new goal restarts from V = 0 (Algorithm 1 line 5).
 
 The width of ``sim(i, g)`` is not in the paper. We take ``sigma_g = goal_sigma * L`` where
 ``L`` is the median length of the map's links in feature space, i.e. the distance between
@@ -27,16 +27,17 @@ explores (instead of climbing the far tail of the Gaussian into a dead end).
 
 Terminal nodes (``absorbing_terminals``, our addition, on by default; off = Eq. 5 on every
 node). The agent notices when an episode ends short of its goal: it is moved back to the
-start instead of walking on, and it did not sense the goal. The map flags the node it
-stood on (:meth:`~tmgwr_agent.core.sensorimotor_map.SensorimotorMap.mark_terminal`) until it walks on
-from it, and value iteration treats a flagged node as a terminal state, as any MDP
-solver would: ``V(i) = R_i``, no successor. Without this a route through a cell that
-ends the episode (the previous goal in the goal-change scenario of section 5.2.1, which
-stays a termination point) looks as good as any other, and the agent keeps being sent
-home through it: on the paper's maze the learnt way to goal 3's region ran through goal
-2's cell, so after the change 2 -> 3 many episodes ended there instead of at goal 3 (the
-README's goal-change results compare the two). Episodes that end *at* the goal flag nothing (the goal node keeps Eq. 5, so
-a goal that moves away leaves no trace), nor do episodes cut by a step limit.
+start instead of walking on, and it did not sense the goal. The map flags the node it stood
+on (:meth:`~tmgwr_agent.core.sensorimotor_map.SensorimotorMap.mark_terminal`) until it
+walks on from it, and value iteration treats a flagged node as a terminal state, as any MDP
+solver would: ``V(i) = R_i``, no successor. Without this a route through a cell that ends
+the episode (the previous goal in the goal-change scenario of section 5.2.1, which stays a
+termination point) looks as good as any other, and the agent keeps being sent home through
+it: on the paper's maze the learnt way to goal 3's region ran through goal 2's cell, so
+after the change 2 -> 3 many episodes ended there instead of at goal 3 (the README's
+goal-change results compare the two). Episodes that end *at* the goal flag nothing (the
+goal node keeps Eq. 5, so a goal that moves away leaves no trace), nor do episodes cut by a
+step limit.
 """
 
 from __future__ import annotations
@@ -46,8 +47,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from tmgwr_agent.core import kernels
-from tmgwr_common.params import Config, param
 from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
+from tmgwr_common.params import Config, param
 
 #: Potentials below this are 0: gamma**d for d > 10,000 steps, i.e. no path to the goal.
 #: Without it a potential that lost its path decays geometrically for ever (to denormals)

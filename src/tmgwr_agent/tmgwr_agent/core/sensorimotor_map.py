@@ -39,7 +39,8 @@ question):
 As in GWR, every link incident to the previous winner (in or out) ages by one per step
 and the traversed link's age restarts at 0; links older than ``max_age``, and links whose
 reliability fell below ``E_min``, are deleted; nodes left with no link (in or out) are
-removed, which clears nodes that stopped winning. Neighbours for adaptation are the nodes linked to the winner in either direction.
+removed, which clears nodes that stopped winning. Neighbours for adaptation are the nodes
+linked to the winner in either direction.
 
 Storage is fixed-width adjacency (``out[i, :K]`` target ids, -1 = empty slot) so that value
 iteration over the map is a few vectorised numpy operations. Node ids are slot indices; a
@@ -54,11 +55,12 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
-from maze_sim.maze import ACTION_VECTORS
 
+from maze_sim.maze import ACTION_VECTORS
 from tmgwr_agent.core import kernels
 from tmgwr_agent.core.outcome import Outcome
 from tmgwr_common.params import Config, param
+
 
 @dataclass(frozen=True)
 class MapConfig(Config):

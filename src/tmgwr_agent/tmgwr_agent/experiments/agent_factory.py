@@ -15,7 +15,6 @@ from typing import Any, Mapping
 import numpy as np
 
 from maze_sim.maze import Maze
-
 from tmgwr_agent.core.protocol import Agent
 
 AGENT_NAMES = ("tmgwr", "q_learning", "model_based", "dyna_q_plus")

@@ -31,7 +31,6 @@ from pathlib import Path
 import numpy as np
 
 from maze_sim.maze import Maze, generate_maze
-
 from tmgwr_agent.experiments.agent_factory import AGENT_NAMES, make_agent
 from tmgwr_agent.experiments.parallel import agent_trials, default_jobs, warm_up
 from tmgwr_agent.experiments.runner import (

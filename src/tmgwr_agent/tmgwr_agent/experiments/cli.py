@@ -5,8 +5,8 @@
 for the scenarios that take them; ``--suite SPEC [--suite-seed K] [--suite-first I]``
 instead of ``--maze`` runs env-change or goal-change on generated mazes
 (:mod:`tmgwr_agent.experiments.suite_runner`); ``demo`` runs every scenario briefly and
-then the ROS graph demo (:mod:`tmgwr_agent.graph.demo`); ``bench`` measures the TMGWR core and merges
-the graph / bag benchmarks. An unknown agent, scenario, goal or
+then the ROS graph demo (:mod:`tmgwr_agent.graph.demo`); ``bench`` measures the TMGWR core
+and merges the graph / bag benchmarks. An unknown agent, scenario, goal or
 event, or a missing maze file, exits with code 2 and a message naming it.
 
 Imports stay light here (argparse only): the scenario modules load when a command runs.

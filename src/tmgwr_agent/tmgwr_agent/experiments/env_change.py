@@ -35,7 +35,6 @@ from __future__ import annotations
 import numpy as np
 
 from maze_sim.maze import Maze, bfs_distances
-
 from tmgwr_agent.experiments.agent_factory import make_agent
 from tmgwr_agent.experiments.parallel import agent_trials
 from tmgwr_agent.experiments.runner import (

@@ -26,7 +26,6 @@ from __future__ import annotations
 import numpy as np
 
 from maze_sim.maze import Maze
-
 from tmgwr_agent.experiments.agent_factory import make_agent
 from tmgwr_agent.experiments.parallel import agent_trials
 from tmgwr_agent.experiments.runner import Caps, make_world, run_episode, set_goal

@@ -28,7 +28,6 @@ import numpy as np
 
 from maze_sim.maze import Maze
 from maze_sim.world import GridWorld
-
 from tmgwr_agent.core.agent import TMGWRAgent
 
 

@@ -41,7 +41,6 @@ from dataclasses import dataclass
 
 from maze_sim.maze import Maze
 from maze_sim.world import GridWorld
-
 from tmgwr_agent.core.protocol import Agent
 
 #: Consecutive optimal greedy rollouts that count as convergence (section 5.2.5).

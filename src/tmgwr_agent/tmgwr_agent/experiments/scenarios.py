@@ -13,16 +13,14 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Sequence
 
-from maze_sim.maze import Maze, MazeError
-
-from tmgwr_agent.experiments.agent_factory import AGENT_NAMES, parse_spec
-from maze_sim.maze import maze_file
+from maze_sim.maze import Maze, MazeError, maze_file
 from tmgwr_agent.experiments import env_change, goal_change, sample_complexity, timing
+from tmgwr_agent.experiments.agent_factory import AGENT_NAMES, parse_spec
+from tmgwr_agent.experiments.names import SCENARIOS
 from tmgwr_agent.experiments.runner import Caps
 
 DEFAULT_MAZE = maze_file()
 DEFAULT_AGENTS = AGENT_NAMES
-from tmgwr_agent.experiments.names import SCENARIOS
 
 #: Per scenario: default goals (None = the scenario takes a single --goal), episodes, agents.
 DEFAULTS = {

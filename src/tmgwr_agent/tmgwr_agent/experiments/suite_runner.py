@@ -76,7 +76,6 @@ from pathlib import Path
 from typing import Sequence
 
 from maze_sim.suite import SuiteError, SuiteMaze, suite
-
 from tmgwr_agent.experiments import env_change, goal_change
 from tmgwr_agent.experiments.parallel import run_items, trial_seeds
 from tmgwr_agent.experiments.runner import Caps

@@ -28,7 +28,6 @@ import time
 import numpy as np
 
 from maze_sim.maze import Maze
-
 from tmgwr_agent.experiments.agent_factory import make_agent
 from tmgwr_agent.experiments.parallel import agent_trials
 from tmgwr_agent.experiments.runner import (

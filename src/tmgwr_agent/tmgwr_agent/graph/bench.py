@@ -113,11 +113,10 @@ def in_process_rate(steps: int, warmup: int = 200, seed: int = 0,
                     maze: str | None = None) -> dict:
     """Steps/s of the same loop in one process (what each node does, in order)."""
     import numpy as np
-    from maze_sim.maze import Maze
-    from maze_sim.world import GridWorld
 
+    from maze_sim.maze import Maze, maze_file
+    from maze_sim.world import GridWorld
     from tmgwr_agent.core.agent import TMGWRAgent
-    from maze_sim.maze import maze_file
 
     path = maze_file(maze) if maze else maze_file()
     m = Maze.from_file(path)

@@ -110,30 +110,30 @@ def _service(args, make, name: str, what: str) -> int:
 
 
 def cmd_goal(args) -> int:
-    from tmgwr_common import topics
     from tmgwr_agent.graph.clients import set_goal_request
+    from tmgwr_common import topics
     return _service(args, lambda: set_goal_request(args.x, args.y), topics.SET_GOAL,
                     f"goal (x={args.x:g}, y={args.y:g})")
 
 
 def cmd_cell(args) -> int:
-    from tmgwr_common import topics
     from tmgwr_agent.graph.clients import set_cell_request
+    from tmgwr_common import topics
     what = f"cell (row {args.row}, col {args.col}) {'block' if args.blocked else 'open'}"
     return _service(args, lambda: set_cell_request(args.row, args.col, args.blocked),
                     topics.SET_CELL, what)
 
 
 def cmd_event(args) -> int:
-    from tmgwr_common import topics
     from tmgwr_agent.graph.clients import fire_event_request
+    from tmgwr_common import topics
     return _service(args, lambda: fire_event_request(args.name), topics.FIRE_EVENT,
                     f"event {args.name!r}")
 
 
 def cmd_reset(args) -> int:
-    from tmgwr_common import topics
     from tmgwr_agent.graph.clients import reset_request
+    from tmgwr_common import topics
     return _service(args, reset_request, topics.RESET, "reset")
 
 
@@ -141,7 +141,6 @@ def cmd_reset(args) -> int:
 def cmd_up(args) -> int:
     _apply_domain(args)
     from tmgwr_agent.graph.run import GraphRun, describe_exit
-
     from tmgwr_common.params import ParamError
     try:
         run = GraphRun(maze=args.maze, seed=args.seed, goal=args.goal,

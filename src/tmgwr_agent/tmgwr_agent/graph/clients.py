@@ -75,6 +75,7 @@ def call_once(srv_type, name: str, request, timeout: float = 10.0):
 def set_goal_request(x: float, y: float):
     """SetGoal request: x = column, y = row (maze cell coordinates, DESIGN.md section 2)."""
     from geometry_msgs.msg import Point
+
     from tmgwr_interfaces.srv import SetGoal
     return SetGoal, SetGoal.Request(goal=Point(x=float(x), y=float(y), z=0.0))
 
@@ -107,6 +108,7 @@ costs only memory."""
 def monitor_qos():
     """STEP_QOS (reliable, volatile) with a :data:`MONITOR_DEPTH` history."""
     from rclpy.qos import QoSProfile
+
     from tmgwr_common.node import STEP_QOS
     return QoSProfile(history=STEP_QOS.history, depth=MONITOR_DEPTH,
                       reliability=STEP_QOS.reliability, durability=STEP_QOS.durability)

@@ -27,8 +27,8 @@ import sys
 import time
 from pathlib import Path
 
-from tmgwr_common import topics
 from tmgwr_agent.graph.output import say
+from tmgwr_common import topics
 
 #: Seed of the demo (simulator and exploration policy). The paper maze takes about 2,000
 #: steps to learn G with this seed; other seeds take 2,000-16,000 (in-process check of
@@ -224,7 +224,6 @@ def run(args) -> int:
     """Run the scenario; ``args`` may carry ``maze``, ``graph_seed``, ``record``/``no_record``,
     ``record_dir``, ``phase_timeout`` (s), ``streak``, ``slack``. Returns the exit code."""
     from maze_sim.maze import DEFAULT_MAZE, Maze, maze_file
-
     from tmgwr_agent.graph.run import GraphRun
 
     maze_path = maze_file(_opt(args, "maze", DEFAULT_MAZE)).resolve()

@@ -44,7 +44,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="member 0 gives up after this many seconds")
     args = ap.parse_args(argv)
     if args.size < 2 or not 0 <= args.index < args.size:
-        ap.error(f"need size >= 2 and 0 <= index < size (got index {args.index}, size {args.size})")
+        ap.error(f"need size >= 2 and 0 <= index < size "
+                 f"(got index {args.index}, size {args.size})")
     if args.laps < 1 or args.warmup < 0:
         ap.error("--laps must be >= 1 and --warmup >= 0")
 
@@ -96,7 +97,8 @@ def main(argv: list[str] | None = None) -> int:
         probe = PROBE_BASE
         next_probe = 0.0
         while rclpy.ok():
-            if not announced and pub.get_subscription_count() > 0 and sub.get_publisher_count() > 0:
+            matched = pub.get_subscription_count() > 0 and sub.get_publisher_count() > 0
+            if not announced and matched:
                 print(f"ring member {args.index} ready", flush=True)
                 announced = True
             if args.index == 0:

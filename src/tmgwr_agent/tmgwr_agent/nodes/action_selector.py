@@ -15,25 +15,23 @@ from __future__ import annotations
 import numpy as np
 from rclpy.node import Node
 
-from tmgwr_interfaces.msg import Action, MotivationField
-
 from maze_sim.maze import ACTION_VECTORS
-
-from tmgwr_common import topics
 from tmgwr_agent.core.action_selector import ActionSelector, SelectorConfig
-from tmgwr_common.params import Param
 from tmgwr_agent.core.sensorimotor_map import Links
 from tmgwr_agent.nodes.step_messages import outcome_of
+from tmgwr_common import topics
 from tmgwr_common.lockstep import Lockstep
 from tmgwr_common.node import (
-    STEP_QOS,
     NODE_OPTIONS,
+    STEP_QOS,
     declare_parameters,
     f64,
     np_f64,
     np_i64,
     run,
 )
+from tmgwr_common.params import Param
+from tmgwr_interfaces.msg import Action, MotivationField
 
 NODE_SPECS = (
     Param("seed", 0, "seed of the selector's generator (exploration and tie-breaks)",

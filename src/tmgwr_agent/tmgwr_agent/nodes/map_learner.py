@@ -23,27 +23,21 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from rclpy.node import Node
-
 from geometry_msgs.msg import Point
+from rclpy.node import Node
 from std_msgs.msg import ColorRGBA
-from tmgwr_interfaces.msg import (Features, MapLink, MapNode, MotivationField,
-                                  SensorimotorMap as MapMsg, SensorimotorState)
-from tmgwr_interfaces.srv import LoadMap, SaveMap
 from visualization_msgs.msg import Marker, MarkerArray
 
 from maze_sim.maze import ACTION_VECTORS
-
-from tmgwr_common import topics
-from tmgwr_common.params import Param
 from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap
 from tmgwr_agent.nodes.step_messages import outcome_of
+from tmgwr_common import topics
 from tmgwr_common.lockstep import Lockstep
 from tmgwr_common.node import (
     LATCHED_QOS,
+    NODE_OPTIONS,
     SENSOR_QOS,
     STEP_QOS,
-    NODE_OPTIONS,
     declare_parameters,
     f64,
     i32,
@@ -51,6 +45,10 @@ from tmgwr_common.node import (
     run,
     u8,
 )
+from tmgwr_common.params import Param
+from tmgwr_interfaces.msg import Features, MapLink, MapNode, MotivationField, SensorimotorState
+from tmgwr_interfaces.msg import SensorimotorMap as MapMsg
+from tmgwr_interfaces.srv import LoadMap, SaveMap
 
 NODE_SPECS = (
     Param("map_path", "~/.ros/tmgwr_map.npz", "where the map is saved on shutdown and by "

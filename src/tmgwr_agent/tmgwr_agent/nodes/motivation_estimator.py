@@ -20,20 +20,17 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from nav_msgs.msg import OccupancyGrid
 from rclpy.node import Node
 
-from nav_msgs.msg import OccupancyGrid
-from tmgwr_interfaces.msg import MotivationField, SensorimotorState
-from tmgwr_interfaces.srv import SetGoal
-
-from tmgwr_common import topics
 from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
 from tmgwr_agent.core.sensorimotor_map import MapSnapshot
+from tmgwr_common import topics
 from tmgwr_common.lockstep import Lockstep
 from tmgwr_common.node import (
     LATCHED_QOS,
-    STEP_QOS,
     NODE_OPTIONS,
+    STEP_QOS,
     declare_parameters,
     f64,
     i32,
@@ -42,7 +39,8 @@ from tmgwr_common.node import (
     np_i64,
     run,
 )
-
+from tmgwr_interfaces.msg import MotivationField, SensorimotorState
+from tmgwr_interfaces.srv import SetGoal
 
 
 def snapshot_of(s: SensorimotorState) -> MapSnapshot:

@@ -27,41 +27,65 @@ recover`` makes such a file valid again.
 from __future__ import annotations
 
 import re
-import sys
 from datetime import datetime, timezone
 from pathlib import Path
 
-import rclpy
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                ParameterType)
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
-from tmgwr_common import topics
 from tmgwr_agent.bag import definitions
 from tmgwr_agent.bag import qos as bag_qos
 from tmgwr_agent.bag.writer import COMPRESSIONS, BagWriter, TopicInfo
+from tmgwr_common import topics
+from tmgwr_common.node import NODE_OPTIONS, declare_parameters, run
+from tmgwr_common.params import Param
 
 _BIG = 2 ** 62
 
-# The per-step topics of the lockstep ring (tmgwr_common.topics, all reliable volatile:
-# STEP_QOS of tmgwr_common.node). A node publishes its first message as soon as the ring turns, possibly
-# before periodic discovery has seen its publisher; subscribing to these at start (the
-# ``expect`` parameter) means the recorder is matched as soon as DDS discovers the
-# publisher, so step 0 is recorded on every topic.
+# The per-step topics of the lockstep ring (tmgwr_common.topics, all reliable volatile: STEP_QOS of
+# tmgwr_common.node). A node publishes its first message as soon as the ring turns, possibly before
+# periodic discovery has seen its publisher; subscribing to these at start (the ``expect``
+# parameter) means the recorder is matched as soon as DDS discovers the publisher, so step 0 is
+# recorded on every topic.
 GRAPH_STEP_TOPICS = (
-    f'{topics.OBSERVATION}=tmgwr_interfaces/msg/Observation',
-    f'{topics.FEATURES}=tmgwr_interfaces/msg/Features',
-    f'{topics.SENSORIMOTOR_STATE}=tmgwr_interfaces/msg/SensorimotorState',
-    f'{topics.MOTIVATION}=tmgwr_interfaces/msg/MotivationField',
-    f'{topics.ACTION}=tmgwr_interfaces/msg/Action',
+    f"{topics.OBSERVATION}=tmgwr_interfaces/msg/Observation",
+    f"{topics.FEATURES}=tmgwr_interfaces/msg/Features",
+    f"{topics.SENSORIMOTOR_STATE}=tmgwr_interfaces/msg/SensorimotorState",
+    f"{topics.MOTIVATION}=tmgwr_interfaces/msg/MotivationField",
+    f"{topics.ACTION}=tmgwr_interfaces/msg/Action",
+)
+
+
+#: The recorder's parameters (read-only ROS parameters, declared like every node's).
+SPECS = (
+    Param("output_dir", "", "bag directory; empty: runs/<UTC timestamp>/"),
+    Param("topics", ("",), "topics to record; empty: all (discovered periodically)"),
+    Param("exclude", "", "regular expression of topics not to record"),
+    Param("compression", "zstd", "chunk compression", choices=tuple(COMPRESSIONS)),
+    Param("chunk_size", 1 << 20, "uncompressed chunk size in bytes", low=1024, high=1 << 30,
+          integer=True),
+    Param("max_bag_size", 0, "split into a new file at this size in bytes (0: never)",
+          low=0, high=_BIG, integer=True),
+    Param("max_bag_duration", 0.0, "split into a new file after this many seconds "
+          "(0: never)", low=0.0, high=1e9),
+    Param("discovery_period", 0.2, "seconds between topic discoveries", low=0.05,
+          high=60.0),
+    Param("flush_period", 0.2, "seconds between flushes of the open chunk to disk (bounds "
+          "what a kill -9 loses; 0: only full chunks)", low=0.0, high=3600.0),
+    Param("queue_depth", 1000, "minimum subscription history depth", low=1, high=1000000,
+          integer=True),
+    Param("expect", GRAPH_STEP_TOPICS, "topics (NAME=pkg/msg/Type) subscribed at start, "
+          "reliable and volatile, before any publisher is seen, so their first messages "
+          "are not missed (only those the topics/exclude parameters record)"),
+    Param("drain_max", 100, "messages taken directly after each callback before returning "
+          "to the executor (0: one per callback)", low=0, high=100000, integer=True),
 )
 
 
 def default_output_dir(now: datetime | None = None) -> Path:
     """``runs/<UTC timestamp>/`` relative to the working directory."""
     now = now or datetime.now(timezone.utc)
-    return Path('runs') / now.strftime('%Y%m%dT%H%M%SZ')
+    return Path("runs") / now.strftime("%Y%m%dT%H%M%SZ")
 
 
 class Recorder(Node):
@@ -70,31 +94,31 @@ class Recorder(Node):
     def __init__(self):
         # No /rosout publisher: the recorder would otherwise record its own log lines, and
         # its final counts are logged after the context has shut down (on SIGINT/SIGTERM).
-        super().__init__('recorder', enable_rosout=False)
+        super().__init__("recorder", enable_rosout=False, **NODE_OPTIONS)
         p = self._declare_parameters()
-        self.topic_list: list[str] = [t if t.startswith('/') else '/' + t for t in p['topics']]
-        self.exclude = re.compile(p['exclude']) if p['exclude'] else None
-        self.queue_depth = p['queue_depth']
-        self.drain_max = p['drain_max']
-        out = Path(p['output_dir']) if p['output_dir'] else default_output_dir()
+        self.topic_list: list[str] = [t if t.startswith("/") else "/" + t for t in p["topics"]]
+        self.exclude = re.compile(p["exclude"]) if p["exclude"] else None
+        self.queue_depth = p["queue_depth"]
+        self.drain_max = p["drain_max"]
+        out = Path(p["output_dir"]) if p["output_dir"] else default_output_dir()
         self.writer = BagWriter(
-            out, compression=p['compression'], chunk_size=p['chunk_size'],
-            max_file_size=p['max_bag_size'],
-            max_file_duration_ns=int(p['max_bag_duration'] * 1e9),
-            library='tmgwr_agent recorder (mcap-python)',
-            custom_data={'recorder': 'tmgwr_agent recorder'})
+            out, compression=p["compression"], chunk_size=p["chunk_size"],
+            max_file_size=p["max_bag_size"],
+            max_file_duration_ns=int(p["max_bag_duration"] * 1e9),
+            library="tmgwr_agent recorder (mcap-python)",
+            custom_data={"recorder": "tmgwr_agent recorder"})
         self.received: dict[str, int] = {}
         self.failed: dict[str, int] = {}
         self.subscriptions_by_topic: dict[str, object] = {}
         self.early: set[str] = set()          # subscribed before a publisher was seen
         self.early_types: dict[str, str] = {}
         self._warned: set[str] = set()
-        for topic, type_name in p['expect'].items():
+        for topic, type_name in p["expect"].items():
             if self._wanted(topic):
                 try:
                     self._subscribe(topic, type_name, infos=None)
                 except definitions.DefinitionError as exc:
-                    self._warn_once(topic, f'{topic} not recorded: {exc}')
+                    self._warn_once(topic, f"{topic} not recorded: {exc}")
         self.discover()
         # The line the graph supervisor waits for: the writer is open and the expected
         # topics are subscribed.
@@ -103,83 +127,39 @@ class Recorder(Node):
             f'to {self.writer.directory.resolve()} (compression {p["compression"]})')
         # Discovery and flushing run on timers in the same single-threaded executor as the
         # subscriptions, so the writer is never used by two threads at once.
-        self.create_timer(p['discovery_period'], self.discover)
-        if p['flush_period'] > 0:
-            self.create_timer(p['flush_period'], self.writer.flush)
+        self.create_timer(p["discovery_period"], self.discover)
+        if p["flush_period"] > 0:
+            self.create_timer(p["flush_period"], self.writer.flush)
 
     # ------------------------------------------------------------------ parameters
     def _declare_parameters(self) -> dict:
-        def desc(text, ptype, lo=None, hi=None, constraints=''):
-            d = ParameterDescriptor(description=text, type=ptype, read_only=True,
-                                    additional_constraints=constraints)
-            if ptype == ParameterType.PARAMETER_INTEGER and lo is not None:
-                d.integer_range = [IntegerRange(from_value=lo, to_value=hi, step=0)]
-            if ptype == ParameterType.PARAMETER_DOUBLE and lo is not None:
-                d.floating_point_range = [FloatingPointRange(from_value=lo, to_value=hi,
-                                                             step=0.0)]
-            return d
-
-        S, I, D, SA = (ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_INTEGER,
-                       ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_STRING_ARRAY)
-        specs = {
-            'output_dir': ('', desc('bag directory; empty: runs/<UTC timestamp>/', S)),
-            'topics': ([''], desc('topics to record; empty: all (discovered periodically)', SA)),
-            'exclude': ('', desc('regular expression of topics not to record', S)),
-            'compression': ('zstd', desc('chunk compression', S,
-                                         constraints='one of: ' + ', '.join(COMPRESSIONS))),
-            'chunk_size': (1 << 20, desc('uncompressed chunk size in bytes', I, 1024, 1 << 30)),
-            'max_bag_size': (0, desc('split into a new file at this size in bytes (0: never)',
-                                     I, 0, _BIG)),
-            'max_bag_duration': (0.0, desc('split into a new file after this many seconds '
-                                           '(0: never)', D, 0.0, 1e9)),
-            'discovery_period': (0.2, desc('seconds between topic discoveries', D, 0.05, 60.0)),
-            'flush_period': (0.2, desc('seconds between flushes of the open chunk to disk '
-                                       '(bounds what a kill -9 loses; 0: only full chunks)',
-                                       D, 0.0, 3600.0)),
-            'queue_depth': (1000, desc('minimum subscription history depth', I, 1, 1000000)),
-            'expect': (list(GRAPH_STEP_TOPICS), desc(
-                'topics (NAME=pkg/msg/Type) subscribed at start, reliable and volatile, '
-                'before any publisher is seen, so their first messages are not missed '
-                '(only those the topics/exclude parameters record)', SA)),
-            'drain_max': (100, desc('messages taken directly after each callback before '
-                                    'returning to the executor (0: one per callback)',
-                                    I, 0, 100000)),
-        }
-        values = {}
-        for name, (default, d) in specs.items():
-            d.name = name
-            # A value outside the descriptor's range makes declare_parameter raise
-            # InvalidParameterValueException, which names the parameter.
-            values[name] = self.declare_parameter(name, default, d).value
-        values['topics'] = [t for t in values['topics'] if t]
-        if values['compression'] not in COMPRESSIONS:
-            raise ValueError(f"parameter 'compression': {values['compression']!r} is not one "
-                             f"of {', '.join(COMPRESSIONS)}")
-        if values['exclude']:
+        values = declare_parameters(self, SPECS)
+        values["topics"] = [t for t in values["topics"] if t]
+        if values["exclude"]:
             try:
-                re.compile(values['exclude'])
+                re.compile(values["exclude"])
             except re.error as exc:
                 raise ValueError(f"parameter 'exclude': invalid regular expression "
                                  f"{values['exclude']!r}: {exc}") from None
-        for t in values['topics']:
-            if not re.fullmatch(r'/?[A-Za-z~][\w/~{}]*', t):
+        for t in values["topics"]:
+            if not re.fullmatch(r"/?[A-Za-z~][\w/~{}]*", t):
                 raise ValueError(f"parameter 'topics': {t!r} is not a valid topic name")
         expect = {}
-        for entry in values['expect']:
+        for entry in values["expect"]:
             if not entry:
                 continue
-            name, _, type_name = entry.partition('=')
-            if not (name.startswith('/') and type_name.count('/') == 2):
+            name, _, type_name = entry.partition("=")
+            if not (name.startswith("/") and type_name.count("/") == 2):
                 raise ValueError(f"parameter 'expect': {entry!r} is not NAME=pkg/msg/Type")
             expect[name] = type_name
-        values['expect'] = expect
+        values["expect"] = expect
         return values
 
     # ------------------------------------------------------------------ discovery
     def _wanted(self, topic: str) -> bool:
         if self.topic_list:
             return topic in self.topic_list
-        if any(part.startswith('_') for part in topic.split('/')):   # hidden topics
+        if any(part.startswith("_") for part in topic.split("/")):   # hidden topics
             return False
         return not (self.exclude and self.exclude.search(topic))
 
@@ -190,7 +170,7 @@ class Recorder(Node):
             if topic in self.subscriptions_by_topic or not self._wanted(topic):
                 continue
             if len(types) != 1:
-                self._warn_once(topic, f'{topic} has several types {types}: not recorded')
+                self._warn_once(topic, f"{topic} has several types {types}: not recorded")
                 continue
             infos = self.get_publishers_info_by_topic(topic)
             if not infos:           # only subscribers so far: wait for a publisher's QoS
@@ -198,7 +178,7 @@ class Recorder(Node):
             try:
                 self._subscribe(topic, types[0], infos)
             except definitions.DefinitionError as exc:
-                self._warn_once(topic, f'{topic} not recorded: {exc}')
+                self._warn_once(topic, f"{topic} not recorded: {exc}")
 
     def _warn_once(self, topic: str, text: str) -> None:
         if topic not in self._warned:
@@ -209,8 +189,8 @@ class Recorder(Node):
         """What the bag stores about ``topic``: definition, offered QoS, type hash."""
         offered = [bag_qos.profile_to_dict(i.qos_profile) for i in infos]
         hashes = {str(i.topic_type_hash) for i in infos}
-        type_hash = sorted(hashes)[0] if len(hashes) == 1 else ''
-        if not type_hash.startswith('RIHS'):
+        type_hash = sorted(hashes)[0] if len(hashes) == 1 else ""
+        if not type_hash.startswith("RIHS"):
             type_hash = definitions.type_hash(type_name)
         return TopicInfo(name=topic, type=type_name,
                          definition=definitions.ros2msg_definition(type_name),
@@ -222,12 +202,12 @@ class Recorder(Node):
         infos = self.get_publishers_info_by_topic(topic)
         if not infos:
             return
-        unreliable = any(bag_qos.profile_to_dict(i.qos_profile)['reliability'] != 'reliable'
+        unreliable = any(bag_qos.profile_to_dict(i.qos_profile)["reliability"] != "reliable"
                          for i in infos)
         if unreliable or types != [self.early_types[topic]]:
-            why = 'a publisher is not reliable' if unreliable else f'types {types}'
-            self.get_logger().info(f'{topic}: {why}: the early subscription does not match, '
-                                   f'subscribing again')
+            why = "a publisher is not reliable" if unreliable else f"types {types}"
+            self.get_logger().info(f"{topic}: {why}: the early subscription does not match, "
+                                   f"subscribing again")
             self.destroy_subscription(self.subscriptions_by_topic.pop(topic))
             self.early.discard(topic)
             del self.received[topic]
@@ -241,8 +221,8 @@ class Recorder(Node):
         if infos is None:
             self.early.add(topic)
             self.early_types[topic] = type_name
-            sub_qos = bag_qos.subscription_qos([{'reliability': 'reliable',
-                                                 'durability': 'volatile'}], self.queue_depth)
+            sub_qos = bag_qos.subscription_qos([{"reliability": "reliable",
+                                                 "durability": "volatile"}], self.queue_depth)
         else:
             info = self._topic_info(topic, type_name, infos)
             self.writer.add_topic(info)
@@ -257,11 +237,11 @@ class Recorder(Node):
                     topic, type_name, self.get_publishers_info_by_topic(topic)))
             received[topic] += 1
             try:
-                write(topic, data, msg_info['received_timestamp'],
-                      msg_info['source_timestamp'], msg_info['publication_sequence_number'])
+                write(topic, data, msg_info["received_timestamp"],
+                      msg_info["source_timestamp"], msg_info["publication_sequence_number"])
             except Exception as exc:  # noqa: BLE001 -- count it, keep recording the rest
                 self.failed[topic] = self.failed.get(topic, 0) + 1
-                self._warn_once('write:' + topic, f'writing a message of {topic} failed: {exc}')
+                self._warn_once("write:" + topic, f"writing a message of {topic} failed: {exc}")
 
         def on_message(data: bytes, msg_info: dict) -> None:
             store(data, msg_info)
@@ -279,52 +259,34 @@ class Recorder(Node):
         handle = sub.handle
         self.subscriptions_by_topic[topic] = sub
         self.get_logger().info(
-            f'subscribed to {topic} [{type_name}] ({sub_qos.reliability.name.lower()}, '
-            f'{sub_qos.durability.name.lower()}, depth {sub_qos.depth})'
-            + (' before its publisher appeared' if infos is None else ''))
+            f"subscribed to {topic} [{type_name}] ({sub_qos.reliability.name.lower()}, "
+            f"{sub_qos.durability.name.lower()}, depth {sub_qos.depth})"
+            + (" before its publisher appeared" if infos is None else ""))
 
     # ------------------------------------------------------------------ end
-    def finish(self) -> None:
+    def on_shutdown(self) -> None:
+        """Finish the bag (summary, indexes, metadata.yaml) and log what was recorded."""
         meta = self.writer.close()
-        written = {t['topic_metadata']['name']: t['message_count']
-                   for t in meta['topics_with_message_count']}
+        written = {t["topic_metadata"]["name"]: t["message_count"]
+                   for t in meta["topics_with_message_count"]}
         total_r, total_w = sum(self.received.values()), sum(written.values())
         for topic in sorted(self.received):
             failed = self.failed.get(topic, 0)
-            self.get_logger().info(f'  {topic}: received {self.received[topic]}, written '
-                                   f'{written.get(topic, 0)}'
-                                   + (f', {failed} FAILED to write' if failed else ''))
-        files = ', '.join(str(p) for p in self.writer.file_paths())
+            self.get_logger().info(f"  {topic}: received {self.received[topic]}, written "
+                                   f"{written.get(topic, 0)}"
+                                   + (f", {failed} FAILED to write" if failed else ""))
+        files = ", ".join(str(p) for p in self.writer.file_paths())
         self.get_logger().info(
             f'recorded: received {total_r}, written {total_w} messages on '
             f'{len(self.received)} topics'
             f'{"" if total_r == total_w else " (MESSAGES LOST IN WRITING)"} -> {files}')
 
 
-def main(args=None) -> int:
-    rclpy.init(args=args)
-    node = None
-    try:
-        try:
-            node = Recorder()
-        except Exception as exc:  # noqa: BLE001 -- a bad parameter: say which, exit 2
-            print(f'recorder: cannot start: {exc}', file=sys.stderr)
-            return 2
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        try:
-            executor.spin()
-        except (KeyboardInterrupt, ExternalShutdownException):
-            pass
-        finally:
-            executor.shutdown()
-    finally:
-        if node is not None:
-            node.finish()
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+def main(args=None):
+    # One single-threaded executor runs the subscriptions, discovery and flushing, so the
+    # writer is never used by two threads at once.
+    raise SystemExit(run(Recorder, "recorder", args, executor_factory=SingleThreadedExecutor))
 
 
-if __name__ == '__main__':
-    sys.exit(main())
+if __name__ == "__main__":
+    main()

@@ -9,19 +9,18 @@ from __future__ import annotations
 
 from rclpy.node import Node
 
-from tmgwr_interfaces.msg import Features, Observation
-
-from tmgwr_common import topics
 from tmgwr_agent.core.preprocessor import PreprocessorConfig, SensoryPreprocessor
+from tmgwr_common import topics
 from tmgwr_common.lockstep import Lockstep
 from tmgwr_common.node import (
-    STEP_QOS,
     NODE_OPTIONS,
+    STEP_QOS,
     declare_parameters,
     f64,
     np_f64,
     run,
 )
+from tmgwr_interfaces.msg import Features, Observation
 
 
 class SensoryPreprocessorNode(Node):
