@@ -1,4 +1,4 @@
-"""``ros2 run maze_sim maze_sim``: the grid world as a ROS 2 node (DESIGN.md section 2).
+"""``ros2 run maze_sim maze_sim``: the grid world as a ROS 2 node (README, Topics and services).
 
 Owns a :class:`~maze_sim.world.GridWorld` and drives the lockstep ring: it publishes one
 ``Observation`` per step and steps the world only when the ``Action`` carrying that
@@ -56,7 +56,7 @@ FRAME = "maze"
 WARMUP_STEPS = 200    # the SUMMARY's steady rate leaves out discovery and the first steps
 
 SPECS = (
-    Param("maze", DEFAULT_MAZE, "maze file (DESIGN.md section 4): absolute, relative to "
+    Param("maze", DEFAULT_MAZE, "maze file (README, Maze format): absolute, relative to "
           "the working directory, or a file name shipped in share/maze_sim/mazes"),
     Param("goal", "G", "initial goal: a goal name of the maze ('G', '1'..'9') or 'row,col'"),
     Param("seed", 0, "seed of the world's sensor-noise generator", low=0, high=2 ** 63 - 1,

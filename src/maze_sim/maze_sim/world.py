@@ -4,7 +4,7 @@ The agent senses the coordinates of its cell (section 5.1 of the paper), optiona
 Gaussian noise. Four actions (``maze.ACTIONS``); a move into a wall leaves the agent in
 place and is reported as a bump. An episode terminates at the current goal, or at the
 previous goal while one is set (the goal-change scenario, section 5.2.1). Events fired at
-runtime turn free cells into walls or open walls (DESIGN.md section 4).
+runtime turn free cells into walls or open walls (README, Maze format).
 
 ``step`` returns ``(observation, reward, terminated, truncated, info)``; the reward is 1.0
 on reaching the current goal and 0.0 otherwise: agents compute their own rewards (Eq. 8-10)

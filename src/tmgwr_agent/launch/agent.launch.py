@@ -1,4 +1,4 @@
-"""Launch the TMGWR node graph on a real ROS 2 Jazzy install (Fig. 1a, DESIGN.md section 2).
+"""Launch the node graph on a ROS 2 Jazzy install (Fig. 1a; README, With ROS 2 Jazzy installed).
 
     ros2 launch tmgwr_agent agent.launch.py
     ros2 launch tmgwr_agent agent.launch.py maze:=paper_13x17.txt goal:=2 seed:=1 record:=true

@@ -1,4 +1,4 @@
-"""The agent nodes' side of the lockstep ring (DESIGN.md section 2).
+"""The agent nodes' side of the lockstep ring (README, Running the ROS 2 node graph).
 
 The simulator publishes one observation per step and resends it when no action came back
 in time (a node started late, or a message was lost). Every node of the ring therefore

@@ -1,8 +1,8 @@
 """The TMGWR sensorimotor map (section 3.1, Fig. 1b, Eq. 1-2).
 
 Growth and adaptation follow GWR (Marsland et al. 2002) with the temporal context of
-Merge-GNG (Strickert & Hammer 2005), as DESIGN.md section 3 fixes (the 2019 TMGWR paper is
-not public):
+Merge-GNG (Strickert & Hammer 2005; README, Interpretation choices), as the 2019 TMGWR
+paper is not public:
 
 * context of the input    ``C_t = (1 - beta_c) w_{prev} + beta_c c_{prev}``
 * distance                ``d_n = (1 - alpha_c) |x - w_n|^2 + alpha_c |C_t - c_n|^2``
@@ -27,8 +27,7 @@ chance). After the update the link's action vector
 moves towards the action that traversed it, ``a_ij += eta_a (a - a_ij)`` (the map "learns
 the possible action vectors linking" nodes, section 3.1): a node that drifted while the map
 formed would otherwise keep a link labelled with an action that no longer leads there.
-Link rules (DESIGN.md section 3, open
-question):
+Link rules (an open question; README, Interpretation choices):
 
 * ``literal``: Eq. 1-2 as written; only the traversed link ``i -> j`` is updated (a self
   transition ``i -> i``, a bump, drives ``E[i, i]`` to 0 and is not stored).
@@ -100,7 +99,7 @@ class MapConfig(Config):
                          low=0.0, high=1.0)
     eta_a: float = param(1.0, "rate at which a link's action vector a_ij follows the action "
                          "that traversed it (0 = fixed at creation)", low=0.0, high=1.0)
-    link_rule: str = param("credit", "Eq. 1-2 reading: 'literal' or 'credit' (DESIGN.md 3)",
+    link_rule: str = param("credit", "Eq. 1-2 reading: 'literal' or 'credit' (README)",
                            choices=("literal", "credit"))
 
 

@@ -1,4 +1,4 @@
-"""``./tmgwr experiment | demo | bench`` (DESIGN.md section 5).
+"""``./tmgwr experiment | demo | bench`` (README, Experiments).
 
 ``experiment SCENARIO --maze FILE --agents LIST --trials N --seed S --json OUT
 [--plot OUT.png] [--jobs J]`` with ``--goals``, ``--episodes``, ``--event``, ``--goal``
@@ -33,13 +33,13 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "experiment", help="run one of the paper's experiments (Tables 3-6, Figs 5-7)",
         description="Run a scenario of the paper over several trials and write its JSON "
-                    "(DESIGN.md section 5). Agents: tmgwr, tmgwr:literal, tmgwr:credit, "
+                    "(README, Experiment JSON). Agents: tmgwr, tmgwr:literal, tmgwr:credit, "
                     "q_learning, model_based, dyna_q_plus; tmgwr options join with + and "
                     "'paper' turns our three additions off (tmgwr:credit+paper).")
     p.add_argument("scenario", choices=SCENARIOS, metavar="SCENARIO",
                    help=f"one of {', '.join(SCENARIOS)}")
     p.add_argument("--maze", default=None,
-                   help="maze file (default config/mazes/paper_13x17.txt)")
+                   help="maze file, a path (default: the installed paper_13x17.txt)")
     p.add_argument("--agents", type=_csv, default=None,
                    help="comma-separated agents (default: tmgwr,q_learning,model_based,"
                         "dyna_q_plus; env-change adds tmgwr:literal,tmgwr:credit)")

@@ -1,3 +1,3 @@
-"""The scenario names of the CLI (a contract, DESIGN.md section 5); import-light."""
+"""The scenario names of the CLI (a contract: README, Experiment JSON); import-light."""
 
 SCENARIOS = ("goal-change", "env-change", "sample-complexity", "timing")

@@ -2,7 +2,7 @@
 
 :func:`run_scenario` validates every name before any work starts (agents, goals, event,
 maze file) and raises :class:`UsageError` with a message naming what is wrong; the CLI
-turns it into exit code 2. The JSON starts with the contract header of DESIGN.md section 5
+turns it into exit code 2. The JSON starts with the contract header (README, Experiment JSON)
 (``scenario, maze, trials, seed``), then the scenario's own top-level fields, the step
 caps used (:class:`.runner.Caps`), and ``agents``.
 """

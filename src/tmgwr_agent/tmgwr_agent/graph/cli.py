@@ -28,7 +28,7 @@ def register(subparsers) -> None:
                     "`ros2 run` starts), wait until each is ready, record the run to MCAP "
                     "and print episodes until Ctrl-C; then stop the nodes in reverse order.")
     p.add_argument("--maze", metavar="FILE", help="maze file (default: the simulator's "
-                   "parameter, config/mazes/paper_13x17.txt)")
+                   "parameter, the installed paper_13x17.txt)")
     p.add_argument("--seed", type=int, metavar="S", help="seed of the simulator and the "
                    "exploration policy")
     p.add_argument("--goal", metavar="NAME", help="initial goal name in the maze (G, 1-9)")

@@ -42,7 +42,7 @@ from tmgwr_common.params import check_params_file
 READY = re.compile(r"\bready\b", re.IGNORECASE)
 RECORDER_READY = re.compile(r"\bready\b|\brecording\b.* to ", re.IGNORECASE)
 
-#: The five nodes of Fig. 1a in data-flow order (DESIGN.md section 2: contract names).
+#: The five nodes of Fig. 1a in data-flow order (contract names: README, Topics and services).
 GRAPH_NODES: tuple[tuple[str, str], ...] = (
     ("maze_sim", "maze_sim"),
     ("tmgwr_agent", "sensory_preprocessor"),

@@ -1,8 +1,9 @@
-"""The ROS 2 nodes of the graph (DESIGN.md section 2): thin shells around the core.
+"""The ROS 2 nodes of the graph (README, Topics and services): thin shells around the core.
 
-One module per node; :mod:`.common` holds what they share (QoS, parameters, flat arrays,
-``main``). Each per-step callback calls the same core objects, in the same order, as
-:class:`tmgwr_agent.core.agent.TMGWRAgent` does in-process (:mod:`.reference` is that loop).
+One module per node; :mod:`tmgwr_common.node` holds what they share (QoS, parameters, flat
+arrays, ``main``). Each per-step callback calls the same core objects, in the same order,
+as :meth:`tmgwr_agent.core.agent.TMGWRAgent.step` does in-process
+(:mod:`tmgwr_agent.experiments.lockstep` is that loop, the graph's in-process twin).
 
 One lockstep step goes once around the ring (names in :mod:`tmgwr_common.topics`)::
 
