@@ -12,6 +12,11 @@
 #      launch, config/, the set of Python module files) or the venv changed. Python module
 #      contents are not part of it: tools/env.sh puts src/tmgwr_common, src/maze_sim and src/tmgwr_agent first
 #      on PYTHONPATH, so editing core code never needs a rebuild.
+#   4. The numba kernels (src/tmgwr_agent/tmgwr_agent/core/kernels.py) compiled into their
+#      on-disk cache (python -m tmgwr_agent.core.warmup: "compiling the numba kernels (once,
+#      about N s)"), so that a node's first start loads them instead of compiling. Re-run
+#      when kernels.py changed (numba's own key: its mtime and size), the cache is gone, or
+#      the venv changed; a run that finds them cached takes about a second.
 #
 # Usage: tools/bootstrap.sh [--force] [--rebuild] [--status]
 #   --force    reinstall the requirements and rebuild
@@ -41,7 +46,7 @@ for arg in "$@"; do
         --force) FORCE=1; REBUILD=1 ;;
         --rebuild) REBUILD=1 ;;
         --status) STATUS=1 ;;
-        -h|--help) sed -n '2,24p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+        -h|--help) sed -n '2,29p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
         *) echo "tmgwr bootstrap: unknown option: $arg" >&2; exit 2 ;;
     esac
 done
@@ -104,6 +109,27 @@ need_pip() {
     return 1
 }
 
+KERNELS_PY="$ROOT/src/tmgwr_agent/tmgwr_agent/core/kernels.py"
+KERNELS_STAMP="$ROOT/build/.tmgwr-kernels.stamp"
+
+# What decides whether the numba cache is still valid: numba keys it on the source file's
+# mtime and size; the venv (numba's version) and the cache location; the cache files.
+kernels_key() {
+    local cache="${NUMBA_CACHE_DIR:-$(dirname "$KERNELS_PY")/__pycache__}"
+    {
+        stat -c '%Y %s' "$KERNELS_PY" 2>/dev/null || true
+        cat "$REQ_STAMP" 2>/dev/null || true
+        echo "$cache"
+        find "$cache" -name 'kernels.*.nbi' 2>/dev/null | sort || true
+    } | sha256sum | cut -d' ' -f1
+}
+
+need_warm() {
+    [ -f "$KERNELS_PY" ] || return 1
+    [ "$(cat "$KERNELS_STAMP" 2>/dev/null)" = "$(kernels_key)" ] || return 0
+    return 1
+}
+
 need_build() {
     [ "$REBUILD" = 1 ] && return 0
     [ -f "$ROOT/install/setup.bash" ] || return 0
@@ -112,13 +138,14 @@ need_build() {
 }
 
 # ---------------------------------------------------------------- fast path (no lock, no pip)
-if ! need_pip && ! need_build; then
+if ! need_pip && ! need_build && ! need_warm; then
     [ "$STATUS" = 1 ] && echo "tmgwr bootstrap: up to date" >&2
     exit 0
 fi
 if [ "$STATUS" = 1 ]; then
     need_pip && echo "tmgwr bootstrap: requirements to (re)install into $VENV" >&2
     need_build && echo "tmgwr bootstrap: workspace to (re)build" >&2
+    need_warm && echo "tmgwr bootstrap: numba kernels to compile (or check) in their cache" >&2
     exit 1
 fi
 
@@ -225,5 +252,16 @@ if need_build; then
         --cmake-args -DPython3_EXECUTABLE="$VENV/bin/python" -DBUILD_TESTING=OFF )
     [ -f "$ROOT/install/setup.bash" ] || die "colcon build produced no install/setup.bash (log: $LOG_DIR/colcon.log)"
     build_hash >"$BUILD_STAMP"
+fi
+
+# ---------------------------------------------------------------- 4. numba kernels
+# The nodes import the core from src/ (tools/env.sh): its cache is the one they read.
+if need_warm; then
+    rm -f "$KERNELS_STAMP"
+    ( cd "$ROOT" && env -u _ROS_WHEELS_BOOTSTRAP_COMPLETE \
+        "PYTHONPATH=$ROOT/src/tmgwr_common:$ROOT/src/maze_sim:$ROOT/src/tmgwr_agent" \
+        "$VENV/bin/python" -m tmgwr_agent.core.warmup --quiet --prefix "tmgwr bootstrap: " \
+        >&2 ) || die "compiling the numba kernels failed (python -m tmgwr_agent.core.warmup)"
+    kernels_key >"$KERNELS_STAMP"
 fi
 exit 0

@@ -63,6 +63,7 @@ class SelectorConfig(ExplorationConfig):
 
 class ActionSelector:
     def __init__(self, rng: np.random.Generator, config: SelectorConfig = SelectorConfig()):
+        kernels.announce_compilation()
         self.rng = rng
         self.config = config
         self.policy = EpsilonGreedy(rng, config)

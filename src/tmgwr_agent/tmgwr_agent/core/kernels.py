@@ -4,9 +4,16 @@ Each kernel is the loop form of an equation the calling module states in numpy t
 exist because a step of the agent is a few dozen tiny array operations, and numpy's
 per-call overhead (microseconds) would dominate it. Dead node slots are skipped through the
 ``alive`` mask; link slots hold -1 when empty.
+
+Compilation is lazy (for the argument types of the first call) and cached on disk
+(``cache=True``: ``__pycache__`` next to this file, or under ``NUMBA_CACHE_DIR``).
+``tools/bootstrap.sh`` fills the cache once (:mod:`tmgwr_agent.core.warmup`); a process
+that finds it empty says so (:func:`announce_compilation`) before compiling (tens of seconds).
 """
 
 from __future__ import annotations
+
+import sys
 
 import numpy as np
 from numba import njit
@@ -292,3 +299,58 @@ def update_links(out, E, A, age, n, i, j, a, alpha, sigma_a, eta_a, E_init, E_mi
     if credit:
         credit_other_links(out, E, A, i, slot, a, alpha, sigma_a)
     return created, age_links(out, E, age, n, i, slot, E_min, max_age)
+
+
+# ---------------------------------------------------------------- the on-disk cache
+#: Every kernel, by name (what the warm-up must compile).
+KERNELS = {name: obj for name, obj in list(globals().items())
+           if hasattr(obj, "py_func") and hasattr(obj, "signatures")}
+#: About how long compiling all of them takes on one free core (seconds).
+COMPILE_SECONDS = 15
+_announced = False
+
+
+def cache_dir() -> str:
+    """Where the compiled kernels are cached."""
+    try:
+        return str(next(iter(KERNELS.values()))._cache._cache_path)
+    except Exception:  # numba internals: informative only
+        return "numba's cache directory"
+
+
+def _cached(dispatcher) -> bool:
+    """Whether the cache holds a compiled version of this kernel for the current source
+    (numba's index, keyed by the source file's stamp; numba internals, hence the guard)."""
+    try:
+        return bool(dispatcher._cache._cache_file._load_index())
+    except Exception:
+        return True     # cannot tell: say nothing rather than something wrong
+
+
+def uncached() -> list[str]:
+    """The kernels neither compiled in this process nor in the cache: those a first call
+    will have to compile (kernels called only from other kernels are compiled, and
+    cached, with their callers)."""
+    return [name for name, d in KERNELS.items() if not d.signatures and not _cached(d)]
+
+
+def quiet_compilation() -> None:
+    """The caller announces the compilation itself (the bootstrap's warm-up)."""
+    global _announced
+    _announced = True
+
+
+def announce_compilation() -> None:
+    """Once per process, before the first kernel call: when the cache lacks kernels, say
+    on stderr that the first steps will wait for numba (the agent's core objects call
+    this when they are made)."""
+    global _announced
+    if _announced:
+        return
+    _announced = True
+    todo = uncached()
+    if todo:
+        print(f"tmgwr_agent: compiling numba kernels, first start only (about "
+              f"{COMPILE_SECONDS} s; {len(todo)} of {len(KERNELS)} not cached in "
+              f"{cache_dir()}; tools/bootstrap.sh compiles them ahead)",
+              file=sys.stderr, flush=True)

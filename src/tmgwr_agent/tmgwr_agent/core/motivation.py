@@ -84,6 +84,7 @@ class MotivationEstimator:
     """Holds the goal and the potentials V; :meth:`update` re-solves Eq. 4-5."""
 
     def __init__(self, config: MotivationConfig = MotivationConfig()):
+        kernels.announce_compilation()
         self.config = config
         self.gamma, self.beta = config.gamma, config.beta
         self.goal_sigma, self.goal_sim_floor = config.goal_sigma, config.goal_sim_floor

@@ -143,6 +143,7 @@ class SensorimotorMap:
     """A growing map of (weight, context) nodes joined by directed, action-labelled links."""
 
     def __init__(self, dim: int, action_dim: int = 2, config: MapConfig = MapConfig()):
+        kernels.announce_compilation()
         self.dim, self.action_dim = dim, action_dim
         self.config = config
         c = config
