@@ -106,6 +106,17 @@ def call(domain, calls, timeout=60):
         return parse_json_line(p.wait(timeout=timeout), "RESULT ")
 
 
+def call_past_the_agent(domain, calls, tries=10):
+    """call(), again while an edit was refused only because the agent stood in its way
+    (maze_sim never walls in the agent or its last route; the agent moves on)."""
+    for _ in range(tries):
+        res = call(domain, calls)
+        if not any(not r["accepted"] and "the agent" in r["message"] for r in res):
+            break
+        time.sleep(0.2)
+    return res
+
+
 def goals_reached(sim, cell=None):
     pat = re.compile(r"goal \((\d+), (\d+)\) reached in (\d+) steps \(step (\d+)\)")
     out = []
@@ -259,7 +270,7 @@ def test_detour_after_event_and_learner_restart_from_saved_map(ros_domain, tmp_p
     echo = None
     try:
         wait_until(lambda: len(goals_reached(sim)) >= 10, 120, "goal 2 x10", procs)
-        res = call(ros_domain, [
+        res = call_past_the_agent(ros_domain, [
             ["/maze_sim/set_cell", "SetCell", {"row": 20, "col": 1, "blocked": True}],
             ["/maze_sim/set_cell", "SetCell", {"row": 11, "col": 5, "blocked": True}],
             ["/maze_sim/set_cell", "SetCell", {"row": 11, "col": 5, "blocked": False}],

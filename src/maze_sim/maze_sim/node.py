@@ -11,7 +11,10 @@ output, so a resend never changes what is learnt).
 Goal changes (``/maze_sim/set_goal``, called by the motivation estimator's ``/set_goal``)
 are validated at once and applied at the next observation the simulator publishes: that
 observation already carries the new goal sensation, which is how the goal reaches the
-agent (the agent never receives the goal's cell). Cell and event changes apply at once.
+agent (the agent never receives the goal's cell); until then cell and event edits keep the
+requested goal free. Cell and event changes apply at once. Every edit keeps the task
+solvable or is refused with the reason (:class:`~maze_sim.world.EditRefused`): nothing may
+wall in the start, the goal, the agent or the last route to the goal.
 
 Also published: the maze as ``nav_msgs/OccupancyGrid`` (latched, republished on change;
 cell (row, col) is centred at x = col, y = row, resolution 1), the current goal as
@@ -275,11 +278,11 @@ class MazeSimNode(Node):
             return resp
         col, row = int(math.floor(x + 0.5)), int(math.floor(y + 0.5))
         try:
-            self.world.maze.check_free(row, col, walls=self.world.walls)
+            # checked now and kept free by cell and event edits until it applies
+            self.pending_goal = self.world.request_goal((row, col))
         except MazeError as exc:
             resp.accepted, resp.message = False, f"goal (x={x}, y={y}) refused: {exc}"
             return resp
-        self.pending_goal = (row, col)
         resp.accepted = True
         resp.message = (f"goal set to row {row}, col {col} (x={col}, y={row}); it applies "
                         f"from step {self.step_id + 1}")
@@ -289,7 +292,7 @@ class MazeSimNode(Node):
     def on_set_cell(self, req, resp):
         try:
             self.world.set_cell(req.row, req.col, req.blocked)
-        except MazeError as exc:
+        except MazeError as exc:        # unknown, or it would make the task unsolvable
             resp.accepted, resp.message = False, str(exc)
             return resp
         what = "blocked" if req.blocked else "opened"
@@ -306,7 +309,7 @@ class MazeSimNode(Node):
             return resp
         try:
             self.world.fire_event(name)
-        except MazeError as exc:
+        except MazeError as exc:        # outside, or it would make the task unsolvable
             resp.accepted, resp.message = False, str(exc)
             return resp
         resp.accepted, resp.message = True, f"event {name!r} fired"
@@ -359,3 +362,9 @@ def main(args=None):
 
 if __name__ == "__main__":
     main()
+        replaced = self.pending_goal
+        if replaced is not None and replaced != self.pending_goal:
+            resp.message += (f" (replaces the change to row {replaced[0]}, col {replaced[1]}"
+                             " requested in the same step)")
+            self.get_logger().warning(f"set_cell refused: {exc}")
+            self.get_logger().warning(f"fire_event refused: {exc}")

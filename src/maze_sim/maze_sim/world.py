@@ -6,6 +6,13 @@ place and is reported as a bump. An episode terminates at the current goal, or a
 previous goal while one is set (the goal-change scenario, section 5.2.1). Events fired at
 runtime turn free cells into walls or open walls (README, Maze format).
 
+Edits keep the task solvable or are refused: :meth:`GridWorld.set_cell`,
+:meth:`GridWorld.fire_event` and :meth:`GridWorld.set_goal` raise :class:`EditRefused` (a
+:class:`MazeError` whose message gives the reason), leaving the world unchanged, rather than
+wall in the start, the goal (or a goal requested for later, :meth:`GridWorld.request_goal`),
+or the agent during an episode, or cut the last route to the goal from the start or from the
+agent. The maze_sim node answers its services with that message.
+
 ``step`` returns ``(observation, reward, terminated, truncated, info)``; the reward is 1.0
 on reaching the current goal and 0.0 otherwise: agents compute their own rewards (Eq. 8-10)
 from ``info``, never from this number.
@@ -17,7 +24,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from maze_sim.maze import ACTION_VECTORS, N_ACTIONS, Cell, Maze, MazeError, move
+from maze_sim.maze import ACTION_VECTORS, N_ACTIONS, Cell, Maze, MazeError, bfs_distances, move
+
+
+class EditRefused(MazeError):
+    """A goal, cell or event change refused because the task would become unsolvable."""
+
+
+def _at(cell: Cell) -> str:
+    return f"(row {cell[0]}, col {cell[1]})"
 
 
 @dataclass(frozen=True)
@@ -60,12 +75,14 @@ class GridWorld:
         self.maze = maze
         self.walls = maze.walls.copy()
         self.fired: list[str] = []
-        self.goal: Cell = maze.goal_cell(goal)
+        self.cell: Cell = maze.start
+        self.in_episode = False          # the agent's cell matters (reset .. terminal step)
+        self.pending_goal: Cell | None = None
+        self.goal: Cell = self.check_goal(goal)
         self.previous_goal: Cell | None = None
         self.sensor_noise = float(sensor_noise)
         self.max_episode_steps = max_episode_steps
         self.rng = np.random.default_rng(seed)
-        self.cell: Cell = maze.start
         self.total_steps = 0
         self.episode = 0
         self.episode_steps = 0
@@ -96,6 +113,7 @@ class GridWorld:
                             f"{self.fired}", self.maze.source)
         self.episode += 1
         self.episode_steps = 0
+        self.in_episode = True
         return self.sense(), {"cell": self.cell, "episode": self.episode}
 
     def step(self, action: int):
@@ -112,31 +130,100 @@ class GridWorld:
         truncated = (self.max_episode_steps is not None
                      and self.episode_steps >= self.max_episode_steps
                      and not info.terminated)
+        if info.terminated or truncated:
+            self.in_episode = False      # the next reset moves the agent to the start
         return (self.sense(), 1.0 if info.reached_goal else 0.0, info.terminated, truncated,
                 info)
 
-    def set_goal(self, goal: str | Cell, keep_previous: bool = False) -> Cell:
-        """Move the goal. With ``keep_previous`` the old goal stays a terminal cell."""
+    # ---------------------------------------------------------------- edits
+    def check_goal(self, goal: str | Cell) -> Cell:
+        """The cell of ``goal`` (a name or (row, col)) if it can be the goal: inside the
+        maze, free, and reachable from the start (and from the agent during an episode);
+        otherwise :class:`MazeError` saying why."""
         new = self.maze.goal_cell(goal) if isinstance(goal, str) else tuple(map(int, goal))
         self.maze.check_free(*new, walls=self.walls)
+        what = f"goal {_at(new)}"
+        if bfs_distances(self.walls, self.maze.start)[new] < 0:
+            raise EditRefused(f"{what} refused: it cannot be reached from the start "
+                              f"{_at(self.maze.start)}", self.maze.source)
+        if self.in_episode and bfs_distances(self.walls, self.cell)[new] < 0:
+            raise EditRefused(f"{what} refused: it cannot be reached from the agent at "
+                              f"{_at(self.cell)}", self.maze.source)
+        return new  # type: ignore[return-value]
+
+    def set_goal(self, goal: str | Cell, keep_previous: bool = False) -> Cell:
+        """Move the goal now. With ``keep_previous`` the old goal stays a terminal cell."""
+        new = self.check_goal(goal)
         self.previous_goal = self.goal if keep_previous and self.goal != new else None
-        self.goal = new  # type: ignore[assignment]
+        self.goal = new
+        if self.pending_goal == new:
+            self.pending_goal = None
         return self.goal
 
+    def request_goal(self, goal: str | Cell) -> Cell:
+        """Check a goal that :meth:`set_goal` will apply later (the simulator moves the goal
+        at its next observation) and keep it safe from walls until then: cell and event
+        edits treat it as the goal. A later request replaces it."""
+        self.pending_goal = self.check_goal(goal)
+        return self.pending_goal
+
     def fire_event(self, name: str) -> None:
-        """Fire a maze event: its lowercase cells become walls, its uppercase walls open."""
-        self.walls = self.maze.walls_after(self.fired + [name])
+        """Fire a maze event: its lowercase cells become walls, its uppercase walls open
+        (on the current layout, cell edits included). Refused (:class:`EditRefused`, the
+        world unchanged) when its walls would leave the task unsolvable."""
+        ev = self.maze.events.get(name)
+        if ev is None:
+            known = ", ".join(sorted(self.maze.events)) or "none"
+            raise MazeError(f"no event named {name!r} (events: {known})", self.maze.source)
+        walls = self.walls.copy()
+        for r, c in ev["block"]:
+            walls[r, c] = True
+        for r, c in ev["open"]:
+            walls[r, c] = False
+        self.check_layout(walls, f"event {name!r}")
+        self.walls = walls
         self.fired.append(name)
 
     def set_cell(self, r: int, c: int, blocked: bool) -> None:
+        """Make a cell a wall (``blocked``) or free it. Blocking is refused
+        (:class:`EditRefused`, the world unchanged) when the task would become unsolvable."""
         rows, cols = self.walls.shape
         if not (0 <= r < rows and 0 <= c < cols):
             raise MazeError(f"cell (row {r}, col {c}) is outside the {rows}x{cols} maze",
                             self.maze.source)
-        if blocked and (r, c) in (self.cell, self.goal):
-            raise MazeError(f"cell (row {r}, col {c}) holds the agent or the goal and "
-                            "cannot be blocked", self.maze.source)
-        self.walls[r, c] = blocked
+        walls = self.walls.copy()
+        walls[r, c] = bool(blocked)
+        self.check_layout(walls, f"blocking cell {_at((r, c))}")
+        self.walls = walls
+
+    def check_layout(self, walls: np.ndarray, what: str) -> None:
+        """Refuse (:class:`EditRefused` naming ``what`` and the reason) a new wall layout
+        that walls in the start, the goal, a requested goal or the agent (during an
+        episode), or cuts the last route to a goal from the start or from the agent.
+        Layouts that only open cells are always accepted."""
+        if not (walls & ~self.walls).any():
+            return
+        keep = [("the start", self.maze.start), ("the goal", self.goal)]
+        goals = [("the goal", self.goal)]
+        if self.pending_goal is not None and self.pending_goal != self.goal:
+            keep.append(("the requested goal", self.pending_goal))
+            goals.append(("the requested goal", self.pending_goal))
+        if self.in_episode:
+            keep.append(("the agent", self.cell))
+        for role, cell in keep:
+            if walls[cell]:
+                raise EditRefused(f"{what} refused: it would wall in {role} at {_at(cell)}",
+                                  self.maze.source)
+        sources = [("the start", self.maze.start)]
+        if self.in_episode:
+            sources.append(("the agent", self.cell))
+        for src_role, src in sources:
+            dist = bfs_distances(walls, src)
+            for role, goal in goals:
+                if dist[goal] < 0:
+                    raise EditRefused(
+                        f"{what} refused: it would cut the last route from {src_role} "
+                        f"{_at(src)} to {role} {_at(goal)}", self.maze.source)
 
     def shortest_path_length(self, a: Cell | None = None, b: Cell | None = None) -> int:
         """BFS steps in the current layout (default: start to goal)."""
