@@ -2,11 +2,20 @@
 
 Owns a :class:`~maze_sim.world.GridWorld` and drives the lockstep ring: it publishes one
 ``Observation`` per step and steps the world only when the ``Action`` carrying that
-observation's ``step_id`` arrives. The answer to a terminal observation is
+observation's ``run_id`` and ``step_id`` arrives. The answer to a terminal observation is
 ``Action.NONE``; the simulator then starts the next episode. While it waits it resends the
-current observation every ``resend_period`` seconds, so the ring recovers from a node
-that started late or was restarted (every node answers a repeated step id with its cached
-output, so a resend never changes what is learnt).
+current observation every ``resend_period`` seconds, and at once (0.25 s later) when a
+node joins the ring (a subscriber of ``/observation`` or a publisher of a ring topic
+appears), so the ring recovers from a node that started late or was restarted (every node
+answers a repeated step with its cached output, so a resend never changes what is learnt).
+Its warning says which step of which run it waits for, when the last action came, and
+which ring topics have no publisher.
+
+Run identity (``tmgwr_common.lockstep``): at start the simulator picks ``run_id`` (the
+wall clock in ns: nonzero, larger for a later start) and stamps it on every observation;
+step ids count from 0 within the run. The agent nodes follow the newest run, so a
+restarted simulator is followed from its first observation. An action of another run
+(a simulator that was replaced, a stray ``ros2 topic pub`` with run_id 0) is ignored.
 
 Goal changes (``/maze_sim/set_goal``, called by the motivation estimator's ``/set_goal``)
 are validated at once and applied at the next observation the simulator publishes: that
@@ -40,6 +49,7 @@ from std_srvs.srv import Trigger
 from maze_sim.maze import DEFAULT_MAZE, N_ACTIONS, Maze, MazeError, maze_file
 from maze_sim.world import GridWorld
 from tmgwr_common import topics
+from tmgwr_common.lockstep import WARN_PERIOD
 from tmgwr_common.node import (
     LATCHED_QOS,
     NODE_OPTIONS,
@@ -57,6 +67,16 @@ from tmgwr_interfaces.srv import FireEvent, SetCell, SetGoal
 
 FRAME = "maze"
 WARMUP_STEPS = 200    # the SUMMARY's steady rate leaves out discovery and the first steps
+JOIN_RESEND = 0.25    # resend period while a run starts or a node joins (matching settles)
+# Who publishes each ring topic (named in the warning when nobody does).
+RING = ((topics.FEATURES, "sensory_preprocessor"), (topics.SENSORIMOTOR_STATE, "map_learner"),
+        (topics.MOTIVATION, "motivation_estimator"), (topics.ACTION, "action_selector"))
+
+
+def new_run_id() -> int:
+    """A run id: the wall clock in ns (nonzero; a simulator started later has a larger
+    one, which is how the nodes tell the newer run)."""
+    return max(time.time_ns(), 1)
 
 SPECS = (
     Param("maze", DEFAULT_MAZE, "maze file (README, Maze format): absolute, relative to "
@@ -125,9 +145,17 @@ class MazeSimNode(Node):
                             callback_group=services)
         self.create_service(Trigger, topics.RESET, self.on_reset, callback_group=services)
 
+        self.run_id = new_run_id()         # this run's identity (tmgwr_common.lockstep)
         self.step_id = -1                  # id of the observation awaiting its action
+        self.resends = 0                   # of the current observation
+        self.last_action: tuple[int, float] | None = None   # (step, time) of the last one
+        self.foreign = (0.0, 0)            # (time, count) of ignored actions of other runs
+        self.ring_size = 0                 # subscribers + ring publishers last counted
+        self.joined_at = -math.inf         # when that count last grew (a node joined)
+        self.logged_at = -math.inf         # of the last 'no action' line
         self.current: Observation | None = None
         self.sent_at = 0.0
+        self.first_sent = 0.0              # first publication of the current step
         self.pending_goal = None           # (row, col) applied at the next observation
         self.pending_reset = False
         self.finished = False
@@ -145,9 +173,11 @@ class MazeSimNode(Node):
         self.create_timer(1.0 / p["pose_rate"], self.publish_pose)
         self.create_timer(min(0.1, p["resend_period"]), self.check_resend)
         self._start_timer = self.create_timer(max(p["start_delay"], 0.01), self.start)
+        self.t_ready = time.monotonic()
         self.get_logger().info(
-            f"maze_sim ready: maze {path} ({maze.walls.shape[0]}x{maze.walls.shape[1]}), goal "
-            f"{self.world.goal}, seed {p['seed']}, max_steps {p['max_steps'] or 'none'}")
+            f"maze_sim ready: run {self.run_id}, maze {path} ({maze.walls.shape[0]}x"
+            f"{maze.walls.shape[1]}), goal {self.world.goal}, seed {p['seed']}, "
+            f"max_steps {p['max_steps'] or 'none'}")
 
     # ------------------------------------------------------------------ the ring
     def start(self):
@@ -163,8 +193,12 @@ class MazeSimNode(Node):
         self.publish_observation(obs, episode_start=True)
 
     def on_action(self, msg: Action):
+        if msg.run_id != self.run_id:
+            self.foreign_action(msg)
+            return
         if msg.step_id != self.step_id or self.current is None or self.finished:
             return                          # a duplicate answer to a resent observation
+        self.answered(msg.step_id)
         with self.timer:
             if self.pending_reset or msg.action == Action.NONE:
                 self.start_episode()
@@ -200,6 +234,7 @@ class MazeSimNode(Node):
         m = Observation()
         m.header.stamp = self.get_clock().now().to_msg()
         m.header.frame_id = FRAME
+        m.run_id = self.run_id
         m.step_id = self.step_id
         m.episode = self.world.episode
         m.sensors = f64(obs)
@@ -218,14 +253,74 @@ class MazeSimNode(Node):
             self.trajectory.append((self.step_id, self.world.episode, m.row, m.col))
         self.timer.publish(self.obs_pub, m)
         self.sent_at = time.monotonic()
+        self.first_sent = self.sent_at
+
+    def answered(self, step: int):
+        """Book-keeping of an accepted action: say when the ring resumed after resends, and
+        how long the first step of this run took from ready."""
+        now = time.monotonic()
+        if step == 0:
+            self.get_logger().info(
+                f"run {self.run_id}: the ring answered step 0 {now - self.t_ready:.2f} s after "
+                f"this simulator was ready (start_delay {self.p['start_delay']} s)")
+        elif self.resends:
+            self.get_logger().info(f"step {step} answered after {self.resends} resends "
+                                   f"({now - self.first_sent:.2f} s): the ring resumed")
+        self.resends = 0
+        self.last_action = (step, now)
+
+    def foreign_action(self, msg: Action):
+        """An action that is not of this run: ignored, said at most every WARN_PERIOD s."""
+        now = time.monotonic()
+        last, count = self.foreign
+        if now - last < WARN_PERIOD:
+            self.foreign = (last, count + 1)
+            return
+        self.foreign = (now, 0)
+        whose = ("no run (run_id 0: a stray publisher?)" if msg.run_id == 0 else
+                 f"run {msg.run_id}, not this simulator's run {self.run_id}")
+        more = f" ({count} more in the last {now - last:.0f} s)" if count else ""
+        self.get_logger().warning(f"ignored an action for step {msg.step_id} of {whose}{more}")
 
     def check_resend(self):
-        if self.current is not None and not self.finished and \
-                time.monotonic() - self.sent_at > self.p["resend_period"]:
-            self.get_logger().info(f"no action for step {self.step_id} within "
-                                   f"{self.p['resend_period']} s: resending the observation")
+        """Resend the current observation after ``resend_period`` without its action, or
+        every JOIN_RESEND s while this run has had no action yet or a node has just joined
+        the ring (its endpoints are being matched; a duplicate is answered from cache)."""
+        now = time.monotonic()
+        size = self.obs_pub.get_subscription_count() + sum(
+            self.count_publishers(t) for t, _ in RING)
+        if size > self.ring_size:
+            self.joined_at = now
+        self.ring_size = size
+        if self.current is None or self.finished:
+            return
+        period = self.p["resend_period"]
+        if self.last_action is None or now - self.joined_at < period:
+            period = min(period, JOIN_RESEND)
+        if now - self.sent_at > period:
+            self.resends += 1
+            if now - self.logged_at >= self.p["resend_period"]:
+                self.logged_at = now
+                self.get_logger().info(
+                    f"no action for step {self.step_id} of run {self.run_id} within "
+                    f"{now - self.first_sent:.1f} s: resending the observation "
+                    f"({self.ring_status(now)})")
             self.obs_pub.publish(self.current)
-            self.sent_at = time.monotonic()
+            self.sent_at = now
+
+    def ring_status(self, now: float) -> str:
+        """The last action heard and the ring topics nobody publishes (cheap: the local
+        graph cache)."""
+        parts = [f"last action: step {self.last_action[0]}, {now - self.last_action[1]:.1f} s "
+                 "ago" if self.last_action else "no action yet from this run"]
+        if not self.obs_pub.get_subscription_count():
+            parts.append(f"nobody subscribes to {topics.OBSERVATION} (sensory_preprocessor)")
+        missing = [f"{t} ({who})" for t, who in RING if not self.count_publishers(t)]
+        if missing:
+            parts.append("no publisher on " + ", ".join(missing))
+        if self.foreign[0]:
+            parts.append(f"last action of another run {now - self.foreign[0]:.1f} s ago")
+        return "; ".join(parts)
 
     def finish(self):
         self.finished = True
@@ -277,6 +372,7 @@ class MazeSimNode(Node):
             resp.accepted, resp.message = False, f"goal (x={x}, y={y}) is not finite"
             return resp
         col, row = int(math.floor(x + 0.5)), int(math.floor(y + 0.5))
+        replaced = self.pending_goal
         try:
             # checked now and kept free by cell and event edits until it applies
             self.pending_goal = self.world.request_goal((row, col))
@@ -286,14 +382,18 @@ class MazeSimNode(Node):
         resp.accepted = True
         resp.message = (f"goal set to row {row}, col {col} (x={col}, y={row}); it applies "
                         f"from step {self.step_id + 1}")
+        if replaced is not None and replaced != self.pending_goal:
+            resp.message += (f" (replaces the change to row {replaced[0]}, col {replaced[1]}"
+                             " requested in the same step)")
         self.get_logger().info(resp.message)
         return resp
 
     def on_set_cell(self, req, resp):
         try:
             self.world.set_cell(req.row, req.col, req.blocked)
-        except MazeError as exc:        # unknown, or it would make the task unsolvable
+        except MazeError as exc:        # outside, or it would make the task unsolvable
             resp.accepted, resp.message = False, str(exc)
+            self.get_logger().warning(f"set_cell refused: {exc}")
             return resp
         what = "blocked" if req.blocked else "opened"
         resp.accepted, resp.message = True, f"cell (row {req.row}, col {req.col}) {what}"
@@ -309,8 +409,9 @@ class MazeSimNode(Node):
             return resp
         try:
             self.world.fire_event(name)
-        except MazeError as exc:        # outside, or it would make the task unsolvable
+        except MazeError as exc:        # unknown, or it would make the task unsolvable
             resp.accepted, resp.message = False, str(exc)
+            self.get_logger().warning(f"fire_event refused: {exc}")
             return resp
         resp.accepted, resp.message = True, f"event {name!r} fired"
         self.publish_grid()
@@ -362,9 +463,3 @@ def main(args=None):
 
 if __name__ == "__main__":
     main()
-        replaced = self.pending_goal
-        if replaced is not None and replaced != self.pending_goal:
-            resp.message += (f" (replaces the change to row {replaced[0]}, col {replaced[1]}"
-                             " requested in the same step)")
-            self.get_logger().warning(f"set_cell refused: {exc}")
-            self.get_logger().warning(f"fire_event refused: {exc}")

@@ -33,7 +33,10 @@ class EpisodeMonitor:
     Every Observation goes through :meth:`on_observation`. ``steps`` counts actions
     (observations that are not an episode's first). An episode ends with a ``terminal``
     observation; one whose end was never seen (a reset, the monitor joining late) is
-    closed as ``cut`` when the next episode starts.
+    closed as ``cut`` when the next episode starts. Step ids count within a run
+    (``run_id``, ``tmgwr_common.lockstep``): a newer run (the simulator restarted) starts
+    the count again, an older one is ignored; run 0 (recordings made before run ids) is
+    taken as the current run.
     """
 
     episodes: list[EpisodeRecord] = field(default_factory=list)
@@ -43,6 +46,8 @@ class EpisodeMonitor:
     last_time: float = 0.0
     seen: int = 0
     missed: int = 0            # gaps in step_id after the first message
+    run_id: int = 0            # the run followed (0: none seen)
+    runs: int = 0              # runs seen (more than 1: the simulator restarted)
     _episode: int = -1
     _steps: int = 0
     _start_cell: tuple[int, int] = (-1, -1)
@@ -52,6 +57,16 @@ class EpisodeMonitor:
     def on_observation(self, msg) -> None:
         now = time.perf_counter()
         sid = int(msg.step_id)
+        run = int(getattr(msg, "run_id", 0))
+        if run and run != self.run_id:
+            if run < self.run_id:
+                return      # a message of a simulator that was replaced
+            if self.runs and not self._closed and self._episode >= 0:
+                self._close("cut", self.last_step_id, (-1, -1))
+                self._episode = -1
+            self.run_id, self.runs, self.last_step_id = run, self.runs + 1, -1
+            if self.first_step_id >= 0:          # the rate counts from the new run's start
+                self.first_step_id, self.first_time = sid, now
         if sid <= self.last_step_id:
             return          # the simulator resent an observation nobody answered yet
         if self.first_step_id < 0:

@@ -372,29 +372,33 @@ class SensorimotorMap:
         self.n = n
         self.version, self.prev, self.winner = (int(v) for v in s["meta"])
 
-    def save(self, path: str | Path, step_id: int = -1) -> Path:
-        """Write the whole map and the last step it learnt (``step_id``) to a .npz file,
-        atomically: a crash never leaves half a file."""
+    def save(self, path: str | Path, step_id: int = -1, run_id: int = 0) -> Path:
+        """Write the whole map and the last step it learnt (``step_id`` of the graph's run
+        ``run_id``, 0 = none) to a .npz file, atomically: a crash never leaves half a
+        file."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(path.name + ".tmp")
         with open(tmp, "wb") as f:
-            np.savez(f, **self.state_dict(), step_id=np.array(step_id, dtype=np.int64))
+            np.savez(f, **self.state_dict(), step_id=np.array(step_id, dtype=np.int64),
+                     run_id=np.array(run_id, dtype=np.uint64))
         tmp.replace(path)
         return path
 
     @classmethod
-    def load(cls, path: str | Path, config: MapConfig = MapConfig()
-             ) -> tuple[SensorimotorMap, int]:
+    def load(cls, path: str | Path, config: MapConfig = MapConfig(), with_run: bool = False
+             ) -> tuple[SensorimotorMap, int] | tuple[SensorimotorMap, int, int]:
         """A map read from a :meth:`save` file (its dimensions from the file, the
-        hyperparameters ``config``) and the last step id it learnt (-1 if unknown)."""
+        hyperparameters ``config``) and the last step id it learnt (-1 if unknown); with
+        ``with_run``, also the run id of that step (0 if unknown)."""
         try:
             with np.load(Path(path)) as data:
                 state = {k: data[k] for k in data.files}
             step_id = int(state.pop("step_id", -1))
+            run_id = int(state.pop("run_id", 0))
             m = cls(dim=int(state["w"].shape[1]), action_dim=int(state["a"].shape[2]),
                     config=config)
             m.load_state_dict(state)
         except (OSError, KeyError, ValueError, IndexError) as exc:
             raise ValueError(f"{path}: not a saved sensorimotor map ({exc})") from exc
-        return m, step_id
+        return (m, step_id, run_id) if with_run else (m, step_id)

@@ -16,10 +16,11 @@ One lockstep step goes once around the ring (names in :mod:`tmgwr_common.topics`
     action_selector      --/action (Action, NONE after a terminal observation)
                                                        ---------> maze_sim
 
-Every per-step message carries the ``step_id`` of its observation; the simulator steps only
-on the action for its current step id and resends the observation when none comes
-(``resend_period``); every node answers a step id it already handled with its cached
-output, so a resend never changes what is learnt.
+Every per-step message carries the ``run_id`` and ``step_id`` of its observation; the
+simulator steps only on the action for its current step of its run and resends the
+observation when none comes (``resend_period``); every node answers a step it already
+handled with its cached output, so a resend never changes what is learnt, and follows a
+newer run (a restarted simulator) from its first step (:mod:`tmgwr_common.lockstep`).
 
 Inspection and control:
 

@@ -47,19 +47,20 @@ class ActionSelectorNode(Node):
         self.core = ActionSelector(np.random.default_rng(self.p["seed"]), config)
         self.prev_winner = -1               # the winner this selector last acted from
         pub = self.create_publisher(Action, topics.ACTION, STEP_QOS)
-        self.lockstep = Lockstep(pub)
+        self.lockstep = Lockstep(pub, logger=self.get_logger(), what="motivation field")
         self.create_subscription(MotivationField, topics.MOTIVATION, self.on_motivation,
                                  STEP_QOS)
         self.get_logger().info(f"action_selector ready: seed {self.p['seed']}, "
                                f"{config.as_dict()}")
 
     def on_motivation(self, f: MotivationField):
-        self.lockstep.on_step(f.step_id, lambda: self.choose(f))
+        self.lockstep.on_step(f.run_id, f.step_id, lambda: self.choose(f))
 
     def choose(self, f: MotivationField) -> Action:
         self.core.record(self.prev_winner, outcome_of(f))   # what TMGWRAgent.step does here
         a = Action()
         a.header = f.header
+        a.run_id = f.run_id
         a.step_id = f.step_id
         a.epsilon = float(self.core.policy.epsilon)
         if f.terminal:

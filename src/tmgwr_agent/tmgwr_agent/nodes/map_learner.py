@@ -15,7 +15,9 @@ their sensed position, coloured by the motivation potential of the last
 Persistence: ``save_map`` / ``load_map`` services; the map is saved to ``map_path`` on
 shutdown (SIGINT/SIGTERM) and ``initial_map`` starts the learner from a saved map, so a
 restarted learner continues with the same map (the file also records the last step it
-learnt, so a resent step is answered, not learnt twice).
+learnt and its run, so a resent step is answered, not learnt twice). A map saved in
+another run brings that run's id along: the learner follows the simulator's current run
+from its first step (``tmgwr_common.lockstep``), learning on with the loaded map.
 """
 
 from __future__ import annotations
@@ -64,20 +66,23 @@ class MapLearnerNode(Node):
         super().__init__("map_learner", **NODE_OPTIONS)
         self.config, self.p = declare_parameters(self, MapConfig, NODE_SPECS)
         self.map: SensorimotorMap | None = None
-        last_step = -1
+        last_step, run_id = -1, 0
         self.gain = 1.0
         self.prev_winner = -1
         if self.p["initial_map"]:
             path = Path(self.p["initial_map"]).expanduser()
-            self.map, last_step = SensorimotorMap.load(path, self.config)
+            self.map, last_step, run_id = SensorimotorMap.load(path, self.config,
+                                                               with_run=True)
             self.get_logger().info(f"started from {path}: {self.map.size} nodes, "
-                                   f"{self.map.link_count()} links, step {last_step}")
+                                   f"{self.map.link_count()} links, step {last_step} "
+                                   f"(run {run_id or 'unknown'})")
         self.V = np.zeros(0)
         self.published = (-1, -1)        # (step, version) of the last latched snapshot
 
         state_pub = self.create_publisher(SensorimotorState, topics.SENSORIMOTOR_STATE,
                                           STEP_QOS)
-        self.lockstep = Lockstep(state_pub, last_step=last_step)
+        self.lockstep = Lockstep(state_pub, last_step=last_step, run_id=run_id,
+                                 logger=self.get_logger(), what="features")
         self.map_pub = self.create_publisher(MapMsg, topics.MAP, LATCHED_QOS)
         self.marker_pub = self.create_publisher(MarkerArray, topics.MAP_MARKERS, LATCHED_QOS)
         self.create_subscription(Features, topics.FEATURES, self.on_features, STEP_QOS)
@@ -95,7 +100,13 @@ class MapLearnerNode(Node):
 
     # ------------------------------------------------------------------ per step
     def on_features(self, f: Features):
-        self.lockstep.on_step(f.step_id, lambda: self.learn(f),
+        dim = self.map.dim if self.map is not None else len(f.features) or -1
+        if f.run_id and len(f.features) != dim:     # a malformed stray must not crash us
+            self.get_logger().warning(
+                f"ignored features of step {f.step_id} (run {f.run_id}): {len(f.features)} "
+                f"values, the map has dimension {dim}", throttle_duration_sec=10.0)
+            return
+        self.lockstep.on_step(f.run_id, f.step_id, lambda: self.learn(f),
                               answer_again=lambda: self.make_state(f))
 
     def learn(self, f: Features) -> SensorimotorState:
@@ -114,6 +125,7 @@ class MapLearnerNode(Node):
         n, K = m.n, m.out.shape[1]
         s = SensorimotorState()
         s.header = f.header
+        s.run_id = f.run_id
         s.step_id = f.step_id
         s.winner = int(m.winner)
         s.previous_winner = self.prev_winner
@@ -160,6 +172,7 @@ class MapLearnerNode(Node):
         msg = MapMsg()
         msg.header.stamp, msg.header.frame_id = stamp, "maze"
         msg.map_version, msg.step_id = int(m.version), max(step, 0)
+        msg.run_id = self.lockstep.run_id
         ids = m.node_ids()
         msg.nodes = [MapNode(id=int(i), weight=f64(m.w[i]), context=f64(m.c[i]),
                              habituation=float(m.h[i]), terminal=bool(m.terminal[i]))
@@ -204,7 +217,7 @@ class MapLearnerNode(Node):
             resp.success, resp.message = False, "the map is empty: nothing learnt yet"
             return resp
         try:
-            self.map.save(path, self.lockstep.last_step)
+            self.map.save(path, self.lockstep.last_step, self.lockstep.run_id)
         except OSError as exc:
             resp.success, resp.message = False, f"cannot write {path}: {exc}"
             return resp
@@ -232,7 +245,8 @@ class MapLearnerNode(Node):
         print(f"map_learner: {self.lockstep.timer.summary()}", flush=True)
         step = self.lockstep.last_step
         if self.map is not None and self.p["map_path"]:
-            path = self.map.save(Path(self.p["map_path"]).expanduser(), step)
+            path = self.map.save(Path(self.p["map_path"]).expanduser(), step,
+                                 self.lockstep.run_id)
             print(f"map_learner: saved {self.map.size} nodes, {self.map.link_count()} links "
                   f"(step {step}) to {path}", flush=True)
 

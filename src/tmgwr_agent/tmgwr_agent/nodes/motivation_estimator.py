@@ -60,7 +60,7 @@ class MotivationEstimatorNode(Node):
         self.core = MotivationEstimator(config)
         self._ids = np.zeros(0, dtype=np.int32)
         pub = self.create_publisher(MotivationField, topics.MOTIVATION, STEP_QOS)
-        self.lockstep = Lockstep(pub)
+        self.lockstep = Lockstep(pub, logger=self.get_logger(), what="state")
         self.create_subscription(SensorimotorState, topics.SENSORIMOTOR_STATE, self.on_state,
                                  STEP_QOS)
         # /set_goal checks the cell against the simulator's grid (latched: it arrives
@@ -73,7 +73,7 @@ class MotivationEstimatorNode(Node):
 
     # ------------------------------------------------------------------ per step
     def on_state(self, s: SensorimotorState):
-        self.lockstep.on_step(s.step_id, lambda: self.motivate(s))
+        self.lockstep.on_step(s.run_id, s.step_id, lambda: self.motivate(s))
 
     def motivate(self, s: SensorimotorState) -> MotivationField:
         goal_x = np_f64(s.goal_features)
@@ -83,6 +83,7 @@ class MotivationEstimatorNode(Node):
         V = self.core.update(m)
         out = MotivationField()
         out.header = s.header
+        out.run_id = s.run_id
         out.step_id = s.step_id
         out.map_version = s.map_version
         out.goal_node = int(self.core.goal_node)

@@ -29,18 +29,19 @@ class SensoryPreprocessorNode(Node):
         config = declare_parameters(self, PreprocessorConfig)
         self.core = SensoryPreprocessor(config)
         pub = self.create_publisher(Features, topics.FEATURES, STEP_QOS)
-        self.lockstep = Lockstep(pub)
+        self.lockstep = Lockstep(pub, logger=self.get_logger(), what="observation")
         self.create_subscription(Observation, topics.OBSERVATION, self.on_observation,
                                  STEP_QOS)
         self.get_logger().info(f"sensory_preprocessor ready: {config.as_dict()}")
 
     def on_observation(self, m: Observation):
-        self.lockstep.on_step(m.step_id, lambda: self.features(m))
+        self.lockstep.on_step(m.run_id, m.step_id, lambda: self.features(m))
 
     def features(self, m: Observation) -> Features:
         x = self.core(np_f64(m.sensors), episode_start=m.episode_start)
         f = Features()
         f.header = m.header
+        f.run_id = m.run_id
         f.step_id = m.step_id
         f.episode = m.episode
         f.features = f64(x)
