@@ -4,10 +4,11 @@ Owns a :class:`~maze_sim.world.GridWorld` and drives the lockstep ring: it publi
 ``Observation`` per step and steps the world only when the ``Action`` carrying that
 observation's ``run_id`` and ``step_id`` arrives. The answer to a terminal observation is
 ``Action.NONE``; the simulator then starts the next episode. While it waits it resends the
-current observation every ``resend_period`` seconds, and at once (0.25 s later) when a
-node joins the ring (a subscriber of ``/observation`` or a publisher of a ring topic
-appears), so the ring recovers from a node that started late or was restarted (every node
-answers a repeated step with its cached output, so a resend never changes what is learnt).
+current observation every ``resend_period`` seconds, and every 0.25 s while its run has
+had no action yet or a node has just joined the ring (a subscriber of ``/observation`` or
+a publisher of a ring topic appeared: its endpoints are being matched), so the ring
+recovers from a node that started late or was restarted (every node answers a repeated
+step with its cached output, so a resend never changes what is learnt).
 Its warning says which step of which run it waits for, when the last action came, and
 which ring topics have no publisher.
 
