@@ -87,7 +87,7 @@ def test_launch_file_starts_the_contract_executables():
     assert list(pairs) == [("maze_sim", "maze_sim"), ("tmgwr_agent", "sensory_preprocessor"),
                            ("tmgwr_agent", "map_learner"), ("tmgwr_agent", "motivation_estimator"),
                            ("tmgwr_agent", "action_selector")]
-    assert "executable='recorder'" in source
+    assert 'executable="recorder"' in source
     # the supervisor of the pip-only environment starts the same executables
     from tmgwr_agent.graph.supervisor import GRAPH_NODES
     assert tuple(pairs) == GRAPH_NODES

@@ -39,9 +39,11 @@ class UsageError(ValueError):
 
 
 def load_maze(path: str | Path) -> Maze:
-    path = Path(path)
-    if not path.is_file():
-        raise UsageError(f"maze file not found: {path}")
+    """A maze given as a path or by the name of a maze maze_sim installs."""
+    try:
+        path = maze_file(path)
+    except FileNotFoundError as exc:
+        raise UsageError(f"maze file not found: {exc}") from None
     try:
         return Maze.from_file(path)
     except MazeError as exc:
@@ -89,6 +91,7 @@ def run_scenario(scenario: str, maze_path: str | Path = DEFAULT_MAZE,
         raise UsageError(f"unknown scenario {scenario!r}; scenarios: {', '.join(SCENARIOS)}")
     d = DEFAULTS[scenario]
     maze = load_maze(maze_path)
+    maze_path = maze.source          # the file found (a name resolves to the installed maze)
     agents = check_agents(agents if agents else d["agents"])
     if trials < 1:
         raise UsageError(f"--trials must be >= 1, got {trials}")

@@ -310,7 +310,11 @@ def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | No
         params: dict[str, object] = {}
         if exe == "maze_sim":
             if maze is not None:
-                params["maze"] = str(Path(maze).expanduser().resolve())
+                from maze_sim.maze import maze_file
+                try:
+                    params["maze"] = str(maze_file(maze).resolve())
+                except FileNotFoundError as exc:
+                    raise GraphError(f"--maze: {exc}") from None
             if goal is not None:
                 params["goal"] = str(goal)
             if record_dir is not None:
