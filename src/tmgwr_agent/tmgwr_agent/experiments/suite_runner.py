@@ -14,7 +14,10 @@ every maze). So one maze's entry of the suite JSON is exactly what
   or its opening event (``--event open`` or ``b``: a new shortcut). ``steps`` counts the
   steps of the first episode after the event, ``oracle_steps`` is
   :func:`.env_change.oracle_steps` (for an opening the agent cannot know of, the old
-  shortest path). ``episodes_to_optimal`` counts the episodes after the event until a
+  shortest path). It bounds an agent that keeps to its old optimal route until it bumps;
+  one that leaves the route before the block (an exploratory step, or a wall sensor
+  seeing the new wall) can beat it, down to ``shortest_after``: a ratio below 1 is
+  possible. ``episodes_to_optimal`` counts the episodes after the event until a
   greedy rollout takes a shortest path of the *new* maze: for an opening, whose new
   shortest path is strictly shorter than every old path, that is the first time the
   greedy path uses the shortcut.
