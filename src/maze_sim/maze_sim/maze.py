@@ -111,10 +111,10 @@ class Maze:
     def from_file(cls, path: str | Path) -> "Maze":
         path = Path(path)
         try:
-            text = path.read_text()
+            data = path.read_bytes()
         except OSError as exc:
             raise MazeError(f"cannot read maze file: {exc.strerror}", str(path)) from exc
-        return cls.from_text(text, source=str(path))
+        return cls.from_text(decode_text(data, str(path)), source=str(path))
 
     def _check_reachable(self) -> None:
         dist = bfs_distances(self.walls, self.start)
@@ -170,6 +170,20 @@ class Maze:
         """BFS path length in steps from a to b, or -1 when b cannot be reached."""
         d = bfs_distances(self.walls if walls is None else walls, a)
         return int(d[b])
+
+
+def decode_text(data: bytes, source: str = "<maze>") -> str:
+    """UTF-8 ``data`` as text, or a :class:`MazeError` naming the line and column of the
+    first byte that is not UTF-8."""
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        start = data.rfind(b"\n", 0, exc.start) + 1
+        line = data.count(b"\n", 0, exc.start) + 1
+        column = len(data[start:exc.start].decode("utf-8")) + 1
+        raise MazeError(f"not UTF-8 text (byte 0x{data[exc.start]:02x}): a maze is a text "
+                        "file of '#', '.', 'S', 'G', '1'-'9', 'a'-'z', 'A'-'Z'", source,
+                        line, column) from None
 
 
 def bfs_distances(walls: np.ndarray, source: Cell) -> np.ndarray:

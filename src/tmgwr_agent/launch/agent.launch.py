@@ -20,7 +20,6 @@ from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
-from launch_ros.parameter_descriptions import ParameterValue
 
 #: (package, executable) of the graph in data-flow order; the names are a contract.
 GRAPH = (
@@ -32,11 +31,24 @@ GRAPH = (
 )
 
 
+def int_argument(context, name: str) -> int:
+    """A launch argument that must be an integer >= 0; the error names it (``ros2 launch``
+    prints it as 'Caught exception in launch ...: launch argument seed:=abc: ...')."""
+    text = LaunchConfiguration(name).perform(context)
+    try:
+        value = int(text.strip())
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise ValueError(f"launch argument {name}:={text}: expected an integer >= 0")
+    return value
+
+
 def graph_nodes(context):
     """The five nodes, each with the user's parameter file (if any), then its overrides."""
     params_file = LaunchConfiguration("params_file").perform(context)
     files = [params_file] if params_file else []
-    seed = ParameterValue(LaunchConfiguration("seed"), value_type=int)
+    seed = int_argument(context, "seed")
     overrides = {
         "maze_sim": {"maze": LaunchConfiguration("maze"), "goal": LaunchConfiguration("goal"),
                      "seed": seed},

@@ -34,7 +34,31 @@ from tmgwr_agent.bag.writer import (
     write_metadata_yaml,
 )
 
-MAGIC = b"\x89MCAP0\r\n"     # MCAP version 0 magic, at the start of every file
+MAGIC = b"\x89MCAP0\r\n"     # MCAP version 0 magic, at the start and the end of every file
+
+
+class UnfinishedBag(ValueError):
+    """A recording whose writer never finished it: readers need ``./tmgwr recover`` first."""
+
+
+def require_finished(bag: str | Path, files: list[Path]) -> None:
+    """Raise :class:`UnfinishedBag` (one line: which file, why, what to run) unless every
+    ``.mcap`` file of ``bag`` is a finished MCAP file (it ends with the MCAP magic, written
+    after the summary; a writer killed with ``kill -9`` never writes it)."""
+    for path in files:
+        with open(path, "rb") as f:
+            head = f.read(len(MAGIC))
+            size = f.seek(0, 2)
+            f.seek(max(size - len(MAGIC), 0))
+            tail = f.read(len(MAGIC))
+        if head != MAGIC:
+            raise ValueError(f"{path} is not an MCAP file")
+        if tail != MAGIC or size < 2 * len(MAGIC):
+            which = "" if Path(path) == Path(bag) else f" ({Path(path).name})"
+            raise UnfinishedBag(
+                f"{bag}{which} is an unfinished recording (its recorder was stopped before "
+                f"writing the summary, e.g. by kill -9): run ./tmgwr recover {bag} first, "
+                f"then use {default_output(Path(bag))}")
 
 
 @dataclass

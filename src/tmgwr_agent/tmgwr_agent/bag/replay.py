@@ -24,6 +24,7 @@ from mcap.reader import make_reader
 
 from tmgwr_agent.bag import definitions
 from tmgwr_agent.bag import qos as bag_qos
+from tmgwr_agent.bag.recover import require_finished
 
 LATCHED_DEPTH = 1
 STREAM_DEPTH = 100
@@ -106,6 +107,7 @@ def replay(bag: str | Path, rate: float = 1.0, topics: list[str] | None = None,
     if not rate > 0:
         raise ValueError(f"--rate must be > 0 (got {rate})")
     files = bag_files(bag)
+    require_finished(bag, files)             # a killed recorder's bag: recover it first
     channels = read_channels(files)
     wanted = None
     if topics:

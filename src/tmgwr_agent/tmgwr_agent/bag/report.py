@@ -71,6 +71,8 @@ def read_bag(bag: str | Path) -> dict[str, Any]:
     """Everything the report needs, in plain Python/numpy form."""
     from rosbags.highlevel import AnyReader
 
+    from tmgwr_agent.bag.recover import require_finished
+    from tmgwr_agent.bag.replay import bag_files
     from tmgwr_agent.episodes import EpisodeMonitor
 
     bag = Path(bag)
@@ -80,6 +82,7 @@ def read_bag(bag: str | Path) -> dict[str, Any]:
     monitor = EpisodeMonitor()
     obs_times: dict[int, int] = {}
     last_raw: dict[str, tuple[Any, bytes]] = {}
+    require_finished(bag, bag_files(bag))   # a killed recorder's bag: recover it first
     with AnyReader(_bag_paths(bag)) as reader:
         for c in reader.connections:
             entry = data["topics"].setdefault(c.topic, {"type": c.msgtype, "count": 0})
