@@ -110,17 +110,17 @@ need_pip() {
 }
 
 KERNELS_PY="$ROOT/src/tmgwr_agent/tmgwr_agent/core/kernels.py"
-KERNELS_STAMP="$ROOT/build/.tmgwr-kernels.stamp"
+KERNELS_CACHE="${NUMBA_CACHE_DIR:-$(dirname "$KERNELS_PY")/__pycache__}"
+# one stamp per cache location (NUMBA_CACHE_DIR may point elsewhere for a while)
+KERNELS_STAMP="$ROOT/build/.tmgwr-kernels-$(echo "$KERNELS_CACHE" | sha256sum | cut -c1-12).stamp"
 
 # What decides whether the numba cache is still valid: numba keys it on the source file's
-# mtime and size; the venv (numba's version) and the cache location; the cache files.
+# mtime and size; the venv (numba's version); the cache files.
 kernels_key() {
-    local cache="${NUMBA_CACHE_DIR:-$(dirname "$KERNELS_PY")/__pycache__}"
     {
         stat -c '%Y %s' "$KERNELS_PY" 2>/dev/null || true
         cat "$REQ_STAMP" 2>/dev/null || true
-        echo "$cache"
-        find "$cache" -name 'kernels.*.nbi' 2>/dev/null | sort || true
+        find "$KERNELS_CACHE" -name 'kernels.*.nbi' 2>/dev/null | sort || true
     } | sha256sum | cut -d' ' -f1
 }
 
