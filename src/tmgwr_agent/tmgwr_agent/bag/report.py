@@ -536,8 +536,8 @@ def _save(fig, path: Path) -> str:
 def name_goals(summary: dict, maze_path: str | Path) -> None:
     """Add the maze's goal names (``G``, ``1``-``9``) beside the goal cells, as the
     experiments CLI names its transitions."""
-    from maze_sim.maze import Maze
-    names = {tuple(c): n for n, c in Maze.from_file(str(maze_path)).goals.items()}
+    from maze_sim.maze import Maze, maze_file
+    names = {tuple(c): n for n, c in Maze.from_file(maze_file(maze_path)).goals.items()}
 
     def name(cell):
         return names.get(tuple(cell)) if cell is not None else None
