@@ -216,7 +216,7 @@ def test_agent_options_combine():
     (["experiment", "goal-change", "--goals", "1,9"], "no goal named '9'"),
     (["experiment", "timing", "--goals", "1,2,3"], "two goals"),
     (["experiment", "env-change", "--maze", "/nonexistent/maze.txt"],
-     "maze file not found: /nonexistent/maze.txt"),
+     "maze file '/nonexistent/maze.txt' not found"),
     (["experiment", "warp-speed"], "invalid choice: 'warp-speed'"),
 ])
 def test_cli_errors_exit_2_with_a_clear_message(args, message):

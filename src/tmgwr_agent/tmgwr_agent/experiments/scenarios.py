@@ -43,7 +43,7 @@ def load_maze(path: str | Path) -> Maze:
     try:
         path = maze_file(path)
     except FileNotFoundError as exc:
-        raise UsageError(f"maze file not found: {exc}") from None
+        raise UsageError(f"maze {exc}") from None   # maze file '...' not found (looked in: ...)
     try:
         return Maze.from_file(path)
     except MazeError as exc:
