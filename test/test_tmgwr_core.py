@@ -231,20 +231,20 @@ def test_goal_search_walks_for_the_rest_of_the_episode_after_the_goal_node():
     V = np.array([0.5, 0.9, 0.0])                         # node 1 is the most motivating
     sel = ActionSelector(np.random.default_rng(0),
                          SelectorConfig(eps_start=0.0, eps_min=0.0, try_untried=False))
-    at0, at1 = m.links_of(0), m.links_of(1)
-    assert sel.select(at0, 0, V, goal_node=1) == (RIGHT, False)   # Eq. 6 off the goal node
+    assert sel.select(m.links_of, 0, V, goal_node=1) == (RIGHT, False)   # Eq. 6 off the goal node
     # standing on the goal node with the episode still running: the map does not know
     # the way, the random walk acts, also back on node 0, until the episode ends
-    assert sel.select(at1, 1, V, goal_node=1)[1] is True
-    assert all(sel.select(at0, 0, V, goal_node=1)[1] for _ in range(20))
-    assert sel.select(at0, 0, V, 1, explore=False) == (RIGHT, False)  # the probe never searches
+    assert sel.select(m.links_of, 1, V, goal_node=1)[1] is True
+    assert all(sel.select(m.links_of, 0, V, goal_node=1)[1] for _ in range(20))
+    # the probe never searches
+    assert sel.select(m.links_of, 0, V, 1, explore=False) == (RIGHT, False)
     sel.record(-1, EPISODE_START)
-    assert sel.select(at0, 0, V, goal_node=1) == (RIGHT, False)
+    assert sel.select(m.links_of, 0, V, goal_node=1) == (RIGHT, False)
     off = ActionSelector(np.random.default_rng(0),     # the paper's selector
                          SelectorConfig(eps_start=0.0, eps_min=0.0, goal_search=False,
                                         try_untried=False))
-    off.select(at1, 1, V, goal_node=1)
-    assert off.select(at0, 0, V, goal_node=1) == (RIGHT, False)
+    off.select(m.links_of, 1, V, goal_node=1)
+    assert off.select(m.links_of, 0, V, goal_node=1) == (RIGHT, False)
 
 
 def test_each_primitive_is_tried_once_from_a_node_before_eq6():
@@ -258,20 +258,21 @@ def test_each_primitive_is_tried_once_from_a_node_before_eq6():
     sel.record(0, Outcome(action=RIGHT))                  # right was taken from node 0
     seen = []
     for _ in range(3):                                    # up, down, left, once each
-        a, explored = sel.select(at0, 0, V, goal_node=1)
+        a, explored = sel.select(m.links_of, 0, V, goal_node=1)
         assert explored and a != RIGHT
         sel.record(0, Outcome(action=a))
         seen.append(a)
     assert sorted(seen) == [UP, DOWN, LEFT]
-    assert sel.select(at0, 0, V, goal_node=1) == (RIGHT, False)               # then Eq. 6
-    assert sel.select(at0, 0, V, 1, explore=False) == (RIGHT, False)  # the probe: Eq. 6 only
+    assert sel.select(m.links_of, 0, V, goal_node=1) == (RIGHT, False)               # then Eq. 6
+    # the probe: Eq. 6 only
+    assert sel.select(m.links_of, 0, V, 1, explore=False) == (RIGHT, False)
     fresh = ActionSelector(np.random.default_rng(0), SelectorConfig(eps_start=0.0, eps_min=0.0))
-    assert fresh.select(at0, 0, V, 1, explore=False) == (RIGHT, False)
+    assert fresh.select(m.links_of, 0, V, 1, explore=False) == (RIGHT, False)
     # the node is named by its id, whatever holds its links (the graph's selector
     # receives only the winner's links)
     for a in (UP, DOWN, LEFT):
         fresh.record(7, Outcome(action=a))
-    assert fresh.select(at0, 7, V, goal_node=1) == (RIGHT, True)
+    assert fresh.select(lambda node: at0, 7, V, goal_node=1) == (RIGHT, True)
     # a greedy probe marks nothing tried
     probe = ActionSelector(np.random.default_rng(0), SelectorConfig(eps_start=0.0, eps_min=0.0))
     probe.record(0, Outcome(action=UP), learn=False)

@@ -38,6 +38,7 @@ results).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -106,13 +107,14 @@ class ActionSelector:
         """The motor primitive nearest the action vector (the action map's codebook)."""
         return int(kernels.nearest_row(ACTION_VECTORS, a))
 
-    def select(self, links: Links | None, node: int, V: np.ndarray, goal_node: int,
-               explore: bool = True) -> tuple[int, bool]:
-        """(action, explored) at the winner ``node`` with outgoing ``links``, under the
-        potentials V (``V[-1]`` = 0 for empty slots) of the goal node ``goal_node``: the
-        random walk with probability epsilon, else an untried primitive of the node
-        (``try_untried``), else Eq. 6; the random walk for the rest of the episode once
-        the agent stood on the goal node with the episode still running (``goal_search``).
+    def select(self, links_of: Callable[[int], Links], node: int, V: np.ndarray,
+               goal_node: int, explore: bool = True) -> tuple[int, bool]:
+        """(action, explored) at the winner ``node``, whose outgoing links
+        ``links_of(node)`` gives (read only when Eq. 6 acts), under the potentials V
+        (``V[-1]`` = 0 for empty slots) of the goal node ``goal_node``: the random walk with
+        probability epsilon, else an untried primitive of the node (``try_untried``), else
+        Eq. 6; the random walk for the rest of the episode once the agent stood on the goal
+        node with the episode still running (``goal_search``).
         """
         if explore and self.goal_search and node >= 0 and node == goal_node:
             self.searching = True
@@ -122,7 +124,7 @@ class ActionSelector:
             u = self.untried(node)
             if u is not None:
                 return u, True
-        a = self.greedy(links, V) if node >= 0 else None
+        a = self.greedy(links_of(node), V) if node >= 0 else None
         if a is None:
             return self.policy.walk.action(), True
         return a, False

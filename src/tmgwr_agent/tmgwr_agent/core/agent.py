@@ -96,8 +96,8 @@ class TMGWRAgent:
         self.step(obs, Outcome.of_step(info), learn)
 
     def act(self, explore: bool = True) -> int:
-        links = self.map.links_of(self.winner) if self.winner >= 0 else None
-        a, self.last_explored = self.selector.select(links, self.winner, self.motivation.V,
+        a, self.last_explored = self.selector.select(self.map.links_of, self.winner,
+                                                     self.motivation.V,
                                                      self.motivation.goal_node, explore)
         self.last_action = a
         return a

@@ -10,11 +10,10 @@ once, here or in the core method that takes an Outcome.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 
-@dataclass(frozen=True)
-class Outcome:
+class Outcome(NamedTuple):       # a tuple: built every step, cheaply
     action: int = -1              # motor primitive executed; -1: the episode starts here
     bumped: bool = False          # touch sensor: the move was blocked
     goal_reached: bool = False    # the goal was sensed
@@ -35,8 +34,7 @@ class Outcome:
     def of_step(cls, info) -> Outcome:
         """From the simulator's ``maze_sim.world.StepInfo`` (truncation is not a
         termination: ``info.terminated`` is the task's end only)."""
-        return cls(action=int(info.action), bumped=bool(info.bumped),
-                   goal_reached=bool(info.reached_goal), episode_over=bool(info.terminated))
+        return cls(info.action, info.bumped, info.reached_goal, info.terminated)
 
 
 #: The outcome of being placed at the start of an episode.

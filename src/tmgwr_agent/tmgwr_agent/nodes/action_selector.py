@@ -74,8 +74,8 @@ class ActionSelectorNode(Node):
                               actions=np_f64(f.winner_link_actions).reshape(
                                   K, f.action_dim or 1))
             V = np.append(np_f64(f.potentials), 0.0)    # V[-1] = 0: empty link slots
-            action, a.explored = self.core.select(links, int(f.winner), V, int(f.goal_node),
-                                                  self.p["explore"])
+            action, a.explored = self.core.select(lambda node: links, int(f.winner), V,
+                                                  int(f.goal_node), self.p["explore"])
             a.action = int(action)
             a.motor = f64(ACTION_VECTORS[action])
         self.prev_winner = int(f.winner)
