@@ -24,7 +24,14 @@ import signal
 import numpy as np
 import pytest
 from ros_helpers import RosProcess, ros2_run, ros_env, spawn_python
-from test_nodes import AGENT_NODES, goals_reached, start_graph, stop_graph, wait_until
+from test_nodes import (
+    AGENT_NODES,
+    MAP_ECHO,
+    goals_reached,
+    start_graph,
+    stop_graph,
+    wait_until,
+)
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -47,25 +54,6 @@ time.sleep(0.5)
 print("PUBLISHED", flush=True)
 node.destroy_node()
 rclpy.shutdown()
-"""
-
-# Prints the latched map (run, step, node ids and weights) once it arrives.
-MAP_ECHO = r"""
-import json
-import rclpy
-from rclpy.qos import QoSProfile, DurabilityPolicy, ReliabilityPolicy
-from tmgwr_interfaces.msg import SensorimotorMap
-rclpy.init()
-node = rclpy.create_node("test_map_echo")
-qos = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                 reliability=ReliabilityPolicy.RELIABLE)
-def show(m):
-    print("MAP " + json.dumps({"run_id": m.run_id, "step_id": m.step_id,
-                               "nodes": [[n.id, list(n.weight)] for n in m.nodes]}),
-          flush=True)
-node.create_subscription(SensorimotorMap, "/map", show, qos)
-print("ECHO READY", flush=True)
-rclpy.spin(node)
 """
 
 

@@ -59,7 +59,8 @@ node.destroy_node()
 rclpy.shutdown()
 """
 
-# Prints the latched map (node count, link count, weights) once it arrives.
+# Prints the latched map (run and step it belongs to, node ids and weights, link count) once
+# it arrives.
 MAP_ECHO = r"""
 import ast
 import json
@@ -71,8 +72,9 @@ node = rclpy.create_node("test_map_echo")
 qos = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                  reliability=ReliabilityPolicy.RELIABLE)
 def show(m):
-    print("MAP " + json.dumps({"nodes": [[n.id, list(n.weight)] for n in m.nodes],
-                               "links": len(m.links), "step_id": m.step_id}), flush=True)
+    print("MAP " + json.dumps({"run_id": m.run_id, "step_id": m.step_id,
+                               "nodes": [[n.id, list(n.weight)] for n in m.nodes],
+                               "links": len(m.links)}), flush=True)
 node.create_subscription(SensorimotorMap, "/map", show, qos)
 print("ECHO READY", flush=True)
 rclpy.spin(node)

@@ -5,10 +5,9 @@ the same JSON for the same seed whatever ``--jobs``, one maze's entry equal to t
 ``--maze`` run of its file, and exit code 2 for bad requests."""
 
 import json
-import subprocess
-import sys
 
 import pytest
+from test_experiments import cli
 
 from maze_sim import Maze
 from maze_sim.suite import suite
@@ -21,14 +20,6 @@ SUMMARY_KEYS = {"mazes", "skipped", "trials", "oracle_ratio", "steps",
                 "episodes_to_optimal", "win_rate", "failures", "train_failures",
                 "worst_trial_ratio", "optimal_within_10", "optimal_found",
                 "episodes_win_rate"}
-
-
-def cli(*args, check=True):
-    proc = subprocess.run([sys.executable, "-m", "tmgwr_agent.cli", *map(str, args)],
-                          capture_output=True, text=True, timeout=240)
-    if check:
-        assert proc.returncode == 0, proc.stderr
-    return proc
 
 
 def run(tmp_path, name, *args):

@@ -118,7 +118,8 @@ class Lockstep:
             self.timer.publish(self.publisher, out)
 
     def forget(self, last_step: int = -1, run_id: int | None = None) -> None:
-        """Start over from ``last_step`` of ``run_id`` (default: the run followed)."""
+        """Start over from ``last_step`` of ``run_id`` (default: the run followed), with no
+        cached output (a learner that loaded another map answers from the new one)."""
         if run_id is not None:
             self.run_id = int(run_id)
         self.last_step, self.last_out = (last_step if self.run_id else -1), None

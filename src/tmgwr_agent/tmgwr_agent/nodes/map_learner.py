@@ -234,7 +234,7 @@ class MapLearnerNode(Node):
         except ValueError as exc:
             resp.success, resp.message = False, str(exc)
             return resp
-        self.lockstep.last_out = None
+        self.lockstep.forget(self.lockstep.last_step)   # the cached state is of the old map
         resp.success = True
         resp.message = f"loaded {self.map.size} nodes, {self.map.link_count()} links from {path}"
         self.get_logger().info(resp.message)
