@@ -38,6 +38,7 @@ setup(
             "motivation_estimator = tmgwr_agent.nodes.motivation_estimator:main",
             "action_selector = tmgwr_agent.nodes.action_selector:main",
             "recorder = tmgwr_agent.nodes.recorder:main",
+            "composed = tmgwr_agent.nodes.composed:main",
         ],
     },
 )

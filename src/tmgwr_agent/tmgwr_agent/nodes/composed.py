@@ -1,0 +1,145 @@
+"""``ros2 run tmgwr_agent composed``: the five nodes (and optionally the recorder) in one
+process, on one executor, as a component container runs components.
+
+rclpy cannot load C++ components, so this entry point does what a container would: it
+builds the very node classes the five executables build (``maze_sim``,
+``sensory_preprocessor``, ``map_learner``, ``motivation_estimator``, ``action_selector``,
+with ``--record`` the ``recorder`` first), with their own names, parameters, topics and
+services, and spins them all on one executor. Tools see the same graph as with five
+processes (``ros2 node list``, the topics of README "Topics and services"); only the
+messages no longer cross a process boundary (one DDS participant: Fast DDS delivers them
+inside the process, no socket).
+
+Parameters: the ROS arguments are the context's, so they reach every node of the process.
+``-p name:=value`` is given to every node that declares ``name`` (the others drop a name
+another node of the graph declares, as with a shared ``/**`` file); ``-p node:name:=value``
+(rcl's node-qualified form) or a ``--params-file`` section per node reaches one node only::
+
+    composed --ros-args -p maze_sim:seed:=0 -p action_selector:seed:=1 -p goal:=2
+    composed --record --ros-args -p recorder:output_dir:=runs/x
+
+Executor: ``--executor single`` (rclpy's SingleThreadedExecutor) or ``events`` (the
+experimental EventsExecutor), default ``TMGWR_EXECUTOR`` as for every node
+(:func:`tmgwr_common.node.make_executor`). The process stops when maze_sim finishes
+(``exit_when_done``) with its exit code, on Ctrl-C or SIGTERM; every node's ``on_shutdown``
+then runs (the learner saves its map, the recorder finishes its bag last).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any, Callable
+
+from tmgwr_common.node import EXECUTORS, make_executor, params_files
+from tmgwr_common.params import ParamError, read_params_file
+
+NAME = "composed"
+
+
+def node_factories(record: bool) -> list[tuple[str, Callable[[], Any]]]:
+    """(name, class) of the nodes in start order: the recorder first (it subscribes before
+    anything is published), the simulator last (its first observation finds the ring
+    matched)."""
+    from maze_sim.node import MazeSimNode
+    from tmgwr_agent.nodes.action_selector import ActionSelectorNode
+    from tmgwr_agent.nodes.map_learner import MapLearnerNode
+    from tmgwr_agent.nodes.motivation_estimator import MotivationEstimatorNode
+    from tmgwr_agent.nodes.sensory_preprocessor import SensoryPreprocessorNode
+
+    out: list[tuple[str, Callable[[], Any]]] = []
+    if record:
+        from tmgwr_agent.nodes.recorder import Recorder
+        out.append(("recorder", Recorder))
+    out += [("sensory_preprocessor", SensoryPreprocessorNode),
+            ("map_learner", MapLearnerNode),
+            ("motivation_estimator", MotivationEstimatorNode),
+            ("action_selector", ActionSelectorNode),
+            ("maze_sim", MazeSimNode)]
+    return out
+
+
+def _executor(kind: str | None):
+    if kind is None:
+        return make_executor()
+    if kind == "events":
+        from rclpy.experimental import EventsExecutor
+        return EventsExecutor()
+    from rclpy.executors import SingleThreadedExecutor
+    return SingleThreadedExecutor()
+
+
+def run_composed(record: bool, executor_kind: str | None, args: list[str]) -> int:
+    """init, build every node, spin them on one executor, shut down: the Jazzy main()
+    idiom of :func:`tmgwr_common.node.run` for several nodes; exit code 2 when one cannot
+    start (the nodes built so far are destroyed)."""
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    try:
+        for f in params_files(args):
+            read_params_file(f)
+        rclpy.init(args=args)
+    except (ParamError, RuntimeError) as exc:
+        print(f"[{NAME}] cannot start: {exc}", file=sys.stderr, flush=True)
+        return 2
+    nodes: list[tuple[str, Any]] = []
+    code = 0
+    try:
+        for name, factory in node_factories(record):
+            try:
+                nodes.append((name, factory()))
+            except (ParamError, ValueError, OSError) as exc:
+                print(f"[{NAME}] cannot start {name}: {exc}", file=sys.stderr, flush=True)
+                return 2
+        executor = _executor(executor_kind)
+        for _, node in nodes:
+            executor.add_node(node)
+        print(f"{NAME} ready: {', '.join(n for n, _ in nodes)} in one process on one "
+              f"{type(executor).__name__}", flush=True)
+        sim = nodes[-1][1]
+        try:
+            while rclpy.ok() and not any(getattr(n, "finished", False) for _, n in nodes):
+                executor.spin_once(timeout_sec=0.2)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        finally:
+            executor.shutdown(timeout_sec=0.5)
+        code = int(getattr(sim, "exit_code", 0))
+    finally:
+        for name, node in reversed(nodes):      # the simulator first, the recorder last
+            hook = getattr(node, "on_shutdown", None)
+            if hook is not None:
+                try:
+                    hook()
+                except Exception as exc:  # noqa: BLE001 -- still shut the others down
+                    print(f"[{NAME}] {name}: shutdown hook failed: {exc}", file=sys.stderr,
+                          flush=True)
+                    code = code or 1
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+def main(args=None) -> None:
+    argv = list(sys.argv if args is None else args)
+    from rclpy.utilities import remove_ros_args
+    ap = argparse.ArgumentParser(
+        prog="composed", description=__doc__.split("\n\n")[1],
+        epilog="ROS arguments follow --ros-args (parameters, --params-file, remapping).")
+    ap.add_argument("--record", action="store_true",
+                    help="also run the recorder in this process (its parameters: "
+                         "-p recorder:output_dir:=DIR ...)")
+    ap.add_argument("--executor", choices=EXECUTORS,
+                    help="executor of the process (default: TMGWR_EXECUTOR, else events)")
+    try:
+        rest = remove_ros_args(argv)[1:]
+    except RuntimeError as exc:          # RCLInvalidROSArgsError: a malformed -p rule
+        print(f"[{NAME}] cannot start: {exc}", file=sys.stderr, flush=True)
+        raise SystemExit(2) from None
+    opts = ap.parse_args(rest)
+    raise SystemExit(run_composed(opts.record, opts.executor, argv))
+
+
+if __name__ == "__main__":
+    main()
