@@ -2,6 +2,7 @@
 
     ros2 launch tmgwr_agent agent.launch.py
     ros2 launch tmgwr_agent agent.launch.py maze:=paper_13x17.txt goal:=2 seed:=1 record:=true
+    ros2 launch tmgwr_agent agent.launch.py composed:=true     # one process, one executor
 
 Starts ``maze_sim`` and the four agent nodes (and, with ``record:=true``, the MCAP
 recorder first). Every hyperparameter defaults to its spec (the config dataclasses of the
@@ -54,6 +55,12 @@ def graph_nodes(context):
                      "seed": seed},
         "action_selector": {"seed": seed},
     }
+    if LaunchConfiguration("composed").perform(context).strip().lower() in ("true", "1"):
+        # one process, one executor (tmgwr_agent composed): its parameters reach every node
+        # of it, a name only the nodes that declare it (maze and goal: maze_sim)
+        shared = {**overrides["maze_sim"], **overrides["action_selector"]}
+        return [Node(package="tmgwr_agent", executable="composed", output="screen",
+                     parameters=[*files, shared])]
     return [
         Node(package=package, executable=executable, name=executable, output="screen",
              parameters=[*files, overrides.get(executable, {})])
@@ -74,6 +81,9 @@ def generate_launch_description():
                               description="record every topic to MCAP (tmgwr_agent recorder)"),
         DeclareLaunchArgument("output_dir", default_value="",
                               description="recorder bag directory ('' = runs/<UTC timestamp>/)"),
+        DeclareLaunchArgument("composed", default_value="false",
+                              description="run the five nodes in one process on one "
+                                          "executor (tmgwr_agent composed)"),
         DeclareLaunchArgument("params_file", default_value="",
                               description="ROS 2 parameter file of overrides for the five "
                                           "nodes ('' = every parameter at its default)"),

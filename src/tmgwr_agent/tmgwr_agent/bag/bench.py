@@ -19,6 +19,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -60,9 +61,24 @@ def _count(bag: Path) -> int:
     return len(ids)
 
 
+class RecorderBenchError(RuntimeError):
+    """A run of the recorder bench that measured nothing; the message says why, with the
+    recorder's exit code and output."""
+
+
+READY_LINE = re.compile(r"\brecording\b.* to ")
+
+
 def run_once(rate: float, seconds: float, domain: int, workdir: Path,
-             compression: str = "zstd") -> dict:
-    """One recorder + publisher run at ``rate`` msg/s for about ``seconds``."""
+             compression: str = "zstd", ready_timeout: float = 60.0) -> dict:
+    """One recorder + publisher run at ``rate`` msg/s for about ``seconds``.
+
+    The publisher starts only once the recorder said it records (its writer is open): a
+    SIGINT that reaches a recorder still starting up (rclpy not yet handling signals)
+    kills it without a bag, which is how ``the recorder wrote no bag at .../rate_16000``
+    came about when it started slowly. Its output is read while it runs (a full pipe
+    would stall it mid-measure) and every way a run can fail raises
+    :class:`RecorderBenchError` naming the rate, the exit code and the output."""
     n = max(100, int(rate * seconds))
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED="1")
     bag = workdir / f"rate_{int(rate)}"
@@ -71,19 +87,52 @@ def run_once(rate: float, seconds: float, domain: int, workdir: Path,
                             "-p", f"compression:={compression}", "-p", "discovery_period:=0.1"],
                            env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                            start_new_session=True)
+    lines: list[str] = []
+    ready = threading.Event()
+
+    def read() -> None:
+        assert rec.stdout is not None
+        for line in rec.stdout:
+            lines.append(line.rstrip("\n"))
+            if READY_LINE.search(line):
+                ready.set()
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+
+    def fail(why: str) -> RecorderBenchError:
+        reader.join(timeout=5)
+        return RecorderBenchError(f"recorder bench at {rate:.0f} msg/s: {why} (recorder exit "
+                                  f"code {rec.poll()}); its output:\n" + "\n".join(lines))
+
+    pub = None
     try:
+        deadline = time.monotonic() + ready_timeout
+        while not ready.wait(0.1):
+            if rec.poll() is not None:
+                raise fail("the recorder exited during start-up")
+            if time.monotonic() > deadline:
+                raise fail(f"the recorder was not recording within {ready_timeout:.0f} s")
         pub = subprocess.run([sys.executable, "-c", PUBLISHER, str(n), str(rate)], env=env,
                              capture_output=True, text=True, timeout=60 + seconds * 3)
     finally:
         time.sleep(0.5)
-        os.killpg(rec.pid, signal.SIGINT)
-        out, _ = rec.communicate(timeout=30)
+        try:
+            os.killpg(rec.pid, signal.SIGINT)
+            rec.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            os.killpg(rec.pid, signal.SIGKILL)
+            rec.wait()
+            raise fail("the recorder did not finish within 30 s of SIGINT") from None
+        except ProcessLookupError:
+            pass
+        reader.join(timeout=5)
     m = re.search(r"PUBLISHED (\d+) ([\d.]+)", pub.stdout)
     if not m:
-        raise RuntimeError(f"bench publisher failed:\n{pub.stdout}\n{pub.stderr}")
+        raise fail(f"the bench publisher failed:\n{pub.stdout}\n{pub.stderr}")
     published, dt = int(m.group(1)), float(m.group(2))
     if not (bag / "metadata.yaml").is_file():
-        raise RuntimeError(f"the recorder wrote no bag at {bag}:\n{out}")
+        raise fail(f"the recorder wrote no bag at {bag}")
     recorded = _count(bag)
     return {"target_rate": rate, "published": published,
             "achieved_rate": round(published / dt, 1), "recorded": recorded,
@@ -114,13 +163,17 @@ def run(args=None) -> dict:
     start = float(getattr(args, "bag_start_rate", None) or 1000)
     seconds = float(getattr(args, "bag_seconds", None) or 2.0)
     domain, lock = _reserve_domain()
-    runs = []
-    best = None
+    runs: list[dict] = []
+    best = error = None
     try:
         best = _sweep(start, seconds, domain, runs)
+    except RecorderBenchError as exc:    # kept with the runs measured so far, and said
+        error = str(exc)
+        print(f"bench: {exc}", file=sys.stderr, flush=True)
     finally:
         os.close(lock)
     return {
+        **({"error": error} if error else {}),
         "recorder_lossless_msg_per_s": best,
         # to compare with graph.graph_steps_per_s: the recorder must take 5 messages a step
         "graph_messages_per_step": 5,

@@ -38,6 +38,9 @@ def register(subparsers) -> None:
     p.add_argument("--quiet", action="store_true", help="do not forward the nodes' output "
                    "(it is still shown when a node fails)")
     p.add_argument("--max-steps", type=int, metavar="N", help="stop by itself after N steps")
+    p.add_argument("--composed", action="store_true", help="run the five nodes (and the "
+                   "recorder) in one process on one executor (tmgwr_agent composed), same "
+                   "names, topics and services")
     p.add_argument("--params-file", action="append", default=[], metavar="FILE",
                    help="ROS 2 parameter file passed to every node (overrides only: "
                         "'/**: ros__parameters: {gamma: 0.9}' or per-node sections); "
@@ -146,6 +149,9 @@ def cmd_up(args) -> int:
         run = GraphRun(maze=args.maze, seed=args.seed, goal=args.goal,
                        record=not args.no_record, record_dir=args.record_dir,
                        echo=not args.quiet, params_files=args.params_file)
+        if args.composed:             # one process instead of five (nodes/composed.py)
+            from tmgwr_agent.graph.supervisor import composed_specs
+            run.specs = run.supervisor.specs = composed_specs(run.specs)
     except ParamError as exc:
         say(f"up: {exc}", sys.stderr)
         return 2

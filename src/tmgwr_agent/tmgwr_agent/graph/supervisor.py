@@ -330,6 +330,21 @@ def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | No
     return specs
 
 
+COMPOSED_READY = re.compile(r"\bcomposed ready\b")
+
+
+def composed_specs(specs: Sequence[NodeSpec]) -> list[NodeSpec]:
+    """The nodes of ``specs`` (:func:`graph_specs`) as one ``tmgwr_agent composed`` process
+    (all on one executor, :mod:`tmgwr_agent.nodes.composed`): each node's overrides become
+    node-qualified ``-p node:name:=value``, a recorder joins with ``--record``."""
+    params = {f"{s.executable}:{k}": v for s in specs for k, v in s.params.items()}
+    files = next((s.params_files for s in specs if s.params_files), ())
+    cmd = NodeSpec("tmgwr_agent", "composed", files, params).command()
+    if any(s.executable == "recorder" for s in specs):
+        cmd.insert(1, "--record")
+    return [NodeSpec("tmgwr_agent", "composed", argv=cmd, ready=COMPOSED_READY)]
+
+
 def install_stop_handlers(callback: Callable[[], None]) -> None:
     """Turn SIGINT and SIGTERM into ``callback()`` (once; a second signal is ignored
     while the graph stops, so stopping in order is not cut short)."""

@@ -69,6 +69,46 @@ def _executor(kind: str | None):
     return SingleThreadedExecutor()
 
 
+class _Aside:
+    """One node spun by a SingleThreadedExecutor in a thread of its own."""
+
+    def __init__(self, node):
+        import threading
+
+        from rclpy.executors import SingleThreadedExecutor
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(node)
+        self.running = True
+        self.thread = threading.Thread(target=self._spin, name="recorder", daemon=True)
+        self.thread.start()
+
+    def _spin(self) -> None:
+        import rclpy
+        from rclpy.executors import ExternalShutdownException
+        try:
+            while self.running and rclpy.ok():
+                self.executor.spin_once(timeout_sec=0.1)
+        except ExternalShutdownException:
+            pass
+
+    def stop(self) -> None:
+        self.running = False
+        self.thread.join(timeout=5.0)
+        self.executor.shutdown(timeout_sec=0.5)
+
+
+def _recorder_aside(executor, nodes) -> _Aside | None:
+    """rclpy 7.1.6's EventsExecutor fails on a raw subscription whose callback takes the
+    message info (``SystemError: null argument to internal routine``), which is how the
+    recorder gets its timestamps: with that executor the recorder spins on its own
+    SingleThreadedExecutor, in its own thread (its writer is still used by one thread)."""
+    from rclpy.executors import SingleThreadedExecutor
+    recorder = dict(nodes).get("recorder")
+    if recorder is None or isinstance(executor, SingleThreadedExecutor):
+        return None
+    return _Aside(recorder)
+
+
 def run_composed(record: bool, executor_kind: str | None, args: list[str]) -> int:
     """init, build every node, spin them on one executor, shut down: the Jazzy main()
     idiom of :func:`tmgwr_common.node.run` for several nodes; exit code 2 when one cannot
@@ -93,18 +133,31 @@ def run_composed(record: bool, executor_kind: str | None, args: list[str]) -> in
                 print(f"[{NAME}] cannot start {name}: {exc}", file=sys.stderr, flush=True)
                 return 2
         executor = _executor(executor_kind)
-        for _, node in nodes:
-            executor.add_node(node)
+        aside = _recorder_aside(executor, nodes)
+        for name, node in nodes:
+            if aside is None or name != "recorder":
+                executor.add_node(node)
         print(f"{NAME} ready: {', '.join(n for n, _ in nodes)} in one process on one "
-              f"{type(executor).__name__}", flush=True)
+              f"{type(executor).__name__}"
+              + (" (the recorder on a SingleThreadedExecutor thread of its own: rclpy's "
+                 "EventsExecutor cannot run its raw subscriptions)" if aside else ""),
+              flush=True)
         sim = nodes[-1][1]
         try:
             while rclpy.ok() and not any(getattr(n, "finished", False) for _, n in nodes):
                 executor.spin_once(timeout_sec=0.2)
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
+        except RuntimeError:
+            # Ctrl-C inside a callback the EventsExecutor runs reaches us as pybind11's
+            # "Unable to convert call argument" RuntimeError; with the context shut down
+            # it is that interrupt, not a failure
+            if rclpy.ok():
+                raise
         finally:
             executor.shutdown(timeout_sec=0.5)
+            if aside is not None:
+                aside.stop()
         code = int(getattr(sim, "exit_code", 0))
     finally:
         for name, node in reversed(nodes):      # the simulator first, the recorder last
