@@ -281,3 +281,28 @@ def unexpected_errors(output: str) -> list[str]:
                 not any(h.search(line) for h in HARMLESS_OUTPUT):
             bad.append(line)
     return bad
+
+
+# --------------------------------------------------------------------------- the ros2 CLI
+def ros2_command() -> str | None:
+    """The real ``ros2`` command (installed into .venv by .ci/run from ../shared/ros2-tools),
+    or None."""
+    import shutil
+    path = ROOT / ".venv" / "bin" / "ros2"
+    return str(path) if path.exists() else shutil.which("ros2", path=base_env().get("PATH"))
+
+
+def require_ros2() -> str:
+    """:func:`ros2_command`, or skip the test saying why."""
+    import pytest
+    ros2 = ros2_command()
+    if ros2 is None:
+        pytest.skip("no `ros2` command here (../shared/ros2-tools not installed)")
+    return ros2
+
+
+def ros2_cli(*args: str, domain: int, name: str = "",
+             env: Mapping[str, str] | None = None) -> RosProcess:
+    """``ros2 ARGS...`` (the real command line) in the ROS environment of ``domain``."""
+    return RosProcess([require_ros2(), *args], ros_env(domain, env),
+                      name=name or "ros2 " + " ".join(args[:2]))

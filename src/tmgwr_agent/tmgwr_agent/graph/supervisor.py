@@ -322,7 +322,7 @@ def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | No
                 # Observation topic before the first step is published
                 params["start_delay"] = 1.0
         if exe == "map_learner" and record_dir is not None:
-            params["map_path"] = str(Path(record_dir) / "tmgwr_map.npz")  # the run's own map
+            params["map_dir"] = str(Path(record_dir).resolve())    # the run's own maps
         if seed is not None and exe in ("maze_sim", "action_selector"):
             params["seed"] = int(seed)
         params.update(node_params.get(exe, {}))

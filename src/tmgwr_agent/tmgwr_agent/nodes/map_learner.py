@@ -2,37 +2,52 @@
 
 Per step (lockstep): ``Features`` in, :meth:`SensorimotorMap.experience` with the step's
 :class:`~tmgwr_agent.core.outcome.Outcome`, the call :class:`~tmgwr_agent.core.agent.TMGWRAgent`
-makes in-process; ``SensorimotorState`` out. The state carries this step's map as flat
-arrays (alive mask, weights, link targets and reliabilities E, the winner's link action
-vectors): what the motivation estimator needs to run Eq. 4-5 on the map of *this* step
-without building a nested message per step.
+makes in-process; ``SensorimotorState`` out. The state carries this step's *change* of
+the map arrays the motivation estimator needs to run Eq. 4-5 on the map of *this* step
+(alive mask, terminal flags, weights, link targets and reliabilities E: only the rows that
+changed, :mod:`tmgwr_agent.map_replica`) and the winner's link action vectors. The first
+state of a map (created, loaded) carries the whole map. The whole map also goes out latched
+on ``/sensorimotor_snapshot`` every ``snapshot_period`` steps, when the learner starts from
+or loads a map, and on request (``/map_learner/request_snapshot``, std_srvs/Trigger): what a
+replica that missed a change starts again from.
 
 At ``publish_rate`` Hz (when the map changed) the whole map is published latched, as
 ``tmgwr_interfaces/SensorimotorMap`` and as ``visualization_msgs/MarkerArray`` (nodes at
-their sensed position, coloured by the motivation potential of the last
-``MotivationField``; links coloured by reliability E).
+their sensed position, coloured by the motivation potentials of the last
+``/potentials``; links coloured by reliability E).
 
-Persistence: ``save_map`` / ``load_map`` services; the map is saved to ``map_path`` on
-shutdown (SIGINT/SIGTERM) and ``initial_map`` starts the learner from a saved map, so a
-restarted learner continues with the same map (the file also records the last step it
-learnt and its run, so a resent step is answered, not learnt twice). A map saved in
-another run brings that run's id along: the learner follows the simulator's current run
-from its first step (``tmgwr_common.lockstep``), learning on with the loaded map.
+Persistence (:mod:`tmgwr_agent.map_store`; README, Maps on disk): maps live in one
+directory, ``map_dir`` (``./tmgwr up`` passes the run's directory; default
+``$ROS_HOME/tmgwr/domain<ID>[_<namespace>]``), held by this learner alone. The private
+``~/save_map`` and ``~/load_map`` services take a map *name* (``NAME`` -> ``NAME.npz`` in
+that directory), never a path; a refused name, file or content leaves the node running and
+the response says why. The map is saved as ``map_name`` on shutdown (SIGINT/SIGTERM) and
+``initial_map`` (a name in ``map_dir``, or a path given by whoever starts the node) starts
+the learner from a saved map, so a restarted learner continues with the same map (the file
+also records the last step it learnt and its run, so a resent step is answered, not learnt
+twice). A map saved in another run brings that run's id along: the learner follows the
+simulator's current run from its first step (``tmgwr_common.lockstep``), learning on with
+the loaded map. A loaded map is validated completely before it replaces the live one.
 """
 
 from __future__ import annotations
 
+import os
+import time
 from pathlib import Path
 
 import numpy as np
 from geometry_msgs.msg import Point
 from rclpy.node import Node
 from std_msgs.msg import ColorRGBA
+from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from maze_sim.maze import ACTION_VECTORS
 from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap
-from tmgwr_agent.nodes.step_messages import outcome_of
+from tmgwr_agent.map_replica import ChangeEncoder
+from tmgwr_agent.map_store import MapStore, MapStoreError, default_map_dir, read_map
+from tmgwr_agent.nodes.step_messages import fill_change, outcome_of
 from tmgwr_common import topics
 from tmgwr_common.lockstep import Lockstep
 from tmgwr_common.node import (
@@ -42,22 +57,36 @@ from tmgwr_common.node import (
     STEP_QOS,
     declare_parameters,
     f64,
-    i32,
     np_f64,
     run,
-    u8,
 )
 from tmgwr_common.params import Param
-from tmgwr_interfaces.msg import Features, MapLink, MapNode, MotivationField, SensorimotorState
+from tmgwr_interfaces.msg import (
+    Features,
+    MapLink,
+    MapNode,
+    Potentials,
+    SensorimotorSnapshot,
+    SensorimotorState,
+)
 from tmgwr_interfaces.msg import SensorimotorMap as MapMsg
 from tmgwr_interfaces.srv import LoadMap, SaveMap
 
 NODE_SPECS = (
-    Param("map_path", "~/.ros/tmgwr_map.npz", "where the map is saved on shutdown and by "
-          "save_map with an empty path (empty = do not save on shutdown)"),
-    Param("initial_map", "", "start from this saved map (empty = an empty map)"),
+    Param("map_dir", "", "directory of this learner's maps (empty = "
+          "$ROS_HOME/tmgwr/domain<ROS_DOMAIN_ID>[_<namespace>], ROS_HOME defaulting to "
+          "~/.ros); one learner per directory"),
+    Param("map_name", "map", "name of the map saved on shutdown and by save_map with an "
+          "empty name (file NAME.npz in map_dir; empty = do not save on shutdown)"),
+    Param("initial_map", "", "start from this saved map: a name in map_dir, or a path "
+          "(empty = an empty map)"),
+    Param("map_path", "", "the old form of map_dir + map_name: DIR/NAME.npz sets both "
+          "(empty = use map_dir and map_name)"),
     Param("publish_rate", 2.0, "rate (Hz) of the latched map and marker publications",
           low=0.01, high=100.0),
+    Param("snapshot_period", 500, "steps between two latched whole-map snapshots "
+          "(/sensorimotor_snapshot; also sent on request and for a new map)", low=1,
+          high=1e9, integer=True),
 )
 
 
@@ -69,11 +98,17 @@ class MapLearnerNode(Node):
         last_step, run_id = -1, 0
         self.gain = 1.0
         self.prev_winner = -1
+        if self.p["map_path"]:                              # the old form: DIR/NAME.npz
+            old = Path(self.p["map_path"])
+            self.p["map_dir"], self.p["map_name"] = str(old.parent), old.name
+        self.store = MapStore(self.p["map_dir"] or default_map_dir(
+            os.environ.get("ROS_DOMAIN_ID") or 0, self.get_namespace()))
+        self.store.lock()
+        if self.p["map_name"]:
+            self.store.path(self.p["map_name"])          # a bad name stops us now, not later
         if self.p["initial_map"]:
-            path = Path(self.p["initial_map"]).expanduser()
-            self.map, last_step, run_id = SensorimotorMap.load(path, self.config,
-                                                               with_run=True)
-            self.get_logger().info(f"started from {path}: {self.map.size} nodes, "
+            self.map, last_step, run_id = self.read_initial_map(self.p["initial_map"])
+            self.get_logger().info(f"started from {self.p['initial_map']}: {self.map.size} nodes, "
                                    f"{self.map.link_count()} links, step {last_step} "
                                    f"(run {run_id or 'unknown'})")
         self.V = np.zeros(0)
@@ -88,11 +123,17 @@ class MapLearnerNode(Node):
         self.create_subscription(Features, topics.FEATURES, self.on_features, STEP_QOS)
         # Marker colours only: the newest field is enough (best effort, depth 1, never
         # stalls its publisher), kept serialized and decoded only when markers are drawn.
-        self.create_subscription(MotivationField, topics.MOTIVATION, self.on_motivation,
+        self.create_subscription(Potentials, topics.POTENTIALS, self.on_motivation,
                                  SENSOR_QOS, raw=True)
         self.motivation_raw: bytes | None = None
         self.create_service(SaveMap, topics.SAVE_MAP, self.on_save)
         self.create_service(LoadMap, topics.LOAD_MAP, self.on_load)
+        # the map as consumers replicate it: per-step changes, latched whole-map snapshots
+        self.encoder: ChangeEncoder | None = None
+        self.encoder_of: SensorimotorMap | None = None       # the map it encodes
+        self.snapshot_pub = self.create_publisher(SensorimotorSnapshot, topics.MAP_SNAPSHOT,
+                                                  LATCHED_QOS)
+        self.create_service(Trigger, topics.REQUEST_SNAPSHOT, self.on_request_snapshot)
         self.create_timer(1.0 / self.p["publish_rate"], self.publish_map)
         if self.map is not None:
             self.publish_map()
@@ -118,11 +159,13 @@ class MapLearnerNode(Node):
         outcome = outcome_of(f)
         self.prev_winner = -1 if outcome.episode_start else int(self.map.prev)
         self.map.experience(x, outcome)              # what TMGWRAgent.step does here
-        return self.make_state(f)
+        state = self.make_state(f)
+        if f.step_id % self.p["snapshot_period"] == 0:
+            self.publish_snapshot()
+        return state
 
     def make_state(self, f: Features) -> SensorimotorState:
         m = self.map
-        n, K = m.n, m.out.shape[1]
         s = SensorimotorState()
         s.header = f.header
         s.run_id = f.run_id
@@ -133,12 +176,7 @@ class MapLearnerNode(Node):
         goal_x = np_f64(f.goal_features)
         s.goal_node = int(m.nearest_by_weight(goal_x)) if len(goal_x) == m.dim else -1
         s.inserted = bool(m.inserted)
-        s.n_slots, s.degree, s.dim = n, K, m.dim
-        s.alive = u8(m.alive[:n])
-        s.terminal_nodes = u8(m.terminal[:n])
-        s.weights = f64(m.w[:n])
-        s.link_targets = i32(m.out[:n])
-        s.link_reliability = f64(m.E[:n])
+        fill_change(s.map_change, self.changes().encode(m, f.run_id, f.step_id))
         s.action_dim = m.action_dim
         if m.winner >= 0:
             s.winner_link_actions = f64(m.a[m.winner])
@@ -154,16 +192,47 @@ class MapLearnerNode(Node):
         self.motivation_raw = raw
 
     def potentials(self) -> np.ndarray:
-        """V of the newest MotivationField (zeros before the first one)."""
+        """V of the newest /potentials (zeros before the first one)."""
         if self.motivation_raw is not None:
             from rclpy.serialization import deserialize_message
-            self.V = np_f64(deserialize_message(self.motivation_raw, MotivationField).potentials)
+            self.V = np_f64(deserialize_message(self.motivation_raw, Potentials).potentials)
             self.motivation_raw = None
         return self.V
+
+    # ------------------------------------------------------------------ replicated map
+    def changes(self) -> ChangeEncoder:
+        """The change encoder of the current map: a new one (new map id, whole map first)
+        when the map was created or replaced."""
+        if self.encoder_of is not self.map:
+            self.encoder, self.encoder_of = ChangeEncoder(time.time_ns()), self.map
+        return self.encoder
+
+    def publish_snapshot(self) -> str:
+        """The whole map, latched, as last sent (encoded now if nothing was sent yet)."""
+        enc = self.changes()
+        if enc.sequence < 0:
+            enc.encode(self.map, self.lockstep.run_id, max(self.lockstep.last_step, 0))
+        c = enc.snapshot()
+        msg = SensorimotorSnapshot()
+        msg.header.stamp, msg.header.frame_id = self.get_clock().now().to_msg(), "maze"
+        msg.run_id, msg.step_id, msg.map_version = c.run_id, max(c.step_id, 0), c.version
+        fill_change(msg.map, c)
+        self.snapshot_pub.publish(msg)
+        return (f"map {c.map_id} state {c.sequence} (step {c.step_id} of run {c.run_id}): "
+                f"{c.n} slots")
+
+    def on_request_snapshot(self, _req, resp):
+        if self.map is None:
+            resp.success, resp.message = False, "no map yet: nothing learnt"
+        else:
+            resp.success, resp.message = True, "published " + self.publish_snapshot()
+        return resp
 
     # ------------------------------------------------------------------ latched map
     def publish_map(self):
         m = self.map
+        if m is not None and self.encoder_of is not m:     # started from / loaded a map
+            self.publish_snapshot()
         step = self.lockstep.last_step
         if m is None or self.published == (step, m.version) and step >= 0:
             return
@@ -211,32 +280,56 @@ class MapLearnerNode(Node):
         return MarkerArray(markers=[nodes, links])
 
     # ------------------------------------------------------------------ persistence
+    def read_initial_map(self, where: str) -> tuple[SensorimotorMap, int, int]:
+        """``initial_map``: a name in the map directory, or a path (the operator's)."""
+        if "/" not in where and not where.startswith("~"):
+            return self.store.load(where, self.config)
+        try:
+            path = Path(where).expanduser().resolve()
+        except RuntimeError as exc:                     # ~nosuchuser
+            raise MapStoreError(f"initial_map {where!r}: {exc}") from None
+        try:
+            return read_map(path, self.config)
+        except MapStoreError as exc:
+            raise MapStoreError(f"initial_map: {exc}") from None
+
     def on_save(self, req, resp):
-        path = Path(req.path or self.p["map_path"]).expanduser()
+        """``req.path`` is a map NAME (the field keeps its name: interface contract)."""
         if self.map is None:
             resp.success, resp.message = False, "the map is empty: nothing learnt yet"
             return resp
+        step = self.lockstep.last_step
         try:
-            self.map.save(path, self.lockstep.last_step, self.lockstep.run_id)
-        except OSError as exc:
-            resp.success, resp.message = False, f"cannot write {path}: {exc}"
+            path = self.store.save(self.map, req.path or self.p["map_name"], step,
+                                   self.lockstep.run_id)
+        except MapStoreError as exc:
+            resp.success, resp.message = False, f"save_map refused: {exc}"
+            self.get_logger().warning(resp.message)
             return resp
         resp.success, resp.path = True, str(path)
         resp.message = (f"saved {self.map.size} nodes, {self.map.link_count()} links "
-                        f"(step {self.lockstep.last_step}) to {path}")
+                        f"(step {step}) to {path}")
         self.get_logger().info(resp.message)
         return resp
 
     def on_load(self, req, resp):
-        path = Path(req.path or self.p["map_path"]).expanduser()
+        """``req.path`` is a map NAME in the map directory; the file is validated
+        completely before it replaces the live map."""
         try:
-            self.map, _ = SensorimotorMap.load(path, self.config)
-        except ValueError as exc:
-            resp.success, resp.message = False, str(exc)
+            m, _, _ = self.store.load(req.path or self.p["map_name"], self.config)
+            if self.map is not None and (m.dim, m.action_dim) != (self.map.dim,
+                                                                 self.map.action_dim):
+                raise MapStoreError(f"the file's map has dimension {m.dim}/{m.action_dim}, "
+                                    f"the live one {self.map.dim}/{self.map.action_dim}")
+        except MapStoreError as exc:
+            resp.success, resp.message = False, f"load_map refused: {exc}"
+            self.get_logger().warning(resp.message)
             return resp
+        self.map = m
         self.lockstep.forget(self.lockstep.last_step)   # the cached state is of the old map
         resp.success = True
-        resp.message = f"loaded {self.map.size} nodes, {self.map.link_count()} links from {path}"
+        resp.message = (f"loaded {self.map.size} nodes, {self.map.link_count()} links from "
+                        f"{self.store.path(req.path or self.p['map_name'])}")
         self.get_logger().info(resp.message)
         self.publish_map()
         return resp
@@ -244,9 +337,13 @@ class MapLearnerNode(Node):
     def on_shutdown(self):
         print(f"map_learner: {self.lockstep.timer.summary()}", flush=True)
         step = self.lockstep.last_step
-        if self.map is not None and self.p["map_path"]:
-            path = self.map.save(Path(self.p["map_path"]).expanduser(), step,
-                                 self.lockstep.run_id)
+        if self.map is not None and self.p["map_name"]:
+            try:
+                path = self.store.save(self.map, self.p["map_name"], step,
+                                       self.lockstep.run_id)
+            except MapStoreError as exc:
+                print(f"map_learner: map NOT saved: {exc}", flush=True)
+                raise
             print(f"map_learner: saved {self.map.size} nodes, {self.map.link_count()} links "
                   f"(step {step}) to {path}", flush=True)
 
