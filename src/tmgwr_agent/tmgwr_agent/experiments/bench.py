@@ -18,7 +18,12 @@
 * the graph and bag benchmarks (``tmgwr_agent.graph.bench.run(args)``,
   ``tmgwr_agent.bag.bench.run(args)``, written by their own packages) are called when
   present and their dicts merged under ``graph`` and ``bag``, so every figure comes from
-  one run. Output: ``results/bench.json`` (``--json``) and a table on stdout.
+  one run. Output: ``results/bench.json`` (``--json``), the figures of issue 11 as ratios
+  in one table (:func:`ratio_table`: graph / ring on the default and the large mazes,
+  composed / ring, two hosts, bytes per step, CPU to convergence per agent), then every
+  figure (``report.bench_table``).
+* nothing fails silently: a part that failed is named on stderr, kept in the JSON
+  (``error`` / ``errors``) and in the table, and the command exits 1.
 """
 
 from __future__ import annotations
@@ -160,8 +165,100 @@ def run(args) -> int:
     if not getattr(args, "no_graph", False):
         for key in ("graph", "bag"):
             result[key] = _optional(key, args)
+    failed = failures(result)
     path = Path(args.json) if args.json else Path("results") / "bench.json"
     write_json(result, path)
+    print(ratio_table(result))
+    print()
     print(bench_table(result))
     print(f"written: {path}")
-    return 0
+    for where, why in failed.items():
+        print(f"bench: FAILED: {where}: {why.splitlines()[0] if why else why}",
+              file=sys.stderr)
+    return 1 if failed else 0
+
+
+def failures(result: dict) -> dict[str, str]:
+    """``part -> error`` for every part of the bench that failed."""
+    out = {}
+    for key in ("graph", "bag"):
+        part = result.get(key) or {}
+        if part.get("error"):
+            out[key] = part["error"]
+        for sub, why in (part.get("errors") or {}).items():
+            out[f"{key}.{sub}"] = why
+    return out
+
+
+def _median(s: dict | None) -> float | None:
+    vals = [v for v in (s or {}).get("values", []) if v is not None]
+    return float(np.median(vals)) if vals else None
+
+
+def ratio_table(result: dict) -> str:
+    """Issue 11's figures from one run: rates as ratios to the empty ring of 5 rclpy
+    processes measured in the same run, bytes per step, CPU to convergence per agent."""
+    from tmgwr_agent.experiments.report import _table
+
+    def num(v, digits=2):
+        return "-" if v is None else f"{v:.{digits}f}" if isinstance(v, float) else str(v)
+
+    g = result.get("graph") or {}
+    ratios = g.get("ratios") or {}
+    rows: list[list[str]] = []
+
+    def rate_row(what: str, key: str, ratio: str, target: str = "") -> None:
+        part = g.get(key) or {}
+        if "skipped" in part:
+            rows.append([what, f"skipped: {part['skipped']}", "", target])
+        elif key in (g.get("errors") or {}):
+            rows.append([what, "FAILED (see errors)", "", target])
+        else:
+            rows.append([what, f"{num(part.get('steps_per_s'), 1)} steps/s",
+                         num(ratios.get(ratio)), target])
+
+    ring = g.get("ring5") or {}
+    rows.append(["empty ring of 5 processes", f"{num(ring.get('laps_per_s'), 1)} laps/s",
+                 "1.00", ""])
+    rate_row("graph, 5 processes, default maze", "graph", "graph_over_ring", ">= 0.6")
+    for key, what in (("graph_large", "graph, generated 51x51 maze (~1300 cells)"),
+                      ("graph_open200", "graph, 200x200 open maze")):
+        rate_row(what, key, key.replace("graph_", "") + "_graph_over_ring", ">= 0.6")
+        part = g.get(key) or {}
+        if part.get("last_quarter_steps_per_s"):
+            rows.append([f"  last quarter of the window (to step {part.get('last_step')})",
+                         f"{num(part['last_quarter_steps_per_s'], 1)} steps/s",
+                         num(ratios.get(key.replace("graph_", "") + "_last_quarter_over_ring")),
+                         ">= 0.6"])
+    rate_row("composed graph, 1 process", "composed", "composed_over_ring", ">= 1.5")
+    rate_row("two hosts (netns + veth), 5 processes", "two_hosts", "two_hosts_over_ring")
+    for key, what in (("graph", "default maze"), ("graph_large", "generated 51x51"),
+                      ("graph_open200", "200x200 open")):
+        b = (g.get(key) or {}).get("bytes")
+        if b:
+            rows.append([f"bytes per step, {what}", f"{b['bytes_per_step']} B",
+                         f"({b['per_topic'].get('/sensorimotor_state', 0)} B state)",
+                         "flat once the map is built"])
+    h = g.get("two_hosts") or {}
+    if h.get("link_bytes_per_step"):
+        rows.append(["bytes per step over the link (two hosts)",
+                     f"{h['link_bytes_per_step']} B", "", ""])
+    cpu = result.get("cpu_to_convergence") or {}
+    q = (cpu.get("q_learning") or {}).get("cpu_s") or {}
+    for agent, d in cpu.items():
+        s = d.get("cpu_s") or {}
+        vs_q = (s["mean"] / q["mean"]) if s.get("mean") and q.get("mean") else None
+        med_q = _median(q)
+        med = _median(s)
+        rows.append([f"CPU s to convergence, {agent}",
+                     f"mean {num(s.get('mean'))}, median {num(med)}",
+                     f"{num(vs_q)} x Q (median {num(med / med_q if med and med_q else None)})",
+                     "TMGWR < Q" if agent == "tmgwr" else ""])
+    bag = result.get("bag") or {}
+    if bag:
+        rows.append(["recorder, lossless", "FAILED: " + bag["error"].splitlines()[0]
+                     if bag.get("error") else f"{num(bag.get('recorder_lossless_msg_per_s'))} "
+                     "msg/s", "", ""])
+    load = g.get("load_avg_1min")
+    return (f"bench summary (ratios to the ring of 5 in this run; load {load}, "
+            f"{g.get('cpus')} cpus)\n" + _table(["measure", "value", "ratio", "target"], rows))
