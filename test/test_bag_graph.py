@@ -9,7 +9,8 @@ while the graph runs, and keeps every episode the simulator logged live (its own
   a gap, the recorder wrote everything it received, and rosbags and Foxglove's own readers
   decode every message of every topic (custom tmgwr_interfaces types, OccupancyGrid,
   MarkerArray, ...);
-* ``./tmgwr report`` states the run's own figures: the same episodes (steps, end step)
+* ``./tmgwr report`` rebuilds the map from the per-step changes without a gap and states
+  the run's own figures: the same episodes (steps, end step)
   as logged live, the goal change at the step the simulator logged, the steps to the
   goal after the goal change and after the event as computed from the live episodes.
 """
@@ -117,7 +118,8 @@ def test_graph_recording_is_complete_and_decodes_everywhere(graph_run, foxglove_
         # the ring answers every step; the newest step may still be in flight at the stop
         assert ids[0] == 0 and ids == list(range(ids[-1] + 1)), topic
         assert ids[-1] >= last - 1, (topic, ids[-1], last)
-    for topic in ("/maze_grid", "/goal", "/map", "/map_markers", "/maze_events"):
+    for topic in ("/maze_grid", "/goal", "/map", "/map_markers", "/maze_events",
+                  "/sensorimotor_snapshot", "/potentials"):
         assert counts.get(topic, 0) >= 1, topic
 
     result = foxglove_decoder(files)
@@ -178,6 +180,10 @@ def test_report_states_the_runs_own_figures(graph_run, tmp_path):
     first = next(e for e in live if e[3] > event["step"] and e[2] == "goal")
     assert event["first_goal_steps_after"] == first[3] - event["step"]
     assert rep["map"]["nodes"] > 0 and 0.0 <= rep["map"]["mean_reliability"] <= 1.0
+    # the map rebuilt from the per-step changes, every one of them applied
+    rebuilt = rep["map"]["rebuilt"]
+    assert rep["map"]["source"] == "/sensorimotor_state" and rebuilt["gaps"] == 0, rebuilt
+    assert rebuilt["step_id"] >= rep["steps"]["last"] - 1
     # shortest paths of the maze in force (from /maze_grid): G 4 steps from S, goal 1 3 steps
     # (before and after event a, which only blocks the top corridor)
     assert rep["start_cell"] == [1, 1]

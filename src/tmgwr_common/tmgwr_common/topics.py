@@ -19,6 +19,10 @@ ACTION = "/action"                    # tmgwr_interfaces/msg/Action, action_sele
 
 # Inspection (bounded rate; latched = transient local, depth 1)
 MAP = "/map"                          # tmgwr_interfaces/msg/SensorimotorMap, latched
+# the whole map as flat arrays (every snapshot_period steps and on request): what a replica
+# of /sensorimotor_state's changes starts from after a gap (tmgwr_agent/map_replica.py)
+MAP_SNAPSHOT = "/sensorimotor_snapshot"  # tmgwr_interfaces/msg/SensorimotorSnapshot, latched
+POTENTIALS = "/potentials"            # tmgwr_interfaces/msg/Potentials (field_period), latched
 MAP_MARKERS = "/map_markers"          # visualization_msgs/msg/MarkerArray, latched
 GRID = "/maze_grid"                   # nav_msgs/msg/OccupancyGrid, latched
 GOAL = "/goal"                        # geometry_msgs/msg/PointStamped (x=col, y=row), latched
@@ -34,3 +38,4 @@ FIRE_EVENT = "/maze_sim/fire_event"   # tmgwr_interfaces/srv/FireEvent
 RESET = "/maze_sim/reset"             # std_srvs/srv/Trigger
 SAVE_MAP = "/map_learner/save_map"    # tmgwr_interfaces/srv/SaveMap
 LOAD_MAP = "/map_learner/load_map"    # tmgwr_interfaces/srv/LoadMap
+REQUEST_SNAPSHOT = "/map_learner/request_snapshot"  # std_srvs/srv/Trigger: MAP_SNAPSHOT now

@@ -6,6 +6,11 @@ deserialization), each on a publisher with the QoS its original publisher offere
 original pace: message ``k`` goes out ``(log_time_k - log_time_0) / R`` seconds after the
 first. Nodes, the recorder and Foxglove see the run again.
 
+The map travels as per-step changes (``/sensorimotor_state``) that a consumer applies to a
+replica starting from a whole map (:mod:`tmgwr_agent.map_replica`): a replay that selects
+``/sensorimotor_state`` also plays ``/sensorimotor_snapshot`` (latched again), so a
+consumer rebuilds the map from the recording as it did live.
+
 The offered QoS recorded from DDS discovery carries no history depth (``history: unknown``,
 ``depth: 0``, as rosbag2 records it too); we publish latched topics with depth 1 (a late
 joiner gets the newest sample, as from the original latched publisher) and the others with
@@ -25,6 +30,7 @@ from mcap.reader import make_reader
 from tmgwr_agent.bag import definitions
 from tmgwr_agent.bag import qos as bag_qos
 from tmgwr_agent.bag.recover import require_finished
+from tmgwr_common import topics as T
 
 LATCHED_DEPTH = 1
 STREAM_DEPTH = 100
@@ -116,6 +122,11 @@ def replay(bag: str | Path, rate: float = 1.0, topics: list[str] | None = None,
         if unknown:
             raise ValueError(f'topics not in {bag}: {", ".join(unknown)} '
                              f'(recorded: {", ".join(sorted(channels))})')
+        if T.SENSORIMOTOR_STATE in wanted and T.MAP_SNAPSHOT in channels \
+                and T.MAP_SNAPSHOT not in wanted:
+            wanted.add(T.MAP_SNAPSHOT)      # what the map changes start from
+            log(f"replay: also {T.MAP_SNAPSHOT}: the map changes of "
+                f"{T.SENSORIMOTOR_STATE} start from its whole maps")
     selected = {t: c for t, c in channels.items() if wanted is None or t in wanted}
     published, loops = 0, 0
     rclpy.init()

@@ -21,12 +21,17 @@ summarise a run:
   force (``/maze_grid``, start cell of the first episode), the episodes until one takes it
   (``episodes_to_optimal``, counted on the run's own episodes: the graph runs no greedy
   probes) and until 3 in a row take at most 1.5 x it (the demo's "reliable");
-* **map** growth from ``/map`` (``tmgwr_interfaces/SensorimotorMap``): nodes, links, mean
-  link reliability E (Eq. 1-2) per snapshot;
-* the **final map** drawn over the maze (``/maze_grid``): every node at the cell where it
-  most often won (``/sensorimotor_state`` winner joined with the ``/observation`` cell of the
-  same step), coloured by its motivation potential (last ``/motivation``, Eq. 4-5), links
-  coloured by E.
+* **map** growth: the map rebuilt step by step from the recording (:class:`MapRebuild`:
+  the per-step changes of ``/sensorimotor_state`` applied to a
+  :class:`~tmgwr_agent.map_replica.Replica`, which starts, and after a gap starts again,
+  from the whole maps of ``/sensorimotor_snapshot``): nodes, links, mean link reliability
+  E (Eq. 1-2) whenever the map's version changes (and every :data:`MAP_SAMPLE` steps); a
+  recording without them uses the latched ``/map`` snapshots;
+* the **final map** (the rebuilt one, else the last ``/map``) drawn over the maze
+  (``/maze_grid``): every node at the cell where it most often won (``/sensorimotor_state``
+  winner joined with the ``/observation`` cell of the same step), coloured by its
+  motivation potential (last ``/potentials``, Eq. 4-5; older recordings: ``/motivation``),
+  links coloured by E.
 
 Writes ``report.json`` and PNG figures into DIR (default: ``BAG/report`` for a bag
 directory, ``<file>_report/`` for a single file).
@@ -38,14 +43,103 @@ import json
 import re
 from collections import Counter, defaultdict
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 
+from tmgwr_agent.map_replica import APPLIED, FULL, GAP, MapChange, Replica
 from tmgwr_common import topics as T
 
 GOAL_EVENT = re.compile(r"step (\d+): goal -> row (-?\d+), col (-?\d+)")
 STEP_EVENT = re.compile(r"step (\d+): (.*)")
+
+
+MAP_SAMPLE = 50          # steps between two map-growth samples of an unchanged version
+
+
+class MapRebuild:
+    """The learner's map rebuilt from a recording: snapshots and per-step changes, in
+    log-time order, applied to a replica; counts the changes applied, the gaps (a change
+    that did not follow: the replica waits for the next whole map) and the resyncs."""
+
+    def __init__(self):
+        self.replica = Replica()
+        self.applied = self.gaps = self.resyncs = 0
+        self.waiting = False
+        self.samples: list[dict] = []
+        self._sampled = (-1, -MAP_SAMPLE)        # (version, step) of the last sample
+        self._legacy = 0
+        self._last = (0, -1)                     # (log time, step) of the newest state
+
+    def on_message(self, msg, t: int, snapshot: bool) -> None:
+        c = self.change_of(msg)
+        status = self.replica.apply(c)
+        if status == GAP:
+            self.gaps += not self.waiting
+            self.waiting = True
+            return
+        if status == APPLIED:
+            self.applied += 1
+            if self.waiting and c.full:
+                self.resyncs += 1
+            self.waiting = False
+        if not snapshot:
+            self._last = (t, int(msg.step_id))
+            self.sample(t, int(msg.step_id))
+
+    def finish(self) -> None:
+        """A last sample at the newest state (its reliabilities may have moved since)."""
+        if self.samples and self.samples[-1]["step_id"] != self._last[1]:
+            self._sampled = (-1, -MAP_SAMPLE)
+            self.sample(*self._last)
+
+    def change_of(self, msg) -> MapChange:
+        if hasattr(msg, "map_change"):
+            return MapChange.of_fields(msg.map_change, msg.map_version, msg.run_id, msg.step_id)
+        if hasattr(msg, "map"):                   # SensorimotorSnapshot
+            return MapChange.of_fields(msg.map, msg.map_version, msg.run_id, msg.step_id)
+        # a recording made before the per-step changes: every state holds the whole map
+        self._legacy += 1
+        n = int(msg.n_slots)
+        fields = SimpleNamespace(map_id=1, base_sequence=FULL, sequence=self._legacy,
+                                 n_slots=n, degree=msg.degree, dim=msg.dim,
+                                 slots=np.arange(n, dtype=np.int32), alive=msg.alive,
+                                 terminal_nodes=msg.terminal_nodes, weights=msg.weights,
+                                 link_targets=msg.link_targets,
+                                 link_reliability=msg.link_reliability)
+        return MapChange.of_fields(fields, msg.map_version, msg.run_id, msg.step_id)
+
+    def sample(self, t: int, step: int) -> None:
+        r = self.replica
+        if (r.version, step) != self._sampled and (r.version != self._sampled[0]
+                                                   or step - self._sampled[1] >= MAP_SAMPLE):
+            self._sampled = (r.version, step)
+            nodes, links, E = self.stats()
+            self.samples.append({"t": t, "step_id": step, "nodes": nodes, "links": links,
+                                 "mean_reliability": E})
+
+    def stats(self) -> tuple[int, int, float]:
+        r = self.replica
+        linked = r.out >= 0
+        E = r.E[linked]
+        return int(r.alive.sum()), int(linked.sum()), float(E.mean()) if len(E) else 0.0
+
+    def final_map(self):
+        """The rebuilt map in the form of a ``/map`` message (node ids, links)."""
+        r = self.replica
+        src, slot = np.nonzero(r.out >= 0)
+        return SimpleNamespace(
+            step_id=r.step_id, nodes=[SimpleNamespace(id=int(i)) for i in np.flatnonzero(r.alive)],
+            links=[SimpleNamespace(source=int(s), target=int(r.out[s, k]),
+                                   reliability=float(r.E[s, k])) for s, k in zip(src, slot)])
+
+    def summary(self) -> dict:
+        nodes, links, E = self.stats()
+        return {"changes_applied": self.applied, "gaps": self.gaps, "resyncs": self.resyncs,
+                "map_id": self.replica.map_id, "state": self.replica.sequence,
+                "step_id": self.replica.step_id, "nodes": nodes, "links": links,
+                "mean_reliability": round(E, 4)}
 
 
 def default_output(bag: Path) -> Path:
@@ -80,6 +174,7 @@ def read_bag(bag: str | Path) -> dict[str, Any]:
                             "winners": {}, "cells": {}, "grid": None, "motivation": None,
                             "grids": [], "start_cell": None}
     monitor = EpisodeMonitor()
+    rebuild = MapRebuild()
     obs_times: dict[int, int] = {}
     last_raw: dict[str, tuple[Any, bytes]] = {}
     require_finished(bag, bag_files(bag))   # a killed recorder's bag: recover it first
@@ -88,7 +183,8 @@ def read_bag(bag: str | Path) -> dict[str, Any]:
             entry = data["topics"].setdefault(c.topic, {"type": c.msgtype, "count": 0})
             entry["count"] += c.msgcount
         data["start_ns"], data["end_ns"] = reader.start_time, reader.end_time
-        wanted = {T.OBSERVATION, T.SENSORIMOTOR_STATE, T.MAP, T.GOAL, T.EVENTS, T.GRID}
+        wanted = {T.OBSERVATION, T.SENSORIMOTOR_STATE, T.MAP_SNAPSHOT, T.MAP, T.GOAL,
+                  T.EVENTS, T.GRID}
         conns = [c for c in reader.connections if c.topic in wanted]
         for conn, t, raw in reader.messages(connections=conns):
             msg = reader.deserialize(raw, conn.msgtype)
@@ -101,6 +197,9 @@ def read_bag(bag: str | Path) -> dict[str, Any]:
                 data["cells"][sid] = (int(msg.row), int(msg.col))
             elif conn.topic == T.SENSORIMOTOR_STATE:
                 data["winners"][int(msg.step_id)] = int(msg.winner)
+                rebuild.on_message(msg, t, snapshot=False)
+            elif conn.topic == T.MAP_SNAPSHOT:
+                rebuild.on_message(msg, t, snapshot=True)
             elif conn.topic == T.MAP:
                 E = np.array([float(lk.reliability) for lk in msg.links])
                 data["map"].append({"t": t, "step_id": int(msg.step_id),
@@ -117,14 +216,24 @@ def read_bag(bag: str | Path) -> dict[str, Any]:
                     int(msg.info.height), int(msg.info.width)) >= 50
                 data["grids"].append((t, walls))
                 last_raw[T.GRID] = (conn, raw)
-        for topic in (T.MOTIVATION,):           # only the newest of these is needed
-            cs = [c for c in reader.connections if c.topic == topic]
-            for conn, _t, raw in reader.messages(connections=cs):
-                last_raw[topic] = (conn, raw)
-        for topic, key in ((T.MOTIVATION, "motivation"), (T.GRID, "grid"), (T.MAP, "final_map")):
+        # every node's potential: the newest /potentials (older recordings: /motivation,
+        # which carried them every step); only the newest is needed
+        mot = T.POTENTIALS if any(c.topic == T.POTENTIALS for c in reader.connections) \
+            else T.MOTIVATION
+        cs = [c for c in reader.connections if c.topic == mot]
+        for conn, _t, raw in reader.messages(connections=cs):
+            last_raw[mot] = (conn, raw)
+        for topic, key in ((mot, "motivation"), (T.GRID, "grid"), (T.MAP, "final_map")):
             if topic in last_raw:
                 conn, raw = last_raw[topic]
                 data[key] = reader.deserialize(raw, conn.msgtype)
+        if data["motivation"] is not None and not hasattr(data["motivation"], "potentials"):
+            data["motivation"] = None
+    if rebuild.replica.synced:                  # the exact map, step by step
+        rebuild.finish()
+        data["map"] = rebuild.samples
+        data["final_map"] = rebuild.final_map()
+    data["map_rebuild"] = rebuild.summary() if rebuild.replica.synced else None
     data["monitor"] = monitor
     data["obs_times"] = obs_times
     return data
@@ -289,7 +398,9 @@ def summarise(data: dict, bag: Path) -> dict:
         "events": event_rows,
         "map": ({"snapshots": len(data["map"]), "nodes": final["nodes"],
                  "links": final["links"], "mean_reliability": round(final["mean_reliability"], 4),
-                 "step_id": final["step_id"]} if final else None),
+                 "step_id": final["step_id"],
+                 "source": T.SENSORIMOTOR_STATE if data.get("map_rebuild") else T.MAP,
+                 "rebuilt": data.get("map_rebuild")} if final else None),
     }
 
 
@@ -448,7 +559,8 @@ def _map_over_time(data: dict, summary: dict, t_of, path: Path) -> str:
         ax.legend(h1 + h2, l1 + l2, fontsize=8, loc="lower right")
         _mark_changes(ax, summary, t_of)
     else:
-        ax.text(0.5, 0.5, f"no {T.MAP} messages recorded", ha="center", va="center",
+        ax.text(0.5, 0.5, f"no {T.SENSORIMOTOR_STATE} or {T.MAP} messages recorded",
+                ha="center", va="center",
                 transform=ax.transAxes)
     ax.set_xlabel("time since the recording started (s)")
     ax.set_title("Sensorimotor map size and reliability")

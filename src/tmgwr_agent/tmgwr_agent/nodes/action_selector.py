@@ -1,7 +1,7 @@
 """``ros2 run tmgwr_agent action_selector``: Eq. 6 plus the exploration of section 5.1.
 
-Per step (lockstep): ``MotivationField`` in (this step's potentials V and the winner's
-outgoing links), ``Action`` out. The core
+Per step (lockstep): ``MotivationField`` in (the winner's outgoing links and this step's
+potentials V of their targets: all Eq. 6 reads), ``Action`` out. The core
 :class:`~tmgwr_agent.core.action_selector.ActionSelector` is called as
 :class:`~tmgwr_agent.core.agent.TMGWRAgent` calls it in-process: ``record`` what the last
 action did (walk direction, tried primitives, the Eq. 7 decay at the goal), then ``select``,
@@ -68,12 +68,15 @@ class ActionSelectorNode(Node):
         else:                               # what TMGWRAgent.act does
             links = None
             if f.winner >= 0:
-                K = len(f.winner_link_targets)
-                links = Links(targets=np_i64(f.winner_link_targets),
+                # slot k's target is looked up as V[k] (the potentials of the targets, in
+                # slot order): the same E[i, k] V(k) products as on the whole field
+                targets = np_i64(f.winner_link_targets)
+                K = len(targets)
+                links = Links(targets=np.where(targets >= 0, np.arange(K), -1),
                               E=np_f64(f.winner_link_reliability),
                               actions=np_f64(f.winner_link_actions).reshape(
                                   K, f.action_dim or 1))
-            V = np.append(np_f64(f.potentials), 0.0)    # V[-1] = 0: empty link slots
+            V = np.append(np_f64(f.winner_link_potentials), 0.0)   # V[-1] = 0: empty slots
             action, a.explored = self.core.select(lambda node: links, int(f.winner), V,
                                                   int(f.goal_node), self.p["explore"])
             a.action = int(action)

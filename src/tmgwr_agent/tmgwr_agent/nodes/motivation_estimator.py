@@ -1,8 +1,14 @@
 """``ros2 run tmgwr_agent motivation_estimator``: Eq. 4-5 on this step's map; hosts /set_goal.
 
-Per step (lockstep): ``SensorimotorState`` in (it carries this step's map as flat arrays),
-:meth:`MotivationEstimator.update` on that map, ``MotivationField`` out (the potentials V
-of every node plus the winner's outgoing links, what Eq. 6 ranks). The goal is the goal
+Per step (lockstep): ``SensorimotorState`` in (it carries this step's change of the map),
+applied to this node's replica of the map (:mod:`tmgwr_agent.map_replica`),
+:meth:`MotivationEstimator.update` on that map, ``MotivationField`` out (the winner's
+outgoing links and the potentials V of their targets, what Eq. 6 ranks); the potentials of
+every node go out latched on ``/potentials`` every ``field_period`` steps. A state whose
+change does not follow the replica (this node started late, or a message was missed) is
+held, logged, and the learner asked for a whole map (``/map_learner/request_snapshot``);
+the replica starts again from the latched ``/sensorimotor_snapshot`` and the held step is
+computed then (a resent step is answered from the replica as it is). The goal is the goal
 *sensation* that came with the observation (through the preprocessor and the map learner):
 when it changes the potentials restart from 0 (Algorithm 1 line 5), exactly as
 :meth:`TMGWRAgent.set_goal` does in-process.
@@ -22,9 +28,11 @@ import math
 import numpy as np
 from nav_msgs.msg import OccupancyGrid
 from rclpy.node import Node
+from std_srvs.srv import Trigger
 
 from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
-from tmgwr_agent.core.sensorimotor_map import MapSnapshot
+from tmgwr_agent.map_replica import APPLIED, GAP, Replica
+from tmgwr_agent.nodes.step_messages import change_of
 from tmgwr_common import topics
 from tmgwr_common.lockstep import Lockstep
 from tmgwr_common.node import (
@@ -34,35 +42,42 @@ from tmgwr_common.node import (
     declare_parameters,
     f64,
     i32,
-    np_bool,
     np_f64,
-    np_i64,
     run,
 )
-from tmgwr_interfaces.msg import MotivationField, SensorimotorState
+from tmgwr_common.params import Param
+from tmgwr_interfaces.msg import (
+    MotivationField,
+    Potentials,
+    SensorimotorSnapshot,
+    SensorimotorState,
+)
 from tmgwr_interfaces.srv import SetGoal
 
-
-def snapshot_of(s: SensorimotorState) -> MapSnapshot:
-    """The map of this step from the flat arrays of a SensorimotorState (no link actions,
-    contexts or ages: Eq. 4-5 need weights, alive mask, link targets and E only)."""
-    n, K, dim = s.n_slots, s.degree, s.dim
-    return MapSnapshot(w=np_f64(s.weights).reshape(n, dim), alive=np_bool(s.alive),
-                       out=np_i64(s.link_targets).reshape(n, K),
-                       E=np_f64(s.link_reliability).reshape(n, K),
-                       terminal=np_bool(s.terminal_nodes), version=s.map_version)
+NODE_SPECS = (
+    Param("field_period", 100, "steps between two latched publications of every node's "
+          "potential (/potentials, for inspection)", low=1, high=1e9, integer=True),
+)
 
 
 class MotivationEstimatorNode(Node):
     def __init__(self):
         super().__init__("motivation_estimator", **NODE_OPTIONS)
-        config = declare_parameters(self, MotivationConfig)
+        config, self.p = declare_parameters(self, MotivationConfig, NODE_SPECS)
         self.core = MotivationEstimator(config)
         self._ids = np.zeros(0, dtype=np.int32)
         pub = self.create_publisher(MotivationField, topics.MOTIVATION, STEP_QOS)
         self.lockstep = Lockstep(pub, logger=self.get_logger(), what="state")
         self.create_subscription(SensorimotorState, topics.SENSORIMOTOR_STATE, self.on_state,
                                  STEP_QOS)
+        # the map of this step: a replica of the learner's, kept by its per-step changes
+        self.replica = Replica()
+        self.held: SensorimotorState | None = None   # a state waiting for a whole map
+        self.create_subscription(SensorimotorSnapshot, topics.MAP_SNAPSHOT, self.on_snapshot,
+                                 LATCHED_QOS)
+        self.snapshot_client = self.create_client(Trigger, topics.REQUEST_SNAPSHOT)
+        self.asked = False                  # a snapshot request is under way
+        self.potentials_pub = self.create_publisher(Potentials, topics.POTENTIALS, LATCHED_QOS)
         # /set_goal checks the cell against the simulator's grid (latched: it arrives
         # whenever this node starts) and hands it to the simulator's own service.
         self.walls: np.ndarray | None = None
@@ -73,13 +88,48 @@ class MotivationEstimatorNode(Node):
 
     # ------------------------------------------------------------------ per step
     def on_state(self, s: SensorimotorState):
+        resent = (s.run_id, s.step_id) == (self.lockstep.run_id, self.lockstep.last_step)
+        if s.run_id and not resent and not self.follow(s):
+            return                          # held until the replica has this step's map
         self.lockstep.on_step(s.run_id, s.step_id, lambda: self.motivate(s))
+
+    def follow(self, s: SensorimotorState) -> bool:
+        """Bring the replica to the map of state ``s``; False (``s`` held, a whole map
+        asked for) when its change does not follow the replica."""
+        c = change_of(s)
+        if self.replica.apply(c) != GAP:
+            return True
+        r = self.replica
+        self.get_logger().warning(
+            f"step {s.step_id} (run {s.run_id}): map change {c.base} -> {c.sequence} of map "
+            f"{c.map_id} does not follow the replica ("
+            + (f"map {r.map_id} state {r.sequence}" if r.synced else "empty")
+            + "): waiting for a whole map", throttle_duration_sec=5.0)
+        self.held = s
+        if not self.asked and self.snapshot_client.service_is_ready():
+            self.asked = True
+            self.snapshot_client.call_async(Trigger.Request()).add_done_callback(
+                self.on_snapshot_answer)
+        return False
+
+    def on_snapshot_answer(self, _future):
+        self.asked = False
+
+    def on_snapshot(self, msg: SensorimotorSnapshot):
+        c = change_of(msg)
+        if self.replica.apply(c) == APPLIED:
+            self.get_logger().info(f"map replica (re)synchronised: map {c.map_id} state "
+                                   f"{c.sequence} (step {c.step_id} of run {c.run_id}), "
+                                   f"{c.n} slots")
+        held, self.held = self.held, None
+        if held is not None and self.replica.status(change_of(held)) != GAP:
+            self.on_state(held)
 
     def motivate(self, s: SensorimotorState) -> MotivationField:
         goal_x = np_f64(s.goal_features)
         if self.core.follow_goal(goal_x):       # a new goal: V restarts from 0 (Algorithm 1)
             self.get_logger().info(f"step {s.step_id}: goal sensation {goal_x.tolist()}")
-        m = snapshot_of(s)
+        m = self.replica.snapshot()
         V = self.core.update(m)
         out = MotivationField()
         out.header = s.header
@@ -88,14 +138,12 @@ class MotivationEstimatorNode(Node):
         out.map_version = s.map_version
         out.goal_node = int(self.core.goal_node)
         out.sweeps = int(self.core.sweeps)
-        if len(self._ids) != len(V):
-            self._ids = np.arange(len(V), dtype=np.int32)
-        out.node_ids = i32(self._ids)
-        out.potentials = f64(V)
         out.winner = s.winner
         if s.winner >= 0:
-            out.winner_link_targets = i32(m.out[s.winner])
+            targets = m.out[s.winner]
+            out.winner_link_targets = i32(targets)
             out.winner_link_reliability = f64(m.E[s.winner])
+            out.winner_link_potentials = f64(self.core.V[targets])   # V[-1] = V[n] = 0
         out.action_dim = s.action_dim
         out.winner_link_actions = s.winner_link_actions
         out.episode_start = s.episode_start
@@ -103,7 +151,23 @@ class MotivationEstimatorNode(Node):
         out.bumped = s.bumped
         out.goal_reached = s.goal_reached
         out.terminal = s.terminal
+        if s.step_id % self.p["field_period"] == 0:
+            self.publish_potentials(s, V)
         return out
+
+    def publish_potentials(self, s: SensorimotorState, V: np.ndarray) -> None:
+        """Every node's potential, latched (for inspection: markers, report)."""
+        p = Potentials()
+        p.header = s.header
+        p.run_id, p.step_id = s.run_id, s.step_id
+        p.map_id, p.map_sequence = self.replica.map_id, self.replica.sequence
+        p.map_version = s.map_version
+        p.goal_node, p.sweeps = int(self.core.goal_node), int(self.core.sweeps)
+        if len(self._ids) != len(V):
+            self._ids = np.arange(len(V), dtype=np.int32)
+        p.node_ids = i32(self._ids)
+        p.potentials = f64(V)
+        self.potentials_pub.publish(p)
 
     # ------------------------------------------------------------------ runtime goal
     def on_grid(self, grid: OccupancyGrid):

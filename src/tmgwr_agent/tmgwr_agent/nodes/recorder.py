@@ -17,6 +17,10 @@ QoS: each topic is subscribed with a profile compatible with all its publishers
 (:func:`tmgwr_agent.bag.qos.subscription_qos`): reliable when they all are, transient local
 when they all are (so latched messages published before the recorder joined are recorded),
 and a history of at least ``queue_depth`` so a momentarily busy recorder loses nothing.
+The latched whole-map snapshots (``/sensorimotor_snapshot``) and potentials
+(``/potentials``) are therefore left to discovery, not ``expect``ed: subscribed transient
+local, a recorder that joins late still records the newest whole map, which the per-step
+map changes of ``/sensorimotor_state`` build on (``./tmgwr report`` rebuilds the map).
 
 Shutdown: SIGINT and SIGTERM shut the context down; the bag is then finished (summary,
 indexes, metadata.yaml) and the received and written counts are logged per topic. A
