@@ -30,6 +30,7 @@ PYTHON_KEYS = {
     "mcap": {"python3-mcap-pip"},
     "rosbags": {"python3-rosbags-pip"},
     "gymnasium": {"python3-gymnasium-pip", "python3-gymnasium"},
+    "optuna": {"python3-optuna-pip", "python3-optuna"},
 }
 
 #: Top-level directories of a package that are not installed data.

@@ -1,4 +1,4 @@
-"""``./tmgwr experiment | demo | bench`` (README, Experiments).
+"""``./tmgwr experiment | demo | bench | tune`` (README, Experiments, Tuning).
 
 ``experiment SCENARIO --maze FILE --agents LIST --trials N --seed S --json OUT
 [--plot OUT.png] [--jobs J]`` with ``--goals``, ``--episodes``, ``--event``, ``--goal``
@@ -6,7 +6,8 @@ for the scenarios that take them; ``--suite SPEC [--suite-seed K] [--suite-first
 instead of ``--maze`` runs env-change or goal-change on generated mazes
 (:mod:`tmgwr_agent.experiments.suite_runner`); ``demo`` runs every scenario briefly and
 then the ROS graph demo (:mod:`tmgwr_agent.graph.demo`); ``bench`` measures the TMGWR core
-and merges the graph / bag benchmarks. An unknown agent, scenario, goal or
+and merges the graph / bag benchmarks; ``tune AGENT`` tunes an agent with Optuna
+(:mod:`tmgwr_agent.experiments.tune`). An unknown agent, scenario, goal or
 event, or a missing maze file, exits with code 2 and a message naming it.
 
 Imports stay light here (argparse only): the scenario modules load when a command runs.
@@ -104,6 +105,58 @@ def register(subparsers) -> None:
                    help="skip the graph and bag benchmarks")
     b.set_defaults(func=cmd_bench)
 
+    t = subparsers.add_parser(
+        "tune", help="tune an agent's hyperparameters with Optuna (TPE) on a training "
+                     "split of the maze suite",
+        description="Optuna TPE over the parameters tune.SEARCH lists for AGENT (--list "
+                    "shows them), minimising the geometric mean over the training mazes of "
+                    "steps / oracle of the first episode after the block, plus a penalty "
+                    "for failed runs (README, Tuning). Writes the best parameters as a ROS 2 "
+                    "parameter file and a JSON summary.")
+    t.add_argument("agent", metavar="AGENT",
+                   help="tmgwr (with options, e.g. tmgwr:credit), q_learning, model_based "
+                        "or dyna_q_plus")
+    t.add_argument("--trials", type=int, default=40,
+                   help="trials of the study in all, every agent the same (default 40)")
+    t.add_argument("--workers", type=int, default=1,
+                   help="worker processes on the study (default 1)")
+    t.add_argument("--study", default=None, help="study name (default: the agent)")
+    t.add_argument("--storage", default=None, metavar="PATH_OR_URL",
+                   help="journal file, or an RDB URL (sqlite:///f.db, postgresql://...); "
+                        "share it (and --study) to add workers on other machines "
+                        "(default results/tune/optuna.journal)")
+    t.add_argument("--suite", default=None, metavar="SPEC",
+                   help="training split (default: tune.TRAIN_SUITE, small mazes of the "
+                        "families with a block)")
+    t.add_argument("--suite-seed", type=int, default=0, help="seed of the mazes (default 0)")
+    t.add_argument("--suite-first", type=int, default=0,
+                   help="first maze index of each family (default 0)")
+    t.add_argument("--seeds", type=int, default=2,
+                   help="trial seeds per maze in the objective (default 2)")
+    t.add_argument("--seed", type=int, default=0,
+                   help="seed of the trial seeds and of the sampler (default 0)")
+    t.add_argument("--space", default=None, metavar="LIST",
+                   help="search these instead: NAME (its declared range), NAME=LOW:HIGH "
+                        "or NAME=LOW:HIGH:log, comma-separated")
+    t.add_argument("--list", action="store_true",
+                   help="list the agent's parameters, searched or fixed, and exit")
+    t.add_argument("--params-out", default=None, metavar="FILE",
+                   help="parameter file of the best values (default "
+                        "results/tune/STUDY.yaml)")
+    t.add_argument("--json", default=None, metavar="OUT",
+                   help="JSON summary (default results/tune/STUDY.json)")
+    t.add_argument("--evaluate", action="store_true",
+                   help="then run the tuned values and the defaults on a held-out split")
+    t.add_argument("--eval-suite", default=None, metavar="SPEC",
+                   help="held-out families (default: those of --suite)")
+    t.add_argument("--eval-first", type=int, default=None,
+                   help="first held-out index of each family (default: after the "
+                        "training mazes)")
+    t.add_argument("--eval-trials", type=int, default=5,
+                   help="seeds per held-out maze (default 5)")
+    t.add_argument("--quiet", action="store_true", help="no progress lines")
+    t.set_defaults(func=cmd_tune)
+
 
 def _fail(msg: str) -> int:
     print(f"tmgwr: error: {msg}", file=sys.stderr)
@@ -168,3 +221,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     from tmgwr_agent.experiments.bench import run
     return run(args)
+
+
+def cmd_tune(args: argparse.Namespace) -> int:
+    from tmgwr_agent.experiments.scenarios import UsageError
+    from tmgwr_agent.experiments.tune import TRAIN_SUITE, run
+    args.suite = args.suite or TRAIN_SUITE
+    try:
+        return run(args)
+    except UsageError as exc:
+        return _fail(str(exc))

@@ -1,0 +1,132 @@
+"""``./tmgwr tune`` (README, Tuning): two worker processes on one Optuna journal study, the
+parameter file it writes, the search space read from the Config declarations, the
+objective by hand, and clear errors for a bad agent, space or storage."""
+
+import json
+import math
+
+import numpy as np
+import optuna
+import pytest
+from optuna.storages import JournalStorage
+from optuna.storages.journal import JournalFileBackend
+from test_experiments import cli
+
+from maze_sim.suite import generate
+from tmgwr_agent.experiments.agent_factory import make_agent
+from tmgwr_agent.experiments.tune import (
+    PENALTY,
+    SEARCH,
+    Task,
+    load_tuned,
+    score,
+    search_space,
+    write_params,
+)
+from tmgwr_common.params import ParamError, check_params_file, params_for, read_params_file
+
+SPLIT = ["--suite", "blocking:1,open:1", "--seeds", "1"]
+
+
+def tune(tmp_path, *args, check=True):
+    return cli("tune", "q_learning", *SPLIT, "--storage", tmp_path / "study.journal",
+               "--study", "s", "--params-out", tmp_path / "best.yaml", "--json",
+               tmp_path / "summary.json", "--quiet", *args, check=check)
+
+
+def trials_in(journal, study="s"):
+    storage = JournalStorage(JournalFileBackend(str(journal)))
+    return optuna.load_study(study_name=study, storage=storage).get_trials()
+
+
+@pytest.mark.slow
+def test_two_workers_share_one_journal_study_and_the_file_loads(tmp_path):
+    tune(tmp_path, "--trials", "4", "--workers", "2", "--evaluate", "--eval-trials", "1")
+    trials = trials_in(tmp_path / "study.journal")
+    assert len(trials) == 4
+    assert all(t.state.name == "COMPLETE" for t in trials)
+    workers = {t.user_attrs["worker"] for t in trials}
+    assert len(workers) == 2, workers                     # both processes' trials
+    assert {w.rsplit(":", 1)[1] for w in workers} == {"0", "1"}
+    defaults = [t for t in trials if t.user_attrs.get("defaults")]
+    assert len(defaults) == 1 and defaults[0].params["gamma"] == 0.86   # Table 2
+
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    best = min(trials, key=lambda t: t.value)
+    assert summary["best"]["number"] == best.number
+    assert summary["best"]["value"] == pytest.approx(best.value)
+    assert sorted(summary["trials"]["by_worker"].values()) == [2, 2]
+    held = summary["held_out"]
+    assert held["first"] == 1 and held["mazes"] == ["blocking-01", "open-01"]
+    assert set(held) >= {"tuned", "defaults", "tuned_wins"}
+
+    # the parameter file: ROS 2 layout, the baseline's own section, every searched name
+    entries = read_params_file(tmp_path / "best.yaml")
+    assert list(entries) == ["q_learning"]
+    values = entries["q_learning"]
+    assert set(values) == set(SEARCH["q_learning"])
+    assert values == pytest.approx(best.params)
+    assert load_tuned(tmp_path / "best.yaml", "q_learning") == values
+    maze = generate("blocking", 0).maze()
+    agent = make_agent("q_learning", maze, np.random.default_rng(0), values)
+    assert (agent.gamma, agent.beta, agent.r_wall) == pytest.approx(
+        (values["gamma"], values["beta"], values["r_wall"]))
+
+    # the study is complete: running again adds no trial; other options are refused
+    tune(tmp_path, "--trials", "4")
+    assert len(trials_in(tmp_path / "study.journal")) == 4
+    proc = tune(tmp_path, "--trials", "4", "--seed", "3", check=False)
+    assert proc.returncode == 2
+    assert "made with other options" in proc.stderr and "seed" in proc.stderr
+
+
+def test_tmgwr_file_is_what_the_nodes_read(tmp_path):
+    values = {d.name: d.default for d in search_space("tmgwr")}
+    path = write_params(tmp_path / "tmgwr.yaml", "tmgwr", values, "test")
+    check_params_file(path)                      # what `./tmgwr up` checks before the nodes
+    assert params_for(path, "motivation_estimator") == values   # the /** section
+    assert load_tuned(path, "tmgwr") == values
+    (tmp_path / "bad.yaml").write_text("/**:\n  ros__parameters:\n    gama: 0.9\n")
+    with pytest.raises(ParamError, match="did you mean 'gamma'"):
+        load_tuned(tmp_path / "bad.yaml", "tmgwr")
+
+
+@pytest.mark.parametrize("agent", sorted(SEARCH))
+def test_search_space_lies_inside_the_declared_ranges(agent):
+    dims = search_space(agent)           # raises on a name or interval the Config refuses
+    assert [d.name for d in dims] == list(SEARCH[agent])
+    for d in dims:
+        assert d.low < d.high
+
+
+def test_objective_by_hand():
+    tasks = [Task("m1", "f", "", "a", 10, 50.0), Task("m2", "f", "", "a", 20, 40.0)]
+    runs = [[{"steps": 20, "train_episodes": 3}, {"steps": 40, "train_episodes": 3},
+             {"steps": None, "train_episodes": 3}],            # failed: cap ratio 50
+            [{"steps": 20, "train_episodes": None},            # train failure, ratio 1
+             {"steps": 80, "train_episodes": 2}, {"steps": 20, "train_episodes": 2}]]
+    s = score(tasks, runs)
+    assert s["per_maze"] == {"m1": 4.0, "m2": 1.0}
+    assert s["failed_runs"] == 2 and s["runs"] == 6 and s["worst_ratio"] == 50.0
+    assert s["objective"] == pytest.approx(math.sqrt(4.0 * 1.0) + PENALTY * 2 / 6)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["tune", "q_leaning"], "unknown agent 'q_leaning'"),
+    (["tune", "dyna_q_plus", "--space", "kapa"], "did you mean 'kappa'"),
+    (["tune", "q_learning", "--space", "gamma=0.5:1.5"], "leaves its declared range"),
+    (["tune", "q_learning", "--suite", "shortcut:1"], "no maze with a block event"),
+    (["tune", "q_learning", "--storage", "nosuchdb://x/y"], "cannot open the RDB storage"),
+])
+def test_bad_requests_exit_2_with_a_clear_message(args, message):
+    proc = cli(*args, "--trials", "1", check=False)
+    assert proc.returncode == 2, proc.stderr
+    assert message in proc.stderr, proc.stderr
+
+
+def test_a_journal_path_that_cannot_be_a_file_is_refused(tmp_path):
+    (tmp_path / "plain").write_text("x")
+    for where in (tmp_path, tmp_path / "plain" / "study.journal"):
+        proc = cli("tune", "q_learning", "--storage", where, "--trials", "1", check=False)
+        assert proc.returncode == 2
+        assert f"--storage {where}: cannot use it as an Optuna journal file" in proc.stderr
