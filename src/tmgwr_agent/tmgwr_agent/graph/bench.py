@@ -91,15 +91,27 @@ def graph_rate(steps: int | None = 2000, warmup: int = 200, seed: int = 0,
     """Steps/s of the lockstep graph after ``warmup`` steps, over ``steps`` steps or, with
     ``seconds``, over that many seconds (then also over the window's last quarter, which
     shows a rate that falls as the map grows); ``composed``: the one-process graph. With
-    ``bytes_steps``, then the bytes per step of every topic (:func:`bytes_per_step`)."""
+    ``bytes_steps``, then the bytes per step of every topic (:func:`bytes_per_step`).
+
+    Timed by the observations' header stamps (maze_sim's clock when it publishes), not by
+    when this process gets them: an observer slower than the graph (one rclpy executor in
+    Python, about 400 messages/s under load) would otherwise measure itself."""
+    from tmgwr_agent.graph.clients import monitor_qos
     from tmgwr_agent.graph.run import GraphRun, describe_exit
     from tmgwr_agent.graph.supervisor import GraphError, composed_specs
+    from tmgwr_common import topics
+    from tmgwr_interfaces.msg import Observation
 
     run = GraphRun(maze=maze, seed=seed, record=False, echo=False)
     if composed:
         run.specs = run.supervisor.specs = composed_specs(run.specs)
     run.start(ready_timeout=120.0)
     mon = run.monitor
+    stamps: list[tuple[float, int]] = []        # (publication time, step id)
+    run.node.create_subscription(
+        Observation, topics.OBSERVATION,
+        lambda m: stamps.append((m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec,
+                                 m.step_id)), monitor_qos())
     t_begin = time.monotonic()
     marks: dict[str, float] = {}
     samples: list[tuple[float, int]] = []
@@ -115,12 +127,15 @@ def graph_rate(steps: int | None = 2000, warmup: int = 200, seed: int = 0,
         while True:
             run.spin_once(0.1)
             check()
-            if "t0" not in marks and mon.last_step_id >= warmup:
-                marks["t0"], marks["s0"] = mon.last_time, mon.last_step_id
+            if not stamps:
+                continue
+            last_time, last_step = stamps[-1]
+            if "t0" not in marks and last_step >= warmup:
+                marks["t0"], marks["s0"] = last_time, last_step
             if "t0" in marks:
-                samples.append((mon.last_time, mon.last_step_id))
-                if (seconds is not None and mon.last_time - marks["t0"] >= seconds) or \
-                        (seconds is None and mon.last_step_id >= warmup + steps):
+                samples.append((last_time, last_step))
+                if (seconds is not None and last_time - marks["t0"] >= seconds) or \
+                        (seconds is None and last_step >= warmup + steps):
                     break
         if bytes_steps:
             sizes = bytes_per_step(run, bytes_steps, check)
@@ -164,8 +179,9 @@ def bytes_per_step(run, steps: int, check, settle: float = 1.0,
     rate (map, markers, pose) counts what it sent during those steps."""
     from tmgwr_agent.bag import definitions
     from tmgwr_agent.bag import qos as bag_qos
+    from tmgwr_common import topics
 
-    node, mon = run.node, run.monitor
+    node = run.node
     counts: dict[str, list[int]] = {}
     subs = []
     for topic, types in node.get_topic_names_and_types():
@@ -188,11 +204,12 @@ def bytes_per_step(run, steps: int, check, settle: float = 1.0,
         check()
     for c in counts.values():
         c[0] = c[1] = 0
-    s0, t0 = mon.last_step_id, time.monotonic()
-    while mon.last_step_id - s0 < steps and time.monotonic() - t0 < limit:
+    seen = counts.get(topics.OBSERVATION, [0, 0])   # one observation a step (and resends)
+    t0 = time.monotonic()
+    while seen[0] < steps and time.monotonic() - t0 < limit:
         run.spin_once(0.05)
         check()
-    n = max(mon.last_step_id - s0, 1)
+    n = max(seen[0], 1)
     for sub in subs:
         node.destroy_subscription(sub)
     per_topic = {t: round(b / n) for t, (_, b) in sorted(counts.items()) if b}
