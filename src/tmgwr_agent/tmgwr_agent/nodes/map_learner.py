@@ -2,15 +2,19 @@
 
 Per step (lockstep): ``Features`` in, :meth:`SensorimotorMap.experience` with the step's
 :class:`~tmgwr_agent.core.outcome.Outcome`, the call :class:`~tmgwr_agent.core.agent.TMGWRAgent`
-makes in-process; ``SensorimotorState`` out. The state carries this step's map as flat
-arrays (alive mask, weights, link targets and reliabilities E, the winner's link action
-vectors): what the motivation estimator needs to run Eq. 4-5 on the map of *this* step
-without building a nested message per step.
+makes in-process; ``SensorimotorState`` out. The state carries this step's *change* of
+the map arrays the motivation estimator needs to run Eq. 4-5 on the map of *this* step
+(alive mask, terminal flags, weights, link targets and reliabilities E: only the rows that
+changed, :mod:`tmgwr_agent.map_replica`) and the winner's link action vectors. The first
+state of a map (created, loaded) carries the whole map. The whole map also goes out latched
+on ``/sensorimotor_snapshot`` every ``snapshot_period`` steps, when the learner starts from
+or loads a map, and on request (``/map_learner/request_snapshot``, std_srvs/Trigger): what a
+replica that missed a change starts again from.
 
 At ``publish_rate`` Hz (when the map changed) the whole map is published latched, as
 ``tmgwr_interfaces/SensorimotorMap`` and as ``visualization_msgs/MarkerArray`` (nodes at
-their sensed position, coloured by the motivation potential of the last
-``MotivationField``; links coloured by reliability E).
+their sensed position, coloured by the motivation potentials of the last
+``/potentials``; links coloured by reliability E).
 
 Persistence (:mod:`tmgwr_agent.map_store`; README, Maps on disk): maps live in one
 directory, ``map_dir`` (``./tmgwr up`` passes the run's directory; default
@@ -29,18 +33,21 @@ the loaded map. A loaded map is validated completely before it replaces the live
 from __future__ import annotations
 
 import os
+import time
 from pathlib import Path
 
 import numpy as np
 from geometry_msgs.msg import Point
 from rclpy.node import Node
 from std_msgs.msg import ColorRGBA
+from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from maze_sim.maze import ACTION_VECTORS
 from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap
+from tmgwr_agent.map_replica import ChangeEncoder
 from tmgwr_agent.map_store import MapStore, MapStoreError, default_map_dir, read_map
-from tmgwr_agent.nodes.step_messages import outcome_of
+from tmgwr_agent.nodes.step_messages import fill_change, outcome_of
 from tmgwr_common import topics
 from tmgwr_common.lockstep import Lockstep
 from tmgwr_common.node import (
@@ -50,13 +57,18 @@ from tmgwr_common.node import (
     STEP_QOS,
     declare_parameters,
     f64,
-    i32,
     np_f64,
     run,
-    u8,
 )
 from tmgwr_common.params import Param
-from tmgwr_interfaces.msg import Features, MapLink, MapNode, MotivationField, SensorimotorState
+from tmgwr_interfaces.msg import (
+    Features,
+    MapLink,
+    MapNode,
+    Potentials,
+    SensorimotorSnapshot,
+    SensorimotorState,
+)
 from tmgwr_interfaces.msg import SensorimotorMap as MapMsg
 from tmgwr_interfaces.srv import LoadMap, SaveMap
 
@@ -72,6 +84,9 @@ NODE_SPECS = (
           "(empty = use map_dir and map_name)"),
     Param("publish_rate", 2.0, "rate (Hz) of the latched map and marker publications",
           low=0.01, high=100.0),
+    Param("snapshot_period", 500, "steps between two latched whole-map snapshots "
+          "(/sensorimotor_snapshot; also sent on request and for a new map)", low=1,
+          high=1e9, integer=True),
 )
 
 
@@ -108,11 +123,17 @@ class MapLearnerNode(Node):
         self.create_subscription(Features, topics.FEATURES, self.on_features, STEP_QOS)
         # Marker colours only: the newest field is enough (best effort, depth 1, never
         # stalls its publisher), kept serialized and decoded only when markers are drawn.
-        self.create_subscription(MotivationField, topics.MOTIVATION, self.on_motivation,
+        self.create_subscription(Potentials, topics.POTENTIALS, self.on_motivation,
                                  SENSOR_QOS, raw=True)
         self.motivation_raw: bytes | None = None
         self.create_service(SaveMap, topics.SAVE_MAP, self.on_save)
         self.create_service(LoadMap, topics.LOAD_MAP, self.on_load)
+        # the map as consumers replicate it: per-step changes, latched whole-map snapshots
+        self.encoder: ChangeEncoder | None = None
+        self.encoder_of: SensorimotorMap | None = None       # the map it encodes
+        self.snapshot_pub = self.create_publisher(SensorimotorSnapshot, topics.MAP_SNAPSHOT,
+                                                  LATCHED_QOS)
+        self.create_service(Trigger, topics.REQUEST_SNAPSHOT, self.on_request_snapshot)
         self.create_timer(1.0 / self.p["publish_rate"], self.publish_map)
         if self.map is not None:
             self.publish_map()
@@ -138,11 +159,13 @@ class MapLearnerNode(Node):
         outcome = outcome_of(f)
         self.prev_winner = -1 if outcome.episode_start else int(self.map.prev)
         self.map.experience(x, outcome)              # what TMGWRAgent.step does here
-        return self.make_state(f)
+        state = self.make_state(f)
+        if f.step_id % self.p["snapshot_period"] == 0:
+            self.publish_snapshot()
+        return state
 
     def make_state(self, f: Features) -> SensorimotorState:
         m = self.map
-        n, K = m.n, m.out.shape[1]
         s = SensorimotorState()
         s.header = f.header
         s.run_id = f.run_id
@@ -153,12 +176,7 @@ class MapLearnerNode(Node):
         goal_x = np_f64(f.goal_features)
         s.goal_node = int(m.nearest_by_weight(goal_x)) if len(goal_x) == m.dim else -1
         s.inserted = bool(m.inserted)
-        s.n_slots, s.degree, s.dim = n, K, m.dim
-        s.alive = u8(m.alive[:n])
-        s.terminal_nodes = u8(m.terminal[:n])
-        s.weights = f64(m.w[:n])
-        s.link_targets = i32(m.out[:n])
-        s.link_reliability = f64(m.E[:n])
+        fill_change(s.map_change, self.changes().encode(m, f.run_id, f.step_id))
         s.action_dim = m.action_dim
         if m.winner >= 0:
             s.winner_link_actions = f64(m.a[m.winner])
@@ -174,16 +192,47 @@ class MapLearnerNode(Node):
         self.motivation_raw = raw
 
     def potentials(self) -> np.ndarray:
-        """V of the newest MotivationField (zeros before the first one)."""
+        """V of the newest /potentials (zeros before the first one)."""
         if self.motivation_raw is not None:
             from rclpy.serialization import deserialize_message
-            self.V = np_f64(deserialize_message(self.motivation_raw, MotivationField).potentials)
+            self.V = np_f64(deserialize_message(self.motivation_raw, Potentials).potentials)
             self.motivation_raw = None
         return self.V
+
+    # ------------------------------------------------------------------ replicated map
+    def changes(self) -> ChangeEncoder:
+        """The change encoder of the current map: a new one (new map id, whole map first)
+        when the map was created or replaced."""
+        if self.encoder_of is not self.map:
+            self.encoder, self.encoder_of = ChangeEncoder(time.time_ns()), self.map
+        return self.encoder
+
+    def publish_snapshot(self) -> str:
+        """The whole map, latched, as last sent (encoded now if nothing was sent yet)."""
+        enc = self.changes()
+        if enc.sequence < 0:
+            enc.encode(self.map, self.lockstep.run_id, max(self.lockstep.last_step, 0))
+        c = enc.snapshot()
+        msg = SensorimotorSnapshot()
+        msg.header.stamp, msg.header.frame_id = self.get_clock().now().to_msg(), "maze"
+        msg.run_id, msg.step_id, msg.map_version = c.run_id, max(c.step_id, 0), c.version
+        fill_change(msg.map, c)
+        self.snapshot_pub.publish(msg)
+        return (f"map {c.map_id} state {c.sequence} (step {c.step_id} of run {c.run_id}): "
+                f"{c.n} slots")
+
+    def on_request_snapshot(self, _req, resp):
+        if self.map is None:
+            resp.success, resp.message = False, "no map yet: nothing learnt"
+        else:
+            resp.success, resp.message = True, "published " + self.publish_snapshot()
+        return resp
 
     # ------------------------------------------------------------------ latched map
     def publish_map(self):
         m = self.map
+        if m is not None and self.encoder_of is not m:     # started from / loaded a map
+            self.publish_snapshot()
         step = self.lockstep.last_step
         if m is None or self.published == (step, m.version) and step >= 0:
             return
