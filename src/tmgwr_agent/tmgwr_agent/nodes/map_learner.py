@@ -14,7 +14,11 @@ replica that missed a change starts again from.
 At ``publish_rate`` Hz (when the map changed) the whole map is published latched, as
 ``tmgwr_interfaces/SensorimotorMap`` and as ``visualization_msgs/MarkerArray`` (nodes at
 their sensed position, coloured by the motivation potentials of the last
-``/potentials``; links coloured by reliability E).
+``/potentials``; links coloured by reliability E). These whole-map messages are for
+inspection and cost the map's size to build, so they take at most ``map_publish_share`` of
+the learner's wall time: after a publication that took ``t`` seconds the next one waits
+``t / map_publish_share`` (and at least ``1 / publish_rate``). On a small map that is the
+rate; on a growing big map the inspection messages thin out instead of capping the steps.
 
 Persistence (:mod:`tmgwr_agent.map_store`; README, Maps on disk): maps live in one
 directory, ``map_dir`` (``./tmgwr up`` passes the run's directory; default
@@ -84,6 +88,9 @@ NODE_SPECS = (
           "(empty = use map_dir and map_name)"),
     Param("publish_rate", 2.0, "rate (Hz) of the latched map and marker publications",
           low=0.01, high=100.0),
+    Param("map_publish_share", 0.05, "largest share of wall time spent building the "
+          "whole-map /map and /map_markers messages (they thin out on big maps)",
+          low=0.001, high=1.0),
     Param("snapshot_period", 500, "steps between two latched whole-map snapshots "
           "(/sensorimotor_snapshot; also sent on request and for a new map)", low=1,
           high=1e9, integer=True),
@@ -134,6 +141,7 @@ class MapLearnerNode(Node):
         self.snapshot_pub = self.create_publisher(SensorimotorSnapshot, topics.MAP_SNAPSHOT,
                                                   LATCHED_QOS)
         self.create_service(Trigger, topics.REQUEST_SNAPSHOT, self.on_request_snapshot)
+        self.next_map_time = 0.0        # time.monotonic() before which publish_map waits
         self.create_timer(1.0 / self.p["publish_rate"], self.publish_map)
         if self.map is not None:
             self.publish_map()
@@ -236,6 +244,9 @@ class MapLearnerNode(Node):
         step = self.lockstep.last_step
         if m is None or self.published == (step, m.version) and step >= 0:
             return
+        if time.monotonic() < self.next_map_time:
+            return
+        started = time.monotonic()
         self.published = (step, m.version)
         stamp = self.get_clock().now().to_msg()
         msg = MapMsg()
@@ -251,6 +262,8 @@ class MapLearnerNode(Node):
                              age=int(g)) for s, t, a, e, g in zip(src, tgt, act, E, age)]
         self.map_pub.publish(msg)
         self.marker_pub.publish(self.markers(stamp, ids, src, tgt, E))
+        took = time.monotonic() - started
+        self.next_map_time = started + took / self.p["map_publish_share"]
 
     def position(self, i: int) -> Point:
         """A node drawn where it is sensed: weight / gain = (row, col) -> x = col, y = row."""
