@@ -32,9 +32,13 @@ deadline = time.monotonic() + 60
 while time.monotonic() < deadline and not want <= set(node.get_node_names()):
     rclpy.spin_once(node, timeout_sec=0.1)
 print("NODES " + " ".join(sorted(set(node.get_node_names()) & want)), flush=True)
-services = {n for n, _ in node.get_service_names_and_types()}
-print("SERVICES " + " ".join(sorted(s for s in services if not s.split("/")[-1].startswith(
-    ("describe_", "get_", "list_", "set_param")) and "type_description" not in s)), flush=True)
+wanted = {"/set_goal", "/maze_sim/set_goal", "/maze_sim/set_cell", "/maze_sim/fire_event",
+          "/maze_sim/reset", "/map_learner/save_map", "/map_learner/load_map"}
+services = set()
+while time.monotonic() < deadline and not wanted <= services:  # discovery may still run
+    rclpy.spin_once(node, timeout_sec=0.1)
+    services = {n for n, _ in node.get_service_names_and_types()}
+print("SERVICES " + " ".join(sorted(services & wanted)), flush=True)
 client = node.create_client(SetGoal, topics.SET_GOAL)
 state = {"sent": None}
 def on_obs(m):
