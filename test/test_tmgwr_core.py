@@ -11,7 +11,7 @@ from tmgwr_agent.core.agent import TMGWRAgent, tmgwr_config
 from tmgwr_agent.core.exploration import EpsilonSchedule, RandomWalk
 from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
 from tmgwr_agent.core.outcome import EPISODE_START, Outcome
-from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap
+from tmgwr_agent.core.sensorimotor_map import Links, MapConfig, SensorimotorMap
 from tmgwr_common.params import ParamError, make_config
 
 UP, DOWN, LEFT, RIGHT = range(4)
@@ -127,7 +127,7 @@ def test_value_iteration_matches_fixed_point_on_a_chain():
     m = chain_map()
     mo = MotivationEstimator(MotivationConfig(gamma=0.97, beta=0.8, goal_sigma=0.3,
                                               goal_sim_floor=1e-3, vi_tol=1e-10,
-                                              vi_max_sweeps=100000))
+                                              vi_max_sweeps=100000, value_unknown=False))
     mo.set_goal(np.array([0.0, 0.2]))
     V = mo.update(m)
     assert mo.goal_node == 2
@@ -142,7 +142,8 @@ def test_value_iteration_matches_fixed_point_on_a_chain():
 def test_node_where_an_episode_ended_short_of_the_goal_is_absorbing(tmp_path):
     m = chain_map()
     m.mark_terminal(1)                  # an episode ended on node 1 without the goal
-    mo = MotivationEstimator(MotivationConfig(vi_tol=1e-10, vi_max_sweeps=100000))
+    mo = MotivationEstimator(MotivationConfig(vi_tol=1e-10, vi_max_sweeps=100000,
+                                              value_unknown=False))
     mo.set_goal(np.array([0.0, 0.2]))
     R1 = np.exp(-0.01 / (2 * 0.03 ** 2))
     # node 1 has no successor: V(1) = R_1, and node 0 only sees that through it
@@ -152,7 +153,8 @@ def test_node_where_an_episode_ended_short_of_the_goal_is_absorbing(tmp_path):
     assert step_id == 7
     assert list(m2.terminal[:3]) == [False, True, False]
     off = MotivationEstimator(MotivationConfig(vi_tol=1e-10, vi_max_sweeps=100000,
-                                               absorbing_terminals=False))
+                                               absorbing_terminals=False,
+                                               value_unknown=False))
     off.set_goal(np.array([0.0, 0.2]))
     np.testing.assert_allclose(off.update(m)[1], R1 + 0.97, rtol=1e-8)   # Eq. 5 as printed
     # walking on from node 1 within an episode clears the flag: it is not an end any more
@@ -191,7 +193,7 @@ def test_agent_marks_episode_ends_short_of_the_goal_only():
 
 def test_value_iteration_without_a_path_gives_no_motivation():
     m = chain_map()
-    mo = MotivationEstimator()
+    mo = MotivationEstimator(MotivationConfig(value_unknown=False))
     mo.set_goal(np.array([0.0, 0.0]))                    # goal at node 0: nothing leads there
     V = mo.update(m)
     R1 = np.exp(-0.01 / (2 * 0.03 ** 2))
@@ -199,6 +201,62 @@ def test_value_iteration_without_a_path_gives_no_motivation():
     assert V[2] == 0.0
     assert V[1] == pytest.approx(R1, rel=1e-3)        # to the tolerance vi_tol
     assert V[0] == pytest.approx(1.0 + 0.97 * R1, rel=1e-4)
+
+
+def test_no_route_to_the_goal_gives_exactly_zero_at_once():
+    """When the last link to the goal goes, every node cut off has V = 0 exactly in the
+    same update (the fixed point), not warm-started dust that decays over many steps."""
+    m = chain_map()
+    mo = MotivationEstimator(MotivationConfig(value_unknown=False))
+    mo.set_goal(np.array([0.0, 0.2]))
+    assert (mo.update(m)[:2] > 0.5).all()
+    slot = int(np.flatnonzero(m.out[0] == 1)[0])
+    m.out[0, slot], m.E[0, slot] = -1, 0.0               # 0 -> 1 deleted (a block)
+    m.version += 1
+    V = mo.update(m)
+    assert V[0] == 0.0 and V[1] > 0.5 and V[2] > 0.5
+    assert mo.sweeps < 10
+
+
+def test_value_of_the_unknown_by_hand():
+    """Eq. 5' on the chain 0 -> 1 -> 2 (links 'right', 0.1 apart), the goal sensation at
+    (0, 0.5), never sensed: no goal node, R = 0, the options alone give potentials."""
+    g, vs = 0.97, 1.0 / (1.0 - 0.97 ** 2)                 # V* = 1 / (1 - gamma^2)
+    m = chain_map()
+    mo = MotivationEstimator(MotivationConfig(vi_tol=1e-12, vi_max_sweeps=100000,
+                                              stale_prior=0.5, stale_horizon=1.0))
+    mo.set_goal(np.array([0.0, 0.5]))
+    for i in (0, 1):                                     # the two moves the map was built from
+        mo.record(i, i + 1, i == 1, Outcome(action=RIGHT), m.w)
+    np.testing.assert_allclose(mo.delta[RIGHT], [0.0, 0.1])   # the forward model of 'right'
+    V = mo.update(m)
+    assert mo.goal_node == -1
+    # untried options: U = V* gamma^h, h = |w_i + delta_a - x_g|_1 / L (L = 0.1);
+    # node 2 'right': h = 2; the other primitives have no move yet (delta 0): h = 3 at
+    # node 2, 4 at node 1, 5 at node 0. V(2) = gamma V* g^2; V(1) = gamma max(V(2),
+    # V* g^4) (link E = 1); V(0) = gamma max(V(1), V* g^5).
+    np.testing.assert_allclose(V, [vs * g ** 5, vs * g ** 4, vs * g ** 3], rtol=1e-9)
+    # stale: every pair known, node 2 bumped 'right' 3 steps ago, the rest just now:
+    # rho = 0.5 (1 - exp(-3 / T)), T = stale_horizon x 3 nodes = 3;
+    # O(2, right) = rho U + (1 - rho)(R_2 + gamma * 0) = rho V* g^2
+    st = mo.state_dict()
+    st["clock"] = 10
+    st["tried"][:3] = True
+    st["bump_t"][:3] = -1
+    st["bump_t"][2] = st["clock"]
+    st["bump_t"][2, RIGHT] = st["clock"] - 3
+    mo.load_state_dict(st)
+    rho = 0.5 * (1.0 - np.exp(-1.0))
+    V = mo.update(m)
+    v2 = g * rho * vs * g ** 2
+    np.testing.assert_allclose(V, [g * g * v2, g * v2, v2], rtol=1e-9)
+    # what Eq. 6 ranks at node 2: the option as a virtual link to itself
+    links = mo.links_of(m, 2)
+    K = m.out.shape[1]
+    assert links.targets[K + RIGHT] == 2 and (links.targets[K:][[UP, DOWN, LEFT]] == -1).all()
+    assert links.E[K + RIGHT] * V[2] == pytest.approx(rho * vs * g ** 2)
+    # the greedy probe's potentials have no options: no route, no motivation
+    assert not mo.exploit(m)[:3].any()
 
 
 def test_eq6_picks_link_with_highest_E_times_V_and_breaks_ties_by_rng():
@@ -230,7 +288,8 @@ def test_goal_search_walks_for_the_rest_of_the_episode_after_the_goal_node():
     m.step(np.array([0.0, 0.1]), ACTION_VECTORS[RIGHT])
     V = np.array([0.5, 0.9, 0.0])                         # node 1 is the most motivating
     sel = ActionSelector(np.random.default_rng(0),
-                         SelectorConfig(eps_start=0.0, eps_min=0.0, try_untried=False))
+                         SelectorConfig(eps_start=0.0, eps_min=0.0, try_untried=False,
+                                        goal_search=True))
     assert sel.select(m.links_of, 0, V, goal_node=1) == (RIGHT, False)   # Eq. 6 off the goal node
     # standing on the goal node with the episode still running: the map does not know
     # the way, the random walk acts, also back on node 0, until the episode ends
@@ -247,36 +306,28 @@ def test_goal_search_walks_for_the_rest_of_the_episode_after_the_goal_node():
     assert off.select(m.links_of, 0, V, goal_node=1) == (RIGHT, False)
 
 
-def test_each_primitive_is_tried_once_from_a_node_before_eq6():
+def test_eq6_ranks_options_as_virtual_self_links():
+    """An option of Eq. 5' reaches the selector as a link of the node to itself whose
+    E V(target) is the option's value; Eq. 6 ranks it with the links, and the paper's
+    selector (try_untried off) ignores it."""
     m = SensorimotorMap(dim=2, config=MapConfig(alpha_c=0.0, insert_at=1.0))
     m.step(np.array([0.0, 0.0]), None)
     m.h[:m.n] = 0.5
     m.step(np.array([0.0, 0.1]), ACTION_VECTORS[RIGHT])
-    V = np.array([0.5, 0.9, 0.0])
-    at0 = m.links_of(0)
+    V = np.array([0.8, 0.5, 0.0])                         # V(0) = 0.8 from an option
+    K = m.out.shape[1]
+    links = Links(np.concatenate((m.out[0], [-1, -1, 0, -1])),
+                  np.concatenate((m.E[0], [0.0, 0.0, 0.7 / 0.8, 0.0])),
+                  np.concatenate((m.a[0], ACTION_VECTORS)))
+    assert links.targets[K + LEFT] == 0
     sel = ActionSelector(np.random.default_rng(0), SelectorConfig(eps_start=0.0, eps_min=0.0))
-    sel.record(0, Outcome(action=RIGHT))                  # right was taken from node 0
-    seen = []
-    for _ in range(3):                                    # up, down, left, once each
-        a, explored = sel.select(m.links_of, 0, V, goal_node=1)
-        assert explored and a != RIGHT
-        sel.record(0, Outcome(action=a))
-        seen.append(a)
-    assert sorted(seen) == [UP, DOWN, LEFT]
-    assert sel.select(m.links_of, 0, V, goal_node=1) == (RIGHT, False)               # then Eq. 6
-    # the probe: Eq. 6 only
-    assert sel.select(m.links_of, 0, V, 1, explore=False) == (RIGHT, False)
-    fresh = ActionSelector(np.random.default_rng(0), SelectorConfig(eps_start=0.0, eps_min=0.0))
-    assert fresh.select(m.links_of, 0, V, 1, explore=False) == (RIGHT, False)
-    # the node is named by its id, whatever holds its links (the graph's selector
-    # receives only the winner's links)
-    for a in (UP, DOWN, LEFT):
-        fresh.record(7, Outcome(action=a))
-    assert fresh.select(lambda node: at0, 7, V, goal_node=1) == (RIGHT, True)
-    # a greedy probe marks nothing tried
-    probe = ActionSelector(np.random.default_rng(0), SelectorConfig(eps_start=0.0, eps_min=0.0))
-    probe.record(0, Outcome(action=UP), learn=False)
-    assert probe.untried(0) is not None and probe.tried == {}
+    assert sel.select(lambda i: links, 0, V, goal_node=-1) == (LEFT, True)   # 0.7 > 0.5
+    V[1] = 0.9
+    assert sel.select(lambda i: links, 0, V, goal_node=-1) == (RIGHT, False)
+    V[1] = 0.5
+    paper = ActionSelector(np.random.default_rng(0),
+                           SelectorConfig(eps_start=0.0, eps_min=0.0, try_untried=False))
+    assert paper.select(lambda i: links, 0, V, goal_node=-1) == (RIGHT, False)
 
 
 def test_outcome_terminal_rule():

@@ -11,28 +11,23 @@ broken by the agent's generator. The chosen action vector is mapped to the neare
 primitive of the action map (the four unit moves). A node with no outgoing link, or whose
 neighbours have no motivation yet, has no greedy opinion: the random walk acts.
 
-Search at the goal node (``goal_search``, our addition, on by default; off = the paper's
-selector). Eq. 6 climbs the potentials to the goal node ``g = argmax_i sim(i, g)``. When
-the goal's sensation is not yet represented in the map (a goal moved into a part of the
-maze never visited), ``g`` is only the node *most like* the goal, often a dead end behind
-a wall from it; reaching it without the episode ending tells the agent that its map does
-not know the way. Eq. 6 would then keep it oscillating around ``g`` (only epsilon's random
-steps leave), and measured on the paper's maze some trials never reached the new goal.
-With ``goal_search`` the selector switches to the random walk of section 5.1 for the rest
-of the episode once it has stood on the goal node without the episode ending; the map
-grows where the walk goes, and once the goal has been sensed its node exists and Eq. 6
-leads there directly from the next episode on. Only the map's own goal node is used
-(no maze knowledge), and the greedy probe (``explore=False``) never searches.
+Options (``try_untried``, our addition, on by default; off = the paper's selector). The
+motivation estimator's Eq. 5' also credits *options*, the value of an untried or stale
+(node, primitive) pair (motivation.py). They reach the selector as virtual links of the
+winner to itself (target = the winner, ``E V(target)`` = the option's value, action = the
+primitive; :meth:`MotivationEstimator.options_of`), so the same argmax ranks links and
+options and the agent takes the primitive whose outcome is worth finding out exactly when
+Eq. 5' says so. With ``try_untried`` off such self-links are ignored (no real link is a
+self-link: a bump is not stored). This replaces the former rule "take every primitive
+once from each node first", which explored every node alike, wherever the goal was.
 
-Untried actions first (``try_untried``, our addition, on by default). Eq. 6 only knows
-the links the agent has made; an action never taken from a node has no link and so no
-say, and with epsilon at its floor a side corridor glimpsed once may never be entered
-again. The selector remembers which motor primitives it has taken from each node and,
-where Eq. 6 would act, first takes one it has not (uniformly among them), once each: a
-bump or a new link then records the outcome. This is the optimism Q-learning gets from its
-zero-initialised table under negative rewards, at most four extra steps per node. On the
-paper's maze it shortens env-change b, as the detour is mapped before the block (README
-results).
+Goal search (``goal_search``, off by default: superseded by Eq. 5', which has no goal node
+until the goal is sensed; kept for the ablation). The random walk for the rest of the
+episode once the agent stood on the goal node without the episode ending.
+
+The state needed to continue a run (epsilon, the walk's direction, the search flag) is
+plain data: :meth:`ActionSelector.state_dict` / :meth:`load_state_dict`; the generator's
+state is the caller's (``rng.bit_generator.state``).
 """
 
 from __future__ import annotations
@@ -52,14 +47,14 @@ from tmgwr_common.params import param
 
 @dataclass(frozen=True)
 class SelectorConfig(ExplorationConfig):
-    """The shared exploration parameters plus our two additions to Eq. 6."""
+    """The shared exploration parameters plus our additions to Eq. 6."""
 
-    goal_search: bool = param(True, "random walk for the rest of an episode once the agent "
-                              "stood on the goal node without reaching the goal "
-                              "(action_selector.py; false: the paper's Eq. 6 selector)")
-    try_untried: bool = param(True, "take each motor primitive once from every node before "
-                              "following Eq. 6 there (action_selector.py; false: the "
-                              "paper's Eq. 6 selector)")
+    goal_search: bool = param(False, "random walk for the rest of an episode once the agent "
+                              "stood on the goal node without reaching the goal (superseded "
+                              "by value_unknown; action_selector.py)")
+    try_untried: bool = param(True, "Eq. 6 also ranks the options of Eq. 5' (untried or "
+                              "stale primitives, virtual self-links of the winner; "
+                              "action_selector.py; false: the paper's Eq. 6 selector)")
 
 
 class ActionSelector:
@@ -71,35 +66,29 @@ class ActionSelector:
         self.goal_search = config.goal_search
         self.searching = False      # stood on the goal node this episode, goal not there
         self.try_untried = config.try_untried
-        self.tried: dict[int, int] = {}   # node id -> bitmask of primitives taken from it
+        self.took_option = False    # the last Eq. 6 choice was an option of Eq. 5'
 
     def record(self, node: int, outcome: Outcome, learn: bool = True) -> None:
         """What the last action did, taken from ``node`` (the winner it acted from): an
-        episode start ends the goal search; otherwise the primitive counts as tried at the
-        node and the exploration policy continues from the outcome (walk direction,
-        Eq. 7 at the goal). A greedy probe (``learn`` False) marks nothing tried."""
+        episode start ends the goal search; otherwise the exploration policy continues
+        from the outcome (walk direction, Eq. 7 at the goal)."""
         if outcome.episode_start:
             self.searching = False
             return
-        if learn and node >= 0:
-            self.tried[node] = self.tried.get(node, 0) | (1 << outcome.action)
         self.policy.observe(outcome.action, outcome.bumped, outcome.goal_reached, learn)
 
-    def untried(self, node: int) -> int | None:
-        """A primitive never taken from ``node`` (uniform among them), or None."""
-        mask = self.tried.get(node, 0)
-        free = [a for a in range(len(ACTION_VECTORS)) if not mask >> a & 1]
-        if not free:
-            return None
-        return free[0] if len(free) == 1 else free[int(self.rng.integers(len(free)))]
-
-    def greedy(self, links: Links, V: np.ndarray) -> int | None:
-        """Eq. 6 over a node's links: the discrete action of a_{i k_max}, or None without
-        opinion (no link, or no neighbour with motivation)."""
-        best = kernels.best_links(links.targets, links.E, V)
+    def greedy(self, links: Links, V: np.ndarray, node: int = -1) -> int | None:
+        """Eq. 6 over a node's links (and options, virtual links to ``node`` itself): the
+        discrete action of a_{i k_max}, or None without opinion (no link, or no
+        neighbour with motivation)."""
+        targets = links.targets
+        if node >= 0 and not self.try_untried:
+            targets = np.where(targets == node, -1, targets)
+        best = kernels.best_links(targets, links.E, V)
         if not len(best):
             return None
         slot = best[0] if len(best) == 1 else best[self.rng.integers(len(best))]
+        self.took_option = node >= 0 and targets[slot] == node
         return self.action_index(links.actions[slot])
 
     @staticmethod
@@ -109,22 +98,30 @@ class ActionSelector:
 
     def select(self, links_of: Callable[[int], Links], node: int, V: np.ndarray,
                goal_node: int, explore: bool = True) -> tuple[int, bool]:
-        """(action, explored) at the winner ``node``, whose outgoing links
+        """(action, explored) at the winner ``node``, whose outgoing links and options
         ``links_of(node)`` gives (read only when Eq. 6 acts), under the potentials V
         (``V[-1]`` = 0 for empty slots) of the goal node ``goal_node``: the random walk with
-        probability epsilon, else an untried primitive of the node (``try_untried``), else
-        Eq. 6; the random walk for the rest of the episode once the agent stood on the goal
-        node with the episode still running (``goal_search``).
+        probability epsilon, else Eq. 6; the random walk for the rest of the episode once
+        the agent stood on the goal node with the episode still running (``goal_search``).
+        ``explored`` is True for a random-walk step or an option taken.
         """
         if explore and self.goal_search and node >= 0 and node == goal_node:
             self.searching = True
         if self.policy.explores(explore) or (explore and self.searching):
             return self.policy.walk.action(), True
-        if explore and self.try_untried and node >= 0:
-            u = self.untried(node)
-            if u is not None:
-                return u, True
-        a = self.greedy(links_of(node), V) if node >= 0 else None
+        if node < 0:
+            return self.policy.walk.action(), True
+        links = links_of(node)
+        a = self.greedy(links, V, node)
         if a is None:
             return self.policy.walk.action(), True
-        return a, False
+        return a, bool(self.took_option)
+
+    # ------------------------------------------------------------------ persistence
+    def state_dict(self) -> dict[str, np.ndarray | float | int]:
+        """Epsilon, the walk's state and the search flag, as plain numbers."""
+        return {**self.policy.state_dict(), "searching": int(self.searching)}
+
+    def load_state_dict(self, d: dict) -> None:
+        self.policy.load_state_dict(d)
+        self.searching = bool(d.get("searching", 0))

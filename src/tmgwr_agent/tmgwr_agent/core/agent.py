@@ -4,8 +4,10 @@ estimator -> action selector, one step at a time.
 Each step: the sensation reached by the last action is preprocessed, presented to the
 TMGWR map with the action vector that produced it (growth, adaptation, Eq. 1-2 on the
 link between the previous and the current winner), the motivation potentials are
-re-solved (Eq. 4-5, warm-started), and the action selector picks the next action (Eq. 6,
-or the random walk with probability epsilon, Eq. 7). The agent sees only the sensed
+re-solved (Eq. 4-5 with the value of the unknown, Eq. 5', warm-started), and the action
+selector picks the next action (Eq. 6 over the winner's links and options, or the random
+walk with probability epsilon, Eq. 7). A greedy probe (``act(explore=False)``) climbs the
+potentials of Eq. 5 without options: the learnt policy. The agent sees only the sensed
 coordinates, its touch sensor (``bumped``) and the goal's sensation: no reward, no cell
 index, no transition model (Table 1).
 
@@ -96,22 +98,41 @@ class TMGWRAgent:
         self.step(obs, Outcome.of_step(info), learn)
 
     def act(self, explore: bool = True) -> int:
-        a, self.last_explored = self.selector.select(self.map.links_of, self.winner,
-                                                     self.motivation.V,
+        if explore:
+            links_of, V = self._links_and_options, self.motivation.V
+        else:
+            links_of, V = self.map.links_of, self.motivation.exploit(self.map)
+        a, self.last_explored = self.selector.select(links_of, self.winner, V,
                                                      self.motivation.goal_node, explore)
         self.last_action = a
         return a
+
+    def _links_and_options(self, i: int):
+        return self.motivation.links_of(self.map, i)
+
+    def state_dict(self) -> dict:
+        """What continues a run besides the map (SensorimotorMap.state_dict) and the
+        generator: the estimator's outcome memory and the selector's state."""
+        return {"motivation": self.motivation.state_dict(),
+                "selector": self.selector.state_dict()}
+
+    def load_state_dict(self, d: dict) -> None:
+        self.motivation.load_state_dict(d["motivation"])
+        self.selector.load_state_dict(d["selector"])
 
     # -------------------------------------------------------------- one pass of Fig. 1a
     def step(self, obs: np.ndarray, outcome: Outcome, learn: bool = True) -> None:
         """Everything the agent does with one observation, in the order of the node ring
         (each line is what one node of the graph calls): the sensation is preprocessed,
         the map learns it (Eq. 1-2 on the link just traversed), the potentials are
-        re-solved (Eq. 4-5) and the selector records what its last action did. A greedy
-        probe (``learn`` False) only finds the winner and moves the walk on."""
+        re-solved (the estimator first notes what the action did, Eq. 5') and the selector
+        records what its last action did. A greedy probe (``learn`` False) only finds the
+        winner and moves the walk on."""
         x = self.preprocessor(obs, episode_start=outcome.episode_start)  # sensory_preprocessor
         acted_from = self.winner
         self.winner = self.map.experience(x, outcome, learn)             # map_learner
         if learn:
-            self.motivation.update(self.map)                             # motivation_estimator
+            self.motivation.record(acted_from, self.winner, self.map.inserted,  # motivation_
+                                   outcome, self.map.w)                           # estimator
+            self.motivation.update(self.map)
         self.selector.record(acted_from, outcome, learn)                 # action_selector

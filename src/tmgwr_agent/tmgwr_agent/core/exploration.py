@@ -21,6 +21,7 @@ from tmgwr_common.params import Config, ParamError, param
 
 N_ACTIONS = 4
 
+
 @dataclass(frozen=True)
 class ExplorationConfig(Config):
     """The exploration parameters every agent shares (same names, defaults and ranges)."""
@@ -98,6 +99,16 @@ class EpsilonGreedy:
         self.walk.observe(action, bumped)
         if learn and goal_reached:
             self.schedule.goal_attained()
+
+    def state_dict(self) -> dict[str, float | int]:
+        """Epsilon and the random walk's state (direction, last bump), plain numbers."""
+        return {"epsilon": float(self.schedule.eps), "walk_direction": int(self.walk.direction),
+                "walk_bumped": int(self.walk.bumped)}
+
+    def load_state_dict(self, d: dict) -> None:
+        self.schedule.eps = float(d["epsilon"])
+        self.walk.direction = int(d["walk_direction"])
+        self.walk.bumped = bool(d["walk_bumped"])
 
     def explores(self, explore: bool = True) -> bool:
         """Draw whether this step explores (always draws when ``explore``, for determinism)."""

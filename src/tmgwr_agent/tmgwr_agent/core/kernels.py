@@ -90,31 +90,110 @@ def goal_rewards(w, alive, n, g, sigma, floor, R):
 
 
 @njit(cache=True)
+def reaches_source(out, E, n, absorbing, alive, source, mark):
+    """``mark[i]``: some link path with E > 0 leads from node i to a source node
+    (``source[i]``: R_i > 0 or an option of the value of the unknown). A reverse
+    breadth-first search from the sources over the links (an absorbing node has no
+    successor, a dead slot is never marked). Returns the number of marked nodes.
+
+    Eq. 4-5 have no source in an unmarked node, whose potential is then exactly 0; value
+    iteration alone only approaches 0 geometrically, leaving numerical dust that Eq. 6
+    would follow."""
+    K = out.shape[1]
+    deg = np.zeros(n + 1, dtype=np.int64)         # reverse adjacency (CSR): j <- i
+    for i in range(n):
+        if not alive[i] or absorbing[i]:
+            continue
+        for s in range(K):
+            j = out[i, s]
+            if j >= 0 and E[i, s] > 0.0:
+                deg[j + 1] += 1
+    for j in range(n):
+        deg[j + 1] += deg[j]
+    pred = np.empty(deg[n], dtype=np.int64)
+    fill = deg[:n].copy()
+    for i in range(n):
+        if not alive[i] or absorbing[i]:
+            continue
+        for s in range(K):
+            j = out[i, s]
+            if j >= 0 and E[i, s] > 0.0:
+                pred[fill[j]] = i
+                fill[j] += 1
+    queue = np.empty(n, dtype=np.int64)
+    head, tail = 0, 0
+    for i in range(n):
+        mark[i] = alive[i] and source[i]
+        if mark[i]:
+            queue[tail] = i
+            tail += 1
+    while head < tail:
+        j = queue[head]
+        head += 1
+        for p in range(deg[j], deg[j + 1]):
+            i = pred[p]
+            if not mark[i]:
+                mark[i] = True
+                queue[tail] = i
+                tail += 1
+    return tail
+
+
+@njit(cache=True)
 def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, absorbing,
-                    alive):
-    """Synchronous sweeps of Eq. 4-5 until every |beta Delta_V(i)| <= tol V(i) + v_floor.
+                    alive, U, rho):
+    """Synchronous sweeps of Eq. 4-5 (with the options of the value of the unknown) until
+    every |beta Delta_V(i)| <= tol V(i) + v_floor.
 
     ``V`` has n + 1 entries, ``V[n] == 0`` (the target of empty link slots). A node with
-    ``absorbing[i]`` has no successor (a terminal state: Delta_V(i) = R_i - V(i)); a dead
-    slot (``alive[i]`` false) has V = 0. Returns the number of sweeps. Potentials below
-    ``v_floor`` are set to exactly 0 at the end.
+    ``absorbing[i]`` has no successor (a terminal state: Delta_V(i) = R_i - V(i)). Node i's
+    option for primitive a (``rho[i, a] > 0``) is a virtual successor worth
+    ``rho U + (1 - rho) (R_i + gamma max_k E[i, k] V(k))`` (motivation.py, Eq. 5').
+    Nodes from which no link path leads to a source (R > 0 or an option) get exactly
+    V = 0 (:func:`reaches_source`), as do dead slots. Returns the number of sweeps.
     """
     K = out.shape[1]
+    A = rho.shape[1]
+    source = np.zeros(n, dtype=np.bool_)
     for i in range(n):
-        if not alive[i]:
+        if R[i] > 0.0:
+            source[i] = True
+        elif not absorbing[i]:
+            for a in range(A):
+                if rho[i, a] > 0.0:
+                    source[i] = True
+                    break
+    live = np.empty(n, dtype=np.bool_)
+    reaches_source(out, E, n, absorbing, alive, source, live)
+    for i in range(n):
+        if not live[i]:
             V[i] = 0.0
     new = np.empty(n)
     sweeps = 0
     for sweeps in range(1, max_sweeps + 1):
         done = True
         for i in range(n):
+            if not live[i]:
+                new[i] = 0.0
+                continue
             best = 0.0
-            for s in range(K if not absorbing[i] else 0):
-                j = out[i, s]
-                if j >= 0:
-                    ev = E[i, s] * V[j]
-                    if ev > best:
-                        best = ev
+            if not absorbing[i]:
+                for s in range(K):
+                    j = out[i, s]
+                    if j >= 0:
+                        ev = E[i, s] * V[j]
+                        if ev > best:
+                            best = ev
+                stay = R[i] + gamma * best      # where a failed test leaves the agent
+                opt = 0.0
+                for a in range(A):
+                    r = rho[i, a]
+                    if r > 0.0:
+                        ov = r * U[i, a] + (1.0 - r) * stay
+                        if ov > opt:
+                            opt = ov
+                if opt > best:
+                    best = opt
             step = beta * (R[i] + gamma * best - V[i])      # beta * Delta_V(i)
             new[i] = V[i] + step
             if abs(step) > tol * new[i] + v_floor:
@@ -126,6 +205,117 @@ def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, abso
         if V[i] < v_floor:
             V[i] = 0.0
     return sweeps
+
+
+@njit(cache=True)
+def option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, succ, clock,
+               horizon, rho_max, U, rho):
+    """The options of the value of the unknown (motivation.py, Eq. 5') of node i, per
+    primitive a: ``U[i, a] = v_star gamma^h``, ``h = |w_i + delta_a - x_g|_1 / L`` (the
+    fewest steps from the predicted successor to the goal sensation); ``rho[i, a]`` = 1
+    for a primitive never taken from i, or whose move's link (to ``succ[i, a]``) the map
+    has since deleted; ``rho_max (1 - exp(-tau / horizon))`` for one whose last outcome
+    was a bump ``tau`` steps ago; 0 otherwise (known: no option)."""
+    for a in range(U.shape[1]):
+        if not tried[i, a]:
+            r = 1.0
+        elif 0 <= bump_t[i, a] < clock and horizon > 0.0:
+            r = rho_max * (1.0 - np.exp(-(clock - bump_t[i, a]) / horizon))
+        elif bump_t[i, a] < 0 and succ[i, a] >= 0 and not _linked(out, i, succ[i, a]):
+            r = 1.0
+        else:
+            rho[i, a] = 0.0
+            U[i, a] = 0.0
+            continue
+        d = 0.0
+        for k in range(w.shape[1]):
+            d += abs(w[i, k] + delta[a, k] - goal[k])
+        rho[i, a] = r
+        U[i, a] = v_star * gamma ** (d / L)
+
+
+@njit(cache=True)
+def _linked(out, i, j):
+    for s in range(out.shape[1]):
+        if out[i, s] == j:
+            return True
+    return False
+
+
+@njit(cache=True)
+def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, bump_t,
+                  succ, clock, horizon, rho_max, U, rho):
+    """:func:`option_row` of the nodes ``rows`` (none for dead slots)."""
+    for i in rows:
+        if i >= n:
+            continue
+        if not alive[i]:
+            for a in range(U.shape[1]):
+                rho[i, a] = 0.0
+                U[i, a] = 0.0
+            continue
+        option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, succ, clock,
+                   horizon, rho_max, U, rho)
+
+
+@njit(cache=True)
+def record_outcome(tried, bump_t, succ, delta, moves, w, node, winner, inserted, a, bumped,
+                   clock):
+    """The outcome memory of Eq. 5' after primitive a taken from ``node`` (motivation.py):
+    a new winner starts untried; the pair (node, a) is tried, with the step of a bump or
+    -1 after a move, whose successor ``succ`` is remembered; a move updates the mean
+    displacement ``delta[a]``. Returns whether the pair's option changed."""
+    if inserted and winner >= 0:
+        for b in range(tried.shape[1]):
+            tried[winner, b] = False
+            bump_t[winner, b] = -1
+            succ[winner, b] = -1
+    if node < 0:
+        return False
+    changed = (not tried[node, a]) or bumped or bump_t[node, a] >= 0 or succ[node, a] != winner
+    tried[node, a] = True
+    if bumped:
+        bump_t[node, a] = clock
+        return changed
+    bump_t[node, a] = -1
+    succ[node, a] = winner
+    if winner >= 0 and winner != node:
+        moves[a] += 1
+        for k in range(delta.shape[1]):
+            delta[a, k] += (w[winner, k] - w[node, k] - delta[a, k]) / moves[a]
+    return changed
+
+
+@njit(cache=True)
+def option_links(out_i, E_i, A_i, V, i, U_i, rho_i, R_i, gamma, primitives):
+    """Node i's links followed by one virtual link per option (motivation.py): targets,
+    reliabilities and action vectors, where an option's target is i itself and its
+    reliability makes E V(target) the option's successor value, so Eq. 6 ranks links and
+    options alike."""
+    K = out_i.shape[0]
+    P = primitives.shape[0]
+    best = 0.0
+    for s in range(K):
+        j = out_i[s]
+        if j >= 0:
+            ev = E_i[s] * V[j]
+            if ev > best:
+                best = ev
+    stay = R_i + gamma * best
+    targets = np.full(K + P, -1, dtype=np.int64)
+    E = np.zeros(K + P)
+    A = np.empty((K + P, A_i.shape[1]))
+    targets[:K] = out_i
+    E[:K] = E_i
+    A[:K] = A_i
+    A[K:] = primitives
+    if V[i] > 0.0:
+        for a in range(P):
+            r = rho_i[a]
+            if r > 0.0:
+                targets[K + a] = i
+                E[K + a] = (r * U_i[a] + (1.0 - r) * stay) / V[i]
+    return targets, E, A
 
 
 @njit(cache=True)

@@ -1,4 +1,5 @@
-"""Motivation estimator (section 3.3, Eq. 4-5, Algorithm 1): value iteration on the map.
+"""Motivation estimator (section 3.3, Eq. 4-5, Algorithm 1): value iteration on the map,
+with the value of what the map does not know (our Eq. 5', the paper's future work).
 
 For the goal node ``g`` (the node nearest the goal state, Algorithm 1 line 2) every node
 gets the immediate reward ``R_i = sim(i, g)`` (Eq. 10), a Gaussian of the distance between
@@ -15,29 +16,81 @@ the same relative precision as near the goal), or after ``vi_max_sweeps``. V is
 warm-started from the last solution, so a step that changed the map a little costs a few
 sweeps; a new goal restarts from V = 0 (Algorithm 1 line 5).
 
+**Exactly 0 without a route.** Before the sweeps a reverse breadth-first search from the
+sources (nodes with R > 0, or with an option below) over the links with E > 0 finds the
+nodes from which some link path leads to a source (:func:`kernels.reaches_source`); every
+other node gets V = 0 exactly, the fixed point of Eq. 4-5 there. Without it a region whose
+last link to the goal was deleted kept warm-started potentials that shrink only a few per
+cent a sweep and pass the relative stopping test as numerical dust (1e-149), and Eq. 6
+followed the gradient of that dust for over a hundred steps. This is part of solving
+Eq. 4-5 and holds for the paper's agent as well.
+
 The width of ``sim(i, g)`` is not in the paper. We take ``sigma_g = goal_sigma * L`` where
 ``L`` is the median length of the map's links in feature space, i.e. the distance between
 consecutive sensations: the reward is then concentrated on the goal node and its
 sensorimotor neighbours whatever the map's scale, so a node that is near the goal in
 sensor space but far from it along the map (behind a wall) is not a rival attractor. The
-Gaussian is cut below ``goal_sim_floor`` (1e-3: beyond about 1.9 link lengths): a node gets
-a potential only through links that lead to the goal, so where the map knows no way to the
-goal every potential is exactly 0, the action selector has no opinion and the agent
-explores (instead of climbing the far tail of the Gaussian into a dead end).
+Gaussian is cut below ``goal_sim_floor`` (1e-3: beyond about 1.9 link lengths).
+
+**The value of the unknown** (``value_unknown``, our addition, on by default; off = the
+paper's Eq. 5). Eq. 5 only knows the links the agent has made: where the map knows no way
+to the goal every potential is 0 and the agent can only random-walk; a side corridor never
+entered, or a wall that has since opened, never enters the plan. R-max style, every
+(node i, motor primitive a) pair whose outcome the map does not know gets a virtual
+successor, an *option*, in the max of Eq. 5::
+
+    Delta_V(i) = R_i + gamma max( max_k E[i, k] V(k), max_a O(i, a) ) - V(i)     (Eq. 5')
+    O(i, a)    = rho(i, a) U(i, a) + (1 - rho(i, a)) (R_i + gamma max_k E[i, k] V(k))
+    U(i, a)    = V* gamma^h(i, a),   h(i, a) = |w_i + delta_a - x_g|_1 / L
+    V*         = 1 / (1 - gamma^2)
+
+* ``U`` is what the unknown successor is worth if the way from it to the goal is as short
+  as it can possibly be: ``h`` counts the fewest steps of length ``L`` from the predicted
+  successor ``w_i + delta_a`` to the goal sensation ``x_g`` (the agent's four motor
+  primitives move along the axes, so the L1 distance; it never overestimates, so no
+  shorter route can be missed: the A* argument). ``delta_a`` is the mean sensed
+  displacement of primitive a over the moves the agent has made (its own forward model;
+  0 before the first). ``V*`` is the potential of a represented goal node (R_g = 1, and
+  Eq. 5 returns to it every second step: V(g) = 1 + gamma^2 V(g)), so an option at
+  ``h`` steps is worth exactly what a known route of ``h`` steps is worth. The agent
+  therefore leaves a known route of length d for an unknown only if ``1 + h`` plus the
+  way there is shorter than d: it explores where a shorter route may exist and nowhere
+  else, and the horizon comes from the goal's distance in the map, not from a constant.
+* ``rho`` is the probability that the option leads on (not into a wall): 1 for a
+  primitive never taken from i (R-max's optimism); for a pair whose last outcome was a
+  bump ``tau`` steps ago, ``rho = stale_prior (1 - exp(-tau / T))``, a wall that may have
+  opened since, with ``T = stale_horizon * N`` (N nodes: the time a walk needs to see the
+  whole map again). A failed test leaves the agent where it was after one step, hence the
+  ``(1 - rho)`` term: re-testing a wall beside the route costs one step and is worth it
+  once ``rho`` times the saving exceeds that step. A move that led somewhere is known
+  through its link; once the map has deleted that link (ageing, GWR) the pair is unknown
+  again (``rho`` = 1), so a forgotten piece of the shortest route is walked again when it
+  may be worth it. A new node starts with every primitive untried.
+* The goal node exists only once the map represents the goal (a node within ``L / 2`` of
+  the goal sensation, i.e. the goal has been sensed): before that ``R = 0`` everywhere
+  and the options alone lead the agent, by the nearest plausible unknown, towards the
+  goal sensation. (The paper's ``g = SM.Map(x_g)`` is otherwise the node *most like* a
+  goal in unvisited space, often a dead end behind a wall, where Eq. 6 then oscillated;
+  this replaces the former ``goal_search``.)
+* The options are part of the potentials the action selector climbs (Eq. 6 ranks them
+  with the links: :meth:`MotivationEstimator.links_of`), which replaces the former
+  ``try_untried``. The experimenter's greedy probe (``explore`` False) is the learnt
+  policy: it climbs the potentials of Eq. 5 without options (:meth:`exploit`), as
+  Dyna-Q+'s probe reads its bonus-free twin.
 
 Terminal nodes (``absorbing_terminals``, our addition, on by default; off = Eq. 5 on every
 node). The agent notices when an episode ends short of its goal: it is moved back to the
 start instead of walking on, and it did not sense the goal. The map flags the node it stood
 on (:meth:`~tmgwr_agent.core.sensorimotor_map.SensorimotorMap.mark_terminal`) until it
 walks on from it, and value iteration treats a flagged node as a terminal state, as any MDP
-solver would: ``V(i) = R_i``, no successor. Without this a route through a cell that ends
-the episode (the previous goal in the goal-change scenario of section 5.2.1, which stays a
-termination point) looks as good as any other, and the agent keeps being sent home through
-it: on the paper's maze the learnt way to goal 3's region ran through goal 2's cell, so
-after the change 2 -> 3 many episodes ended there instead of at goal 3 (the README's
-goal-change results compare the two). Episodes that end *at* the goal flag nothing (the
-goal node keeps Eq. 5, so a goal that moves away leaves no trace), nor do episodes cut by a
-step limit.
+solver would: ``V(i) = R_i``, no successor, no option. Without this a route through a cell
+that ends the episode (the previous goal in the goal-change scenario of section 5.2.1,
+which stays a termination point) looks as good as any other, and the agent keeps being
+sent home through it. Episodes that end *at* the goal flag nothing (the goal node keeps
+Eq. 5, so a goal that moves away leaves no trace), nor do episodes cut by a step limit.
+
+The outcome memory (primitives tried per node, step of the last bump, the step clock, the
+forward model ``delta``) is plain data: :meth:`state_dict` / :meth:`load_state_dict`.
 """
 
 from __future__ import annotations
@@ -46,19 +99,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from maze_sim.maze import ACTION_VECTORS
 from tmgwr_agent.core import kernels
-from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
+from tmgwr_agent.core.outcome import Outcome
+from tmgwr_agent.core.sensorimotor_map import Links, SensorimotorMap
 from tmgwr_common.params import Config, param
 
-#: Potentials below this are 0: gamma**d for d > 10,000 steps, i.e. no path to the goal.
-#: Without it a potential that lost its path decays geometrically for ever (to denormals)
-#: and the agent follows that numerical dust instead of exploring.
+#: Potentials below this are 0: gamma**d for d > 10,000 steps.
 V_FLOOR = 1e-150
+#: Motor primitives (the action map's codebook).
+N_PRIMITIVES = len(ACTION_VECTORS)
+_PRIMITIVES = np.ascontiguousarray(ACTION_VECTORS, dtype=float)
 
 
 @dataclass(frozen=True)
 class MotivationConfig(Config):
-    """Hyperparameters of the motivation estimator (Eq. 4-5, Algorithm 1)."""
+    """Hyperparameters of the motivation estimator (Eq. 4-5, Algorithm 1, Eq. 5')."""
 
     gamma: float = param(0.97, "Eq. 5: discount factor (Table 2)", low=0.0, high=1.0,
                          low_open=True, high_open=True)
@@ -74,14 +130,29 @@ class MotivationConfig(Config):
                                integer=True)
     absorbing_terminals: bool = param(True, "nodes where an episode ended have no successor "
                                       "in Eq. 5 (false: the paper's Eq. 5 on every node)")
+    value_unknown: bool = param(True, "Eq. 5': untried and stale (node, primitive) pairs "
+                                "are options worth the unknown; the goal node exists once "
+                                "the goal is sensed (motivation.py; false: the paper's "
+                                "Eq. 5)")
+    stale_prior: float = param(0.03, "Eq. 5': probability that a remembered wall has opened "
+                               "after a long time (rho's limit)", low=0.0, high=1.0)
+    stale_horizon: float = param(10.0, "Eq. 5': a bump goes stale over T = stale_horizon x "
+                                 "nodes steps (0: bumps never go stale)", low=0.0,
+                                 high=1e6)
 
 
-def _no_absorbing(n: int) -> np.ndarray:
-    return np.zeros(n, dtype=bool)
+def _grown(a: np.ndarray, n: int, fill) -> np.ndarray:
+    """``a`` with at least n rows (doubling), new rows set to ``fill``."""
+    if len(a) >= n:
+        return a
+    b = np.full((max(n, 2 * len(a)),) + a.shape[1:], fill, dtype=a.dtype)
+    b[: len(a)] = a
+    return b
 
 
 class MotivationEstimator:
-    """Holds the goal and the potentials V; :meth:`update` re-solves Eq. 4-5."""
+    """Holds the goal, the potentials V and the outcome memory of Eq. 5'; :meth:`record`
+    notes what an action did, :meth:`update` re-solves Eq. 4-5'."""
 
     def __init__(self, config: MotivationConfig = MotivationConfig()):
         kernels.announce_compilation()
@@ -90,17 +161,39 @@ class MotivationEstimator:
         self.goal_sigma, self.goal_sim_floor = config.goal_sigma, config.goal_sim_floor
         self.vi_tol, self.vi_max_sweeps = config.vi_tol, config.vi_max_sweeps
         self.absorbing_terminals = config.absorbing_terminals
+        self.value_unknown = config.value_unknown
+        self.stale_prior, self.stale_horizon = config.stale_prior, config.stale_horizon
+        self.v_star = 1.0 / (1.0 - self.gamma ** 2)
         self.goal_x: np.ndarray | None = None
         self.goal_node = -1
         self.V = np.zeros(1)          # V[:n]; V[n] stays 0 (target of empty link slots)
         self.sweeps = 0               # sweeps of the last update
         self._scale_version = -1      # map version the cached link scale belongs to
         self._scale = 1.0
+        # outcome memory (Eq. 5'): per node slot and primitive
+        self.tried = np.zeros((64, N_PRIMITIVES), dtype=bool)
+        self.bump_t = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)
+        self.succ = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)   # where a move led
+        self.clock = 0                # learning steps recorded
+        self.delta = np.zeros((N_PRIMITIVES, 2))     # mean sensed displacement per primitive
+        self.moves = np.zeros(N_PRIMITIVES, dtype=np.int64)
+        self.U = np.zeros((64, N_PRIMITIVES))
+        self.rho = np.zeros((64, N_PRIMITIVES))
+        self.R = np.zeros(1)
+        self.V0 = np.zeros(1)         # Eq. 5 without options (exploit), computed on demand
+        self._v0_fresh = False
+        self._options_key: tuple = ()
+        self._dirty: set[int] = set()    # rows whose outcome memory changed since update
+        self._alive_version, self._alive = -1, 0
 
+    # ------------------------------------------------------------------ goal
     def set_goal(self, goal_x: np.ndarray) -> None:
         """A new goal state: the potentials restart from 0 (Algorithm 1, line 5)."""
         self.goal_x = np.asarray(goal_x, dtype=float)
+        self._options_key = ()
         self.V[:] = 0.0
+        self.V0[:] = 0.0
+        self._v0_fresh = False
 
     def follow_goal(self, goal_x: np.ndarray) -> bool:
         """The goal sensation that came with this step: :meth:`set_goal` when it differs
@@ -112,6 +205,50 @@ class MotivationEstimator:
         self.set_goal(goal_x)
         return True
 
+    # ------------------------------------------------------------------ outcome memory
+    def record(self, node: int, winner: int, inserted: bool, outcome: Outcome,
+               w: np.ndarray) -> None:
+        """What the last learning step did: primitive ``outcome.action`` taken from
+        ``node`` led to ``winner`` (``inserted``: a new node) or bumped. The pair becomes
+        known (a bump remembers its step, for staleness), a new node starts with every
+        primitive untried, and a move updates the forward model ``delta`` (the mean of
+        ``w[winner] - w[node]`` over the moves made with the primitive; ``w``: the map's
+        weights)."""
+        if outcome.episode_start:
+            return
+        self.clock += 1
+        top = max(node, winner) + 1
+        if top > len(self.tried):
+            self.tried = _grown(self.tried, top, False)
+            self.bump_t = _grown(self.bump_t, top, -1)
+            self.succ = _grown(self.succ, top, -1)
+        if self.delta.shape[1] != w.shape[1]:
+            self.delta = np.zeros((N_PRIMITIVES, w.shape[1]))
+        if inserted and winner >= 0:
+            self._dirty.add(winner)
+        if kernels.record_outcome(self.tried, self.bump_t, self.succ, self.delta,
+                                  self.moves, w, node, winner, inserted, outcome.action,
+                                  outcome.bumped, self.clock):
+            self._dirty.add(node)
+
+    def state_dict(self) -> dict[str, np.ndarray | float | int]:
+        """The outcome memory, as plain arrays and numbers (node rows ``[0, n)`` of the
+        map it belongs to)."""
+        return {"tried": self.tried.copy(), "bump_t": self.bump_t.copy(),
+                "succ": self.succ.copy(),
+                "clock": int(self.clock), "delta": self.delta.copy(),
+                "moves": self.moves.copy()}
+
+    def load_state_dict(self, d: dict) -> None:
+        self.tried = np.array(d["tried"], dtype=bool)
+        self.bump_t = np.array(d["bump_t"], dtype=np.int64)
+        self.succ = np.array(d["succ"], dtype=np.int64)
+        self.clock = int(d["clock"])
+        self.delta = np.array(d["delta"], dtype=float)
+        self.moves = np.array(d["moves"], dtype=np.int64)
+        self._options_key = ()
+
+    # ------------------------------------------------------------------ Eq. 4-5'
     @staticmethod
     def link_scale(m: SensorimotorMap) -> float:
         """Median length of the map's links in feature space (0 if it has none)."""
@@ -128,27 +265,128 @@ class MotivationEstimator:
                              floor=self.goal_sim_floor, R=R)
         return R
 
-    def update(self, m: SensorimotorMap) -> np.ndarray:
-        """Solve Eq. 4-5 on the current map; returns V[:n]."""
+    def _prepare(self, m: SensorimotorMap) -> int:
+        """Sizes, goal node and rewards of this map; returns n."""
         n = m.n
         if len(self.V) != n + 1:                      # the map grew: extend, keep values
-            V = np.zeros(n + 1)
-            k = min(n, len(self.V) - 1)
-            V[:k] = self.V[:k]
-            self.V = V
-        self.sweeps = 0
-        g = m.nearest_by_weight(self.goal_x) if self.goal_x is not None else -1
-        self.goal_node = g
-        if g < 0:                                     # no goal yet, or an empty map
-            self.V[:] = 0.0
-            return self.V[:n]
+            self.V = self._extended(self.V, n)
+            self.V0 = self._extended(self.V0, n)
+        if len(self.U) < n:
+            self.tried = _grown(self.tried, n, False)
+            self.bump_t = _grown(self.bump_t, n, -1)
+            self.succ = _grown(self.succ, n, -1)
+            self.U = _grown(self.U, n, 0.0)
+            self.rho = _grown(self.rho, n, 0.0)
+        self.goal_node = -1
+        g = m.nearest_by_weight(self.goal_x) if self.goal_x is not None and n else -1
+        if g < 0:
+            self.R = np.zeros(n)
+            return n
         if self._scale_version != m.version:          # links only change with the version
             self._scale = self.link_scale(m) or 1.0
             self._scale_version = m.version
-        R = self.rewards(m, g, self._scale)
-        absorbing = m.terminal if self.absorbing_terminals else _no_absorbing(n)
+        if self.value_unknown:                        # represented only once sensed
+            d = m.w[g] - self.goal_x
+            if float(np.sqrt(d @ d)) > 0.5 * self._scale:
+                self.R = np.zeros(n)
+                return n
+        self.goal_node = g
+        self.R = self.rewards(m, g, self._scale)
+        return n
+
+    @staticmethod
+    def _extended(V: np.ndarray, n: int) -> np.ndarray:
+        W = np.zeros(n + 1)
+        k = min(n, len(V) - 1)
+        W[:k] = V[:k]
+        return W
+
+    def _absorbing(self, m: SensorimotorMap, n: int) -> np.ndarray:
+        return m.terminal[:n] if self.absorbing_terminals else np.zeros(n, dtype=bool)
+
+    def stale_clock(self, nodes: int) -> tuple[int, float]:
+        """(clock, T) for the staleness of bumps: ``T = stale_horizon * nodes``; the clock
+        advances in steps of T / 8 (rho changes at those ticks only, so the warm-started
+        value iteration is not re-solved for a drift of every option each step)."""
+        T = self.stale_horizon * nodes
+        tick = max(1, int(T / 8))
+        return self.clock - self.clock % tick, T
+
+    def _options(self, m: SensorimotorMap, n: int) -> None:
+        """U and rho of every option (:func:`kernels.option_values`), recomputed in full
+        when the map's structure, the goal, the node count or the stale clock's tick
+        changed, else only on the rows whose outcome memory :meth:`record` changed
+        (weights drift a little between full passes; a pow per pair and step would
+        dominate the step time). Absorbing nodes keep theirs unused (Eq. 5' gives them
+        no successor)."""
+        clock, T = self.stale_clock(self.nodes_alive(m, n))
+        key = (m.version, clock, n)
+        if key != self._options_key:
+            self._options_key = key
+            rows = np.arange(n)
+        elif self._dirty:
+            rows = np.fromiter(self._dirty, dtype=np.int64)
+        else:
+            return
+        self._dirty.clear()
+        kernels.option_values(m.w, m.out, m.alive, n, rows, self.goal_x, self.delta,
+                              self._scale, self.v_star, self.gamma, self.tried, self.bump_t,
+                              self.succ, clock, T, self.stale_prior, self.U, self.rho)
+
+    def nodes_alive(self, m: SensorimotorMap, n: int) -> int:
+        if self._alive_version != m.version:
+            self._alive_version = m.version
+            self._alive = int(m.alive[:n].sum())
+        return self._alive
+
+    def update(self, m: SensorimotorMap) -> np.ndarray:
+        """Solve Eq. 4-5' on the current map; returns V[:n]."""
+        n = self._prepare(m)
+        self._v0_fresh = False
+        self.sweeps = 0
+        if self.goal_x is None or n == 0:
+            self.V[:] = 0.0
+            return self.V[:n]
+        absorbing = self._absorbing(m, n)
+        if self.value_unknown:
+            self._options(m, n)
         self.sweeps = kernels.value_iteration(
-            out=m.out, E=m.E, R=R, V=self.V, n=n, beta=self.beta, gamma=self.gamma,
+            out=m.out, E=m.E, R=self.R, V=self.V, n=n, beta=self.beta, gamma=self.gamma,
             tol=self.vi_tol, v_floor=V_FLOOR, max_sweeps=self.vi_max_sweeps,
-            absorbing=absorbing, alive=m.alive)
+            absorbing=absorbing, alive=m.alive, U=self.U[:n], rho=self.rho[:n])
         return self.V[:n]
+
+    def exploit(self, m: SensorimotorMap) -> np.ndarray:
+        """The potentials of Eq. 5 without options (the learnt policy, for the greedy
+        probe), on the map of the last :meth:`update`; V0 (n + 1 entries), computed once
+        per update, warm-started."""
+        if not self.value_unknown:
+            return self.V
+        if not self._v0_fresh:
+            n = self._prepare(m)
+            if self.goal_x is None or n == 0:
+                self.V0[:] = 0.0
+            else:
+                kernels.value_iteration(
+                    out=m.out, E=m.E, R=self.R, V=self.V0, n=n, beta=self.beta,
+                    gamma=self.gamma, tol=self.vi_tol, v_floor=V_FLOOR,
+                    max_sweeps=self.vi_max_sweeps, absorbing=self._absorbing(m, n),
+                    alive=m.alive, U=self.U[:n], rho=np.zeros((n, N_PRIMITIVES)))
+            self._v0_fresh = True
+        return self.V0
+
+    def options_of(self, i: int, links: Links) -> Links:
+        """Node i's links followed by its options as virtual links (Eq. 6 ranks both):
+        an option's target is i itself, its reliability ``O(i, a) / V(i)`` so that
+        ``E V(target)`` is its successor value, its action the primitive's vector. Over
+        the graph they travel in the MotivationField's winner-link arrays."""
+        if not self.value_unknown or i < 0 or i >= len(self.V) - 1:
+            return links
+        R_i = self.R[i] if i < len(self.R) else 0.0
+        return Links(*kernels.option_links(links.targets, links.E, links.actions, self.V, i,
+                                           self.U[i], self.rho[i], R_i, self.gamma,
+                                           _PRIMITIVES))
+
+    def links_of(self, m: SensorimotorMap, i: int) -> Links:
+        """:meth:`options_of` node i's links in map m (what Eq. 6 ranks in-process)."""
+        return self.options_of(i, m.links_of(i))

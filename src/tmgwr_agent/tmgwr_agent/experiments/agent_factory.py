@@ -2,10 +2,11 @@
 
 ``make_agent("tmgwr:credit", maze, rng)``: a name, optionally followed by ``:options``
 joined by ``+``. TMGWR options: ``literal`` / ``credit`` choose the sensorimotor-link rule
-(plain ``tmgwr`` uses the default of ``MapConfig.link_rule``); ``paper`` turns our three
-additions off (``absorbing_terminals``, ``goal_search``, ``try_untried``: the agent of
-Eq. 1-7 as printed), e.g. ``tmgwr:literal+paper``. The baselines take no option. Options
-are parameter overrides, checked like any other (an unknown name is refused).
+(plain ``tmgwr`` uses the default of ``MapConfig.link_rule``); ``paper`` turns our
+additions off (``absorbing_terminals``; ``value_unknown`` and ``try_untried``, the options
+of Eq. 5' and Eq. 6; ``goal_search``: the agent of Eq. 1-7 as printed), e.g.
+``tmgwr:literal+paper``. The baselines take no option. Options are parameter overrides,
+checked like any other (an unknown name is refused).
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ AGENT_NAMES = ("tmgwr", "q_learning", "model_based", "dyna_q_plus")
 TMGWR_OPTIONS = {
     "literal": {"link_rule": "literal"},
     "credit": {"link_rule": "credit"},
-    "paper": {"absorbing_terminals": False, "goal_search": False, "try_untried": False},
+    "paper": {"absorbing_terminals": False, "value_unknown": False, "goal_search": False,
+              "try_untried": False},
 }
 
 
