@@ -140,15 +140,32 @@ def reaches_source(out, E, n, absorbing, alive, source, mark):
 
 
 @njit(cache=True)
+def contradicted(out, E, n, bump_t, succ):
+    """E with the links zeroed whose pair's last outcome was a bump (the move from i with
+    primitive a once led to ``succ[i, a]``, and bumped since): what the outcome memory
+    still believes traversable."""
+    Eb = E[:n].copy()
+    for i in range(n):
+        for a in range(bump_t.shape[1]):
+            j = succ[i, a]
+            if bump_t[i, a] >= 0 and j >= 0:
+                for s in range(out.shape[1]):
+                    if out[i, s] == j:
+                        Eb[i, s] = 0.0
+    return Eb
+
+
+@njit(cache=True)
 def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, absorbing,
-                    alive, U, rho):
+                    alive, U, rho, osucc):
     """Synchronous sweeps of Eq. 4-5 (with the options of the value of the unknown) until
     every |beta Delta_V(i)| <= tol V(i) + v_floor.
 
     ``V`` has n + 1 entries, ``V[n] == 0`` (the target of empty link slots). A node with
     ``absorbing[i]`` has no successor (a terminal state: Delta_V(i) = R_i - V(i)). Node i's
     option for primitive a (``rho[i, a] > 0``) is a virtual successor worth
-    ``rho U + (1 - rho) (R_i + gamma max_k E[i, k] V(k))`` (motivation.py, Eq. 5').
+    ``rho S + (1 - rho) (R_i + gamma max_k E[i, k] V(k))`` with ``S = V(osucc[i, a])``
+    for a known successor, else ``U[i, a]`` (motivation.py, Eq. 5').
     Nodes from which no link path leads to a source (R > 0 or an option) get exactly
     V = 0 (:func:`reaches_source`), as do dead slots. Returns the number of sweeps.
     """
@@ -189,7 +206,9 @@ def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, abso
                 for a in range(A):
                     r = rho[i, a]
                     if r > 0.0:
-                        ov = r * U[i, a] + (1.0 - r) * stay
+                        j = osucc[i, a]
+                        sv = V[j] if j >= 0 else U[i, a]
+                        ov = r * sv + (1.0 - r) * stay
                         if ov > opt:
                             opt = ov
                 if opt > best:
@@ -208,30 +227,84 @@ def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, abso
 
 
 @njit(cache=True)
+def cell_grid(w, alive, n, L):
+    """A lookup table of the nodes by position (2-D sensations): ``grid[r, c]`` = the node
+    whose weight rounds to cell (r, c) of side L from ``origin`` (-1 = none). Other
+    dimensions get an empty table (no lookup: options keep their optimistic value)."""
+    origin = np.zeros(2)
+    if w.shape[1] != 2 or n == 0:
+        return np.full((0, 0), -1, dtype=np.int64), origin
+    lo = np.full(2, np.inf)
+    hi = np.full(2, -np.inf)
+    for i in range(n):
+        if alive[i]:
+            for k in range(2):
+                lo[k] = min(lo[k], w[i, k])
+                hi[k] = max(hi[k], w[i, k])
+    if lo[0] > hi[0]:
+        return np.full((0, 0), -1, dtype=np.int64), origin
+    origin[:] = lo - L
+    rows = int((hi[0] - origin[0]) / L + 0.5) + 2
+    cols = int((hi[1] - origin[1]) / L + 0.5) + 2
+    grid = np.full((rows, cols), -1, dtype=np.int64)
+    for i in range(n):
+        if alive[i]:
+            grid[int((w[i, 0] - origin[0]) / L + 0.5), int((w[i, 1] - origin[1]) / L + 0.5)] = i
+    return grid, origin
+
+
+@njit(cache=True)
+def node_at(grid, origin, L, w, x):
+    """The node within L / 2 of position x (-1 if none), from :func:`cell_grid`."""
+    if grid.shape[0] == 0:
+        return -1
+    r = int(np.floor((x[0] - origin[0]) / L + 0.5))
+    c = int(np.floor((x[1] - origin[1]) / L + 0.5))
+    if r < 0 or c < 0 or r >= grid.shape[0] or c >= grid.shape[1]:
+        return -1
+    j = grid[r, c]
+    if j >= 0 and (w[j, 0] - x[0]) ** 2 + (w[j, 1] - x[1]) ** 2 <= 0.25 * L * L:
+        return j
+    return -1
+
+
+@njit(cache=True)
 def option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, succ, clock,
-               horizon, rho_max, U, rho):
+               horizon, rho_max, grid, origin, U, rho, osucc):
     """The options of the value of the unknown (motivation.py, Eq. 5') of node i, per
-    primitive a: ``U[i, a] = v_star gamma^h``, ``h = |w_i + delta_a - x_g|_1 / L`` (the
-    fewest steps from the predicted successor to the goal sensation); ``rho[i, a]`` = 1
-    for a primitive never taken from i, or whose move's link (to ``succ[i, a]``) the map
-    has since deleted; ``rho_max (1 - exp(-tau / horizon))`` for one whose last outcome
-    was a bump ``tau`` steps ago; 0 otherwise (known: no option)."""
+    primitive a: ``rho[i, a]`` = 1 for a primitive never taken from i, or whose move's
+    link (to ``succ[i, a]``) the map has since deleted; ``rho_max (1 - exp(-tau /
+    horizon))`` for one whose last outcome was a bump ``tau`` steps ago; 0 otherwise
+    (known: no option). The option's successor: ``osucc[i, a]``, a known node (where the
+    move once led, else a node at the predicted position ``w_i + delta_a``), whose V the
+    sweep reads; -1 when none, and then ``U[i, a] = v_star gamma^h``, ``h = |w_i +
+    delta_a - x_g|_1 / L`` (the fewest steps from the predicted successor to the goal
+    sensation)."""
+    x = np.empty(w.shape[1])
     for a in range(U.shape[1]):
+        j = -1
         if not tried[i, a]:
             r = 1.0
         elif 0 <= bump_t[i, a] < clock and horizon > 0.0:
             r = rho_max * (1.0 - np.exp(-(clock - bump_t[i, a]) / horizon))
+            j = succ[i, a]
         elif bump_t[i, a] < 0 and succ[i, a] >= 0 and not _linked(out, i, succ[i, a]):
             r = 1.0
+            j = succ[i, a]
         else:
             rho[i, a] = 0.0
             U[i, a] = 0.0
+            osucc[i, a] = -1
             continue
         d = 0.0
         for k in range(w.shape[1]):
-            d += abs(w[i, k] + delta[a, k] - goal[k])
+            x[k] = w[i, k] + delta[a, k]
+            d += abs(x[k] - goal[k])
+        if j < 0:
+            j = node_at(grid, origin, L, w, x)
         rho[i, a] = r
         U[i, a] = v_star * gamma ** (d / L)
+        osucc[i, a] = j if j != i else -1
 
 
 @njit(cache=True)
@@ -244,7 +317,7 @@ def _linked(out, i, j):
 
 @njit(cache=True)
 def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, bump_t,
-                  succ, clock, horizon, rho_max, U, rho):
+                  succ, clock, horizon, rho_max, grid, origin, U, rho, osucc):
     """:func:`option_row` of the nodes ``rows`` (none for dead slots)."""
     for i in rows:
         if i >= n:
@@ -253,9 +326,10 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
             for a in range(U.shape[1]):
                 rho[i, a] = 0.0
                 U[i, a] = 0.0
+                osucc[i, a] = -1
             continue
         option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, succ, clock,
-                   horizon, rho_max, U, rho)
+                   horizon, rho_max, grid, origin, U, rho, osucc)
 
 
 @njit(cache=True)
@@ -287,7 +361,7 @@ def record_outcome(tried, bump_t, succ, delta, moves, w, node, winner, inserted,
 
 
 @njit(cache=True)
-def option_links(out_i, E_i, A_i, V, i, U_i, rho_i, R_i, gamma, primitives):
+def option_links(out_i, E_i, A_i, V, i, U_i, rho_i, osucc_i, R_i, gamma, primitives):
     """Node i's links followed by one virtual link per option (motivation.py): targets,
     reliabilities and action vectors, where an option's target is i itself and its
     reliability makes E V(target) the option's successor value, so Eq. 6 ranks links and
@@ -313,8 +387,10 @@ def option_links(out_i, E_i, A_i, V, i, U_i, rho_i, R_i, gamma, primitives):
         for a in range(P):
             r = rho_i[a]
             if r > 0.0:
+                j = osucc_i[a]
+                sv = V[j] if j >= 0 else U_i[a]
                 targets[K + a] = i
-                E[K + a] = (r * U_i[a] + (1.0 - r) * stay) / V[i]
+                E[K + a] = (r * sv + (1.0 - r) * stay) / V[i]
     return targets, E, A
 
 

@@ -179,12 +179,19 @@ class MotivationEstimator:
         self.moves = np.zeros(N_PRIMITIVES, dtype=np.int64)
         self.U = np.zeros((64, N_PRIMITIVES))
         self.rho = np.zeros((64, N_PRIMITIVES))
+        self.osucc = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)   # option successors
+        self._grid = np.full((0, 0), -1, dtype=np.int64)
+        self._origin = np.zeros(2)
         self.R = np.zeros(1)
         self.V0 = np.zeros(1)         # Eq. 5 without options (exploit), computed on demand
         self._v0_fresh = False
         self._options_key: tuple = ()
         self._dirty: set[int] = set()    # rows whose outcome memory changed since update
         self._alive_version, self._alive = -1, 0
+        self._winner = -1                # the agent's node (from record)
+        self._bumps = 0                  # bumps recorded (a key of the stuck test)
+        self._reach_key: tuple = ()
+        self._reach = np.zeros(0, dtype=bool)
 
     # ------------------------------------------------------------------ goal
     def set_goal(self, goal_x: np.ndarray) -> None:
@@ -214,6 +221,7 @@ class MotivationEstimator:
         primitive untried, and a move updates the forward model ``delta`` (the mean of
         ``w[winner] - w[node]`` over the moves made with the primitive; ``w``: the map's
         weights)."""
+        self._winner = winner
         if outcome.episode_start:
             return
         self.clock += 1
@@ -230,6 +238,7 @@ class MotivationEstimator:
                                   self.moves, w, node, winner, inserted, outcome.action,
                                   outcome.bumped, self.clock):
             self._dirty.add(node)
+            self._bumps += 1
 
     def state_dict(self) -> dict[str, np.ndarray | float | int]:
         """The outcome memory, as plain arrays and numbers (node rows ``[0, n)`` of the
@@ -277,6 +286,7 @@ class MotivationEstimator:
             self.succ = _grown(self.succ, n, -1)
             self.U = _grown(self.U, n, 0.0)
             self.rho = _grown(self.rho, n, 0.0)
+            self.osucc = _grown(self.osucc, n, -1)
         self.goal_node = -1
         g = m.nearest_by_weight(self.goal_x) if self.goal_x is not None and n else -1
         if g < 0:
@@ -304,11 +314,13 @@ class MotivationEstimator:
     def _absorbing(self, m: SensorimotorMap, n: int) -> np.ndarray:
         return m.terminal[:n] if self.absorbing_terminals else np.zeros(n, dtype=bool)
 
-    def stale_clock(self, nodes: int) -> tuple[int, float]:
-        """(clock, T) for the staleness of bumps: ``T = stale_horizon * nodes``; the clock
-        advances in steps of T / 8 (rho changes at those ticks only, so the warm-started
-        value iteration is not re-solved for a drift of every option each step)."""
-        T = self.stale_horizon * nodes
+    def stale_clock(self, nodes: int, stuck: bool = False) -> tuple[int, float]:
+        """(clock, T) for the staleness of bumps: ``T = stale_horizon * nodes`` (stuck:
+        ``T = nodes``, a bump older than a walk over the map is as doubtful as any); the
+        clock advances in steps of T / 8 (rho changes at those ticks only, so the
+        warm-started value iteration is not re-solved for a drift of every option each
+        step)."""
+        T = (1.0 if stuck and self.stale_horizon > 0 else self.stale_horizon) * nodes
         tick = max(1, int(T / 8))
         return self.clock - self.clock % tick, T
 
@@ -319,9 +331,12 @@ class MotivationEstimator:
         (weights drift a little between full passes; a pow per pair and step would
         dominate the step time). Absorbing nodes keep theirs unused (Eq. 5' gives them
         no successor)."""
-        clock, T = self.stale_clock(self.nodes_alive(m, n))
-        key = (m.version, clock, n)
+        stuck = self.stuck(m, n)
+        clock, T = self.stale_clock(self.nodes_alive(m, n), stuck)
+        key = (m.version, clock, n, stuck)
         if key != self._options_key:
+            if self._options_key[:1] != key[:1]:
+                self._grid, self._origin = kernels.cell_grid(m.w, m.alive, n, self._scale)
             self._options_key = key
             rows = np.arange(n)
         elif self._dirty:
@@ -331,7 +346,27 @@ class MotivationEstimator:
         self._dirty.clear()
         kernels.option_values(m.w, m.out, m.alive, n, rows, self.goal_x, self.delta,
                               self._scale, self.v_star, self.gamma, self.tried, self.bump_t,
-                              self.succ, clock, T, self.stale_prior, self.U, self.rho)
+                              self.succ, clock, T, 0.5 if stuck else self.stale_prior,
+                              self._grid, self._origin, self.U, self.rho, self.osucc)
+
+    def stuck(self, m: SensorimotorMap, n: int) -> bool:
+        """The goal is represented but no link path leads from the agent's node to it
+        over the links the outcome memory does not contradict (a link whose primitive
+        bumped last time counts as gone): the agent's knowledge says the task is
+        impossible, so its remembered walls are doubted in full (``rho``'s limit 1
+        instead of ``stale_prior``; older bumps first). Cached per map version, goal
+        node, terminal flags and bump count."""
+        if self.goal_node < 0 or not 0 <= self._winner < n:
+            return False
+        absorbing = self._absorbing(m, n)
+        key = (m.version, self.goal_node, int(absorbing.sum()), self._bumps)
+        if key != self._reach_key:
+            self._reach_key = key
+            self._reach = np.zeros(n, dtype=bool)
+            Eb = kernels.contradicted(m.out, m.E, n, self.bump_t, self.succ)
+            kernels.reaches_source(m.out, Eb, n, absorbing, m.alive, self.R >= 0.5,
+                                   self._reach)
+        return not self._reach[self._winner]
 
     def nodes_alive(self, m: SensorimotorMap, n: int) -> int:
         if self._alive_version != m.version:
@@ -353,7 +388,8 @@ class MotivationEstimator:
         self.sweeps = kernels.value_iteration(
             out=m.out, E=m.E, R=self.R, V=self.V, n=n, beta=self.beta, gamma=self.gamma,
             tol=self.vi_tol, v_floor=V_FLOOR, max_sweeps=self.vi_max_sweeps,
-            absorbing=absorbing, alive=m.alive, U=self.U[:n], rho=self.rho[:n])
+            absorbing=absorbing, alive=m.alive, U=self.U[:n], rho=self.rho[:n],
+            osucc=self.osucc[:n])
         return self.V[:n]
 
     def exploit(self, m: SensorimotorMap) -> np.ndarray:
@@ -371,7 +407,8 @@ class MotivationEstimator:
                     out=m.out, E=m.E, R=self.R, V=self.V0, n=n, beta=self.beta,
                     gamma=self.gamma, tol=self.vi_tol, v_floor=V_FLOOR,
                     max_sweeps=self.vi_max_sweeps, absorbing=self._absorbing(m, n),
-                    alive=m.alive, U=self.U[:n], rho=np.zeros((n, N_PRIMITIVES)))
+                    alive=m.alive, U=self.U[:n], rho=np.zeros((n, N_PRIMITIVES)),
+                    osucc=self.osucc[:n])
             self._v0_fresh = True
         return self.V0
 
@@ -384,8 +421,8 @@ class MotivationEstimator:
             return links
         R_i = self.R[i] if i < len(self.R) else 0.0
         return Links(*kernels.option_links(links.targets, links.E, links.actions, self.V, i,
-                                           self.U[i], self.rho[i], R_i, self.gamma,
-                                           _PRIMITIVES))
+                                           self.U[i], self.rho[i], self.osucc[i], R_i,
+                                           self.gamma, _PRIMITIVES))
 
     def links_of(self, m: SensorimotorMap, i: int) -> Links:
         """:meth:`options_of` node i's links in map m (what Eq. 6 ranks in-process)."""
