@@ -236,27 +236,41 @@ def test_value_of_the_unknown_by_hand():
     # node 2, 4 at node 1, 5 at node 0. V(2) = gamma V* g^2; V(1) = gamma max(V(2),
     # V* g^4) (link E = 1); V(0) = gamma max(V(1), V* g^5).
     np.testing.assert_allclose(V, [vs * g ** 5, vs * g ** 4, vs * g ** 3], rtol=1e-9)
-    # stale: every pair known, node 2 bumped 'right' 3 steps ago, the rest just now:
-    # rho = 0.5 (1 - exp(-3 / T)), T = stale_horizon x 3 nodes = 3;
-    # O(2, right) = rho U + (1 - rho)(R_2 + gamma * 0) = rho V* g^2
+    # what Eq. 6 ranks at node 2: the option 'right' as a virtual link to itself
+    links = mo.links_of(m, 2)
+    K = m.out.shape[1]
+    assert (links.targets[K:] == 2).all()
+    assert links.E[K + RIGHT] * V[2] == pytest.approx(vs * g ** 2)
+    # the greedy probe's potentials have no options: no route, no motivation
+    assert not mo.exploit(m)[:3].any()
+
+
+def test_value_of_a_remembered_wall_by_hand():
+    """A stale bump when the agent is stuck: the chain 0 -> 1 -> 2, the goal sensed at
+    node 2, every pair known, but 'right' from node 0 bumped 3 steps ago (its link to
+    node 1 is gone): no route from node 0, so its walls are doubted with
+    rho = 1/2 (1 - exp(-tau / N)), N = 3 nodes, and the option leads to node 1, where
+    the move once led: O(0, right) = rho V(1) + (1 - rho)(R_0 + gamma * 0)."""
+    g = 0.97
+    m = chain_map()
+    slot = int(np.flatnonzero(m.out[0] == 1)[0])
+    m.out[0, slot], m.E[0, slot] = -1, 0.0
+    m.version += 1
+    mo = MotivationEstimator(MotivationConfig(vi_tol=1e-12, vi_max_sweeps=100000))
+    mo.set_goal(np.array([0.0, 0.2]))
     st = mo.state_dict()
     st["clock"] = 10
     st["tried"][:3] = True
     st["bump_t"][:3] = -1
-    st["bump_t"][2] = st["clock"]
-    st["bump_t"][2, RIGHT] = st["clock"] - 3
+    st["succ"][0, RIGHT], st["succ"][1, RIGHT] = 1, 2
+    st["bump_t"][0, RIGHT] = 7
     mo.load_state_dict(st)
-    rho = 0.5 * (1.0 - np.exp(-1.0))
+    mo.record(-1, 0, False, EPISODE_START, m.w)          # the agent stands on node 0
     V = mo.update(m)
-    v2 = g * rho * vs * g ** 2
-    np.testing.assert_allclose(V, [g * g * v2, g * v2, v2], rtol=1e-9)
-    # what Eq. 6 ranks at node 2: the option as a virtual link to itself
-    links = mo.links_of(m, 2)
-    K = m.out.shape[1]
-    assert links.targets[K + RIGHT] == 2 and (links.targets[K:][[UP, DOWN, LEFT]] == -1).all()
-    assert links.E[K + RIGHT] * V[2] == pytest.approx(rho * vs * g ** 2)
-    # the greedy probe's potentials have no options: no route, no motivation
-    assert not mo.exploit(m)[:3].any()
+    assert mo.goal_node == 2 and mo.stuck(m, m.n)
+    R1 = np.exp(-0.01 / (2 * 0.03 ** 2))
+    rho = 0.5 * (1.0 - np.exp(-1.0))
+    np.testing.assert_allclose(V, [g * rho * (R1 + g), R1 + g, 1.0], rtol=1e-9)
 
 
 def test_eq6_picks_link_with_highest_E_times_V_and_breaks_ties_by_rng():

@@ -140,6 +140,23 @@ def reaches_source(out, E, n, absorbing, alive, source, mark):
 
 
 @njit(cache=True)
+def option_successor(V, U, osucc, onb, i, a, gamma):
+    """The value of option (i, a)'s successor: V of a known node, gamma max V of the
+    known neighbours of a remembered wall cell (-2), or the optimistic U (-1)."""
+    j = osucc[i, a]
+    if j >= 0:
+        return V[j]
+    if j == -2:
+        best = 0.0
+        for b in range(onb.shape[2]):
+            q = onb[i, a, b]
+            if q >= 0 and V[q] > best:
+                best = V[q]
+        return gamma * best
+    return U[i, a]
+
+
+@njit(cache=True)
 def contradicted(out, E, n, bump_t, succ):
     """E with the links zeroed whose pair's last outcome was a bump (the move from i with
     primitive a once led to ``succ[i, a]``, and bumped since): what the outcome memory
@@ -157,7 +174,7 @@ def contradicted(out, E, n, bump_t, succ):
 
 @njit(cache=True)
 def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, absorbing,
-                    alive, U, rho, osucc):
+                    alive, U, rho, osucc, onb):
     """Synchronous sweeps of Eq. 4-5 (with the options of the value of the unknown) until
     every |beta Delta_V(i)| <= tol V(i) + v_floor.
 
@@ -206,8 +223,7 @@ def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, abso
                 for a in range(A):
                     r = rho[i, a]
                     if r > 0.0:
-                        j = osucc[i, a]
-                        sv = V[j] if j >= 0 else U[i, a]
+                        sv = option_successor(V, U, osucc, onb, i, a, gamma)
                         ov = r * sv + (1.0 - r) * stay
                         if ov > opt:
                             opt = ov
@@ -270,7 +286,7 @@ def node_at(grid, origin, L, w, x):
 
 @njit(cache=True)
 def option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, succ, clock,
-               horizon, rho_max, grid, origin, U, rho, osucc):
+               horizon, rho_max, stuck, grid, origin, U, rho, osucc, onb):
     """The options of the value of the unknown (motivation.py, Eq. 5') of node i, per
     primitive a: ``rho[i, a]`` = 1 for a primitive never taken from i, or whose move's
     link (to ``succ[i, a]``) the map has since deleted; ``rho_max (1 - exp(-tau /
@@ -279,29 +295,53 @@ def option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, succ, cl
     move once led, else a node at the predicted position ``w_i + delta_a``), whose V the
     sweep reads; -1 when none, and then ``U[i, a] = v_star gamma^h``, ``h = |w_i +
     delta_a - x_g|_1 / L`` (the fewest steps from the predicted successor to the goal
-    sensation)."""
+    sensation); -2 for a remembered wall cell, whose value if it opened is gamma times the
+    best V of the known nodes next to it (``onb[i, a]``; no such node: no option), unless
+    ``stuck`` (then U, as for unknown space)."""
     x = np.empty(w.shape[1])
+    y = np.empty(w.shape[1])
     for a in range(U.shape[1]):
         j = -1
+        wall = False
         if not tried[i, a]:
             r = 1.0
         elif 0 <= bump_t[i, a] < clock and horizon > 0.0:
             r = rho_max * (1.0 - np.exp(-(clock - bump_t[i, a]) / horizon))
             j = succ[i, a]
+            wall = j < 0
         elif bump_t[i, a] < 0 and succ[i, a] >= 0 and not _linked(out, i, succ[i, a]):
             r = 1.0
             j = succ[i, a]
         else:
-            rho[i, a] = 0.0
-            U[i, a] = 0.0
-            osucc[i, a] = -1
-            continue
+            r = 0.0
         d = 0.0
         for k in range(w.shape[1]):
             x[k] = w[i, k] + delta[a, k]
             d += abs(x[k] - goal[k])
-        if j < 0:
+        for b in range(U.shape[1]):
+            onb[i, a, b] = -1
+        if r > 0.0 and wall and not stuck:
+            # a remembered wall: if it opened, the cell leads on to its known
+            # neighbours (other than i); with none there is nothing to gain (stuck:
+            # the optimistic U, as for unknown space)
+            j = -2
+            found = False
+            for b in range(U.shape[1]):
+                for k in range(w.shape[1]):
+                    y[k] = x[k] + delta[b, k]
+                q = node_at(grid, origin, L, w, y)
+                if q >= 0 and q != i:
+                    onb[i, a, b] = q
+                    found = True
+            if not found:
+                r = 0.0
+        elif r > 0.0 and j < 0:
             j = node_at(grid, origin, L, w, x)
+        if r == 0.0:
+            rho[i, a] = 0.0
+            U[i, a] = 0.0
+            osucc[i, a] = -1
+            continue
         rho[i, a] = r
         U[i, a] = v_star * gamma ** (d / L)
         osucc[i, a] = j if j != i else -1
@@ -317,7 +357,7 @@ def _linked(out, i, j):
 
 @njit(cache=True)
 def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, bump_t,
-                  succ, clock, horizon, rho_max, grid, origin, U, rho, osucc):
+                  succ, clock, horizon, rho_max, stuck, grid, origin, U, rho, osucc, onb):
     """:func:`option_row` of the nodes ``rows`` (none for dead slots)."""
     for i in rows:
         if i >= n:
@@ -329,7 +369,7 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
                 osucc[i, a] = -1
             continue
         option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, succ, clock,
-                   horizon, rho_max, grid, origin, U, rho, osucc)
+                   horizon, rho_max, stuck, grid, origin, U, rho, osucc, onb)
 
 
 @njit(cache=True)
@@ -361,7 +401,7 @@ def record_outcome(tried, bump_t, succ, delta, moves, w, node, winner, inserted,
 
 
 @njit(cache=True)
-def option_links(out_i, E_i, A_i, V, i, U_i, rho_i, osucc_i, R_i, gamma, primitives):
+def option_links(out_i, E_i, A_i, V, i, U, rho, osucc, onb, R_i, gamma, primitives):
     """Node i's links followed by one virtual link per option (motivation.py): targets,
     reliabilities and action vectors, where an option's target is i itself and its
     reliability makes E V(target) the option's successor value, so Eq. 6 ranks links and
@@ -385,10 +425,9 @@ def option_links(out_i, E_i, A_i, V, i, U_i, rho_i, osucc_i, R_i, gamma, primiti
     A[K:] = primitives
     if V[i] > 0.0:
         for a in range(P):
-            r = rho_i[a]
+            r = rho[i, a]
             if r > 0.0:
-                j = osucc_i[a]
-                sv = V[j] if j >= 0 else U_i[a]
+                sv = option_successor(V, U, osucc, onb, i, a, gamma)
                 targets[K + a] = i
                 E[K + a] = (r * sv + (1.0 - r) * stay) / V[i]
     return targets, E, A

@@ -180,6 +180,7 @@ class MotivationEstimator:
         self.U = np.zeros((64, N_PRIMITIVES))
         self.rho = np.zeros((64, N_PRIMITIVES))
         self.osucc = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)   # option successors
+        self.onb = np.full((64, N_PRIMITIVES, N_PRIMITIVES), -1, dtype=np.int64)
         self._grid = np.full((0, 0), -1, dtype=np.int64)
         self._origin = np.zeros(2)
         self.R = np.zeros(1)
@@ -287,6 +288,7 @@ class MotivationEstimator:
             self.U = _grown(self.U, n, 0.0)
             self.rho = _grown(self.rho, n, 0.0)
             self.osucc = _grown(self.osucc, n, -1)
+            self.onb = _grown(self.onb, n, -1)
         self.goal_node = -1
         g = m.nearest_by_weight(self.goal_x) if self.goal_x is not None and n else -1
         if g < 0:
@@ -347,7 +349,8 @@ class MotivationEstimator:
         kernels.option_values(m.w, m.out, m.alive, n, rows, self.goal_x, self.delta,
                               self._scale, self.v_star, self.gamma, self.tried, self.bump_t,
                               self.succ, clock, T, 0.5 if stuck else self.stale_prior,
-                              self._grid, self._origin, self.U, self.rho, self.osucc)
+                              stuck, self._grid, self._origin, self.U, self.rho, self.osucc,
+                              self.onb)
 
     def stuck(self, m: SensorimotorMap, n: int) -> bool:
         """The goal is represented but no link path leads from the agent's node to it
@@ -389,7 +392,7 @@ class MotivationEstimator:
             out=m.out, E=m.E, R=self.R, V=self.V, n=n, beta=self.beta, gamma=self.gamma,
             tol=self.vi_tol, v_floor=V_FLOOR, max_sweeps=self.vi_max_sweeps,
             absorbing=absorbing, alive=m.alive, U=self.U[:n], rho=self.rho[:n],
-            osucc=self.osucc[:n])
+            osucc=self.osucc[:n], onb=self.onb[:n])
         return self.V[:n]
 
     def exploit(self, m: SensorimotorMap) -> np.ndarray:
@@ -408,7 +411,7 @@ class MotivationEstimator:
                     gamma=self.gamma, tol=self.vi_tol, v_floor=V_FLOOR,
                     max_sweeps=self.vi_max_sweeps, absorbing=self._absorbing(m, n),
                     alive=m.alive, U=self.U[:n], rho=np.zeros((n, N_PRIMITIVES)),
-                    osucc=self.osucc[:n])
+                    osucc=self.osucc[:n], onb=self.onb[:n])
             self._v0_fresh = True
         return self.V0
 
@@ -421,7 +424,7 @@ class MotivationEstimator:
             return links
         R_i = self.R[i] if i < len(self.R) else 0.0
         return Links(*kernels.option_links(links.targets, links.E, links.actions, self.V, i,
-                                           self.U[i], self.rho[i], self.osucc[i], R_i,
+                                           self.U, self.rho, self.osucc, self.onb, R_i,
                                            self.gamma, _PRIMITIVES))
 
     def links_of(self, m: SensorimotorMap, i: int) -> Links:
