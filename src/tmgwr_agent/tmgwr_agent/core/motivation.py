@@ -40,43 +40,52 @@ entered, or a wall that has since opened, never enters the plan. R-max style, ev
 successor, an *option*, in the max of Eq. 5::
 
     Delta_V(i) = R_i + gamma max( max_k E[i, k] V(k), max_a O(i, a) ) - V(i)     (Eq. 5')
-    O(i, a)    = rho(i, a) U(i, a) + (1 - rho(i, a)) (R_i + gamma max_k E[i, k] V(k))
-    U(i, a)    = V* gamma^h(i, a),   h(i, a) = |w_i + delta_a - x_g|_1 / L
-    V*         = 1 / (1 - gamma^2)
+    O(i, a)    = rho(i, a) S(i, a) + (1 - rho(i, a)) (R_i + gamma max_k E[i, k] V(k))
 
-* ``U`` is what the unknown successor is worth if the way from it to the goal is as short
-  as it can possibly be: ``h`` counts the fewest steps of length ``L`` from the predicted
-  successor ``w_i + delta_a`` to the goal sensation ``x_g`` (the agent's four motor
-  primitives move along the axes, so the L1 distance; it never overestimates, so no
-  shorter route can be missed: the A* argument). ``delta_a`` is the mean sensed
-  displacement of primitive a over the moves the agent has made (its own forward model;
-  0 before the first). ``V*`` is the potential of a represented goal node (R_g = 1, and
-  Eq. 5 returns to it every second step: V(g) = 1 + gamma^2 V(g)), so an option at
-  ``h`` steps is worth exactly what a known route of ``h`` steps is worth. The agent
-  therefore leaves a known route of length d for an unknown only if ``1 + h`` plus the
-  way there is shorter than d: it explores where a shorter route may exist and nowhere
-  else, and the horizon comes from the goal's distance in the map, not from a constant.
-* ``rho`` is the probability that the option leads on (not into a wall): 1 for a
-  primitive never taken from i (R-max's optimism); for a pair whose last outcome was a
-  bump ``tau`` steps ago, ``rho = stale_prior (1 - exp(-tau / T))``, a wall that may have
-  opened since, with ``T = stale_horizon * N`` (N nodes: the time a walk needs to see the
+* ``rho`` is the probability that the option leads on: 1 for a primitive never taken from
+  i, and for a move whose link the map has since deleted (GWR ageing: a forgotten piece
+  of a route is walked again when it may be worth it); for a pair whose last outcome was
+  a bump ``tau`` steps ago, ``rho = stale_prior (1 - exp(-tau / T))``, a wall that may
+  have opened since, ``T = stale_horizon * N`` (N nodes: the time a walk needs to see the
   whole map again). A failed test leaves the agent where it was after one step, hence the
-  ``(1 - rho)`` term: re-testing a wall beside the route costs one step and is worth it
-  once ``rho`` times the saving exceeds that step. A move that led somewhere is known
-  through its link; once the map has deleted that link (ageing, GWR) the pair is unknown
-  again (``rho`` = 1), so a forgotten piece of the shortest route is walked again when it
-  may be worth it. A new node starts with every primitive untried.
+  ``(1 - rho)`` term: re-testing a wall is worth it once ``rho`` times the saving exceeds
+  the way there and the step. ``rho`` changes at ticks of T / 8 only (warm starts).
+* ``S`` is what the successor is worth. A known node when there is one: where the move
+  once led, else the node at the predicted position ``w_i + delta_a`` (``delta_a``: the
+  mean sensed displacement of primitive a over the agent's moves, its own forward model;
+  a node lookup by position, :func:`kernels.cell_grid`); so an untried move between two
+  known places is worth what the place is, not more. A remembered wall cell: ``gamma``
+  times the best V of the known nodes next to it (it pays to re-test only a wall whose
+  other side is known and nearer the goal; with none, no option). Unknown space:
+  ``U = V* gamma^h``, ``h = |w_i + delta_a - x_g|_1 / L``, the fewest steps of length L
+  from the predicted successor to the goal sensation ``x_g`` (the four primitives move
+  along the axes, hence L1: it never overestimates, so no shorter route is missed, the
+  A* argument), and ``V* = 1 / (1 - gamma^2)``, the potential of a represented goal node
+  (R_g = 1, and Eq. 5 returns to it every second step), so an option at h steps is worth
+  exactly a known route of h steps. The agent leaves a known route of length d for an
+  unknown only if the way there plus ``1 + h`` is shorter than d: it explores where a
+  shorter route may exist and nowhere else; the horizon is the goal's distance in the
+  map, no constant.
+* *Stuck*: the goal is represented but no link path leads from the agent's node to it
+  over the links its outcome memory does not contradict (a link whose primitive bumped
+  last time counts as gone). The agent's knowledge says the task is impossible, so every
+  remembered wall is doubted evenly: ``rho``'s limit is 1/2 (no evidence either way)
+  and ``T = N``; walls without a known other side get the optimistic U.
 * The goal node exists only once the map represents the goal (a node within ``L / 2`` of
-  the goal sensation, i.e. the goal has been sensed): before that ``R = 0`` everywhere
-  and the options alone lead the agent, by the nearest plausible unknown, towards the
-  goal sensation. (The paper's ``g = SM.Map(x_g)`` is otherwise the node *most like* a
-  goal in unvisited space, often a dead end behind a wall, where Eq. 6 then oscillated;
-  this replaces the former ``goal_search``.)
+  the goal sensation, i.e. the goal has been sensed): before that ``R = 0`` everywhere and
+  the options alone lead the agent, by the nearest plausible unknown, towards the goal
+  sensation. (The paper's ``g = SM.Map(x_g)`` is otherwise the node *most like* a goal in
+  unvisited space, often a dead end behind a wall, where Eq. 6 then oscillated; this
+  replaces ``goal_search``.)
 * The options are part of the potentials the action selector climbs (Eq. 6 ranks them
-  with the links: :meth:`MotivationEstimator.links_of`), which replaces the former
-  ``try_untried``. The experimenter's greedy probe (``explore`` False) is the learnt
+  with the links: :meth:`MotivationEstimator.options_of`), which replaces the former
+  ``try_untried`` rule. The experimenter's greedy probe (``explore`` False) is the learnt
   policy: it climbs the potentials of Eq. 5 without options (:meth:`exploit`), as
   Dyna-Q+'s probe reads its bonus-free twin.
+
+Costs: the options are recomputed in full when the map's structure, the stale tick or the
+stuck state changes, else only on the rows whose outcome memory changed; the reachability
+pass and the option loop are a few linear passes over the map.
 
 Terminal nodes (``absorbing_terminals``, our addition, on by default; off = Eq. 5 on every
 node). The agent notices when an episode ends short of its goal: it is moved back to the
@@ -89,8 +98,9 @@ which stays a termination point) looks as good as any other, and the agent keeps
 sent home through it. Episodes that end *at* the goal flag nothing (the goal node keeps
 Eq. 5, so a goal that moves away leaves no trace), nor do episodes cut by a step limit.
 
-The outcome memory (primitives tried per node, step of the last bump, the step clock, the
-forward model ``delta``) is plain data: :meth:`state_dict` / :meth:`load_state_dict`.
+The outcome memory (primitives tried per node, step of the last bump, where each move led,
+the step clock, the forward model ``delta``) is plain data: :meth:`state_dict` /
+:meth:`load_state_dict`.
 """
 
 from __future__ import annotations
