@@ -7,6 +7,7 @@ figures, and exit code 2 with a clear message for bad names."""
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -232,6 +233,80 @@ def test_malformed_maze_names_line_and_column(tmp_path):
     proc = cli("experiment", "env-change", "--maze", bad, check=False)
     assert proc.returncode == 2
     assert f"{bad}:3:" in proc.stderr
+
+
+# ------------------------------------------------------------------ --params
+REPO = Path(__file__).resolve().parents[1]
+TUNED_QL = str(REPO / "config/tuned/q_learning.yaml")
+
+
+def test_tuned_file_changes_the_baseline_and_the_json_records_it(tmp_path, small_maze):
+    args = ("env-change", "--event", "a", "--trials", "2", "--agents",
+            "q_learning,model_based", "--jobs", "1")
+    plain, _ = experiment(tmp_path, small_maze, *args, name="plain")
+    assert "params" not in plain                         # no --params: the old JSON
+    tuned, _ = experiment(tmp_path, small_maze, *args, "--params", TUNED_QL, name="tuned")
+    from tmgwr_agent.experiments.tune import load_tuned
+    values = load_tuned(TUNED_QL, "q_learning")
+    assert values["gamma"] != 0.86                       # not the defaults (Table 2)
+    assert list(tuned) == list(plain)[:-1] + ["params", "agents"]
+    assert tuned["params"] == {"files": [TUNED_QL],
+                               "agents": {"q_learning": values, "model_based": {}}}
+    # the tuned values reach the agent: another run; the untouched agent is unchanged
+    assert tuned["agents"]["q_learning"] != plain["agents"]["q_learning"]
+    assert tuned["agents"]["model_based"] == plain["agents"]["model_based"]
+    # the same file given to q_learning only, and a later file's value winning
+    later = tmp_path / "later.yaml"
+    later.write_text("q_learning:\n  ros__parameters:\n    gamma: 0.9\n")
+    again, _ = experiment(tmp_path, small_maze, *args, "--params", f"q_learning={TUNED_QL}",
+                          "--params", later, name="again")
+    assert again["params"]["files"] == [f"q_learning={TUNED_QL}", str(later)]
+    assert again["params"]["agents"]["q_learning"] == {**values, "gamma": 0.9}
+
+
+def test_params_per_agent_spec(tmp_path):
+    from tmgwr_agent.experiments.scenarios import UsageError
+    from tmgwr_agent.experiments.tune import experiment_params
+    agents = ["tmgwr:credit", "tmgwr:literal", "q_learning"]
+    with pytest.raises(UsageError, match="values for none of the agents"):
+        experiment_params(agents, [str(REPO / "config/tuned/dyna_q_plus.yaml")])
+    # one file with a section per agent serves them all; AGENT=FILE narrows it
+    f = tmp_path / "all.yaml"
+    f.write_text("/**:\n  ros__parameters:\n    gamma: 0.9\n"
+                 "q_learning:\n  ros__parameters:\n    gamma: 0.5\n"
+                 "dyna_q_plus:\n  ros__parameters:\n    kappa: 0.01\n")
+    assert experiment_params(agents, [str(f)]) == {
+        "tmgwr:credit": {"gamma": 0.9}, "tmgwr:literal": {"gamma": 0.9},
+        "q_learning": {"gamma": 0.5}}
+    assert experiment_params(agents, [f"tmgwr:credit={f}"]) == {
+        "tmgwr:credit": {"gamma": 0.9}, "tmgwr:literal": {}, "q_learning": {}}
+    assert experiment_params(agents, [f"tmgwr={f}"])["tmgwr:literal"] == {"gamma": 0.9}
+
+
+@pytest.mark.parametrize("body, arg, message", [
+    ("q_learning:\n  ros__parameters:\n    gama: 0.9\n", "{f}",
+     "[q_learning]: unknown parameter 'gama' (did you mean 'gamma'?)"),
+    ("q_leaning:\n  ros__parameters:\n    gamma: 0.9\n", "{f}",
+     "section 'q_leaning' is read by no agent (did you mean 'q_learning'?)"),
+    ("q_learning:\n  ros__parameters:\n    gamma: 1.5\n", "{f}", "out of range"),
+    ("q_learning:\n  ros__parameters:\n    gamma: 0.9\n", "sarsa={f}",
+     "unknown agent 'sarsa'"),
+    ("q_learning:\n  ros__parameters:\n    gamma: 0.9\n", "dyna_q_plus={f}",
+     "not among the agents run"),
+    ("/**:\n  ros__parameters:\n    gamma: 0.9\n", "q_learning={f}",
+     "has no section 'q_learning' for q_learning"),
+])
+def test_bad_params_exit_2_naming_the_key_and_the_file(tmp_path, body, arg, message):
+    f = tmp_path / "p.yaml"
+    f.write_text(body)
+    for extra in ((), ("--suite", "blocking:1")):
+        proc = cli("experiment", "env-change", "--agents", "tmgwr,q_learning", "--params",
+                   arg.format(f=f), *extra, check=False)
+        assert proc.returncode == 2, proc.stderr
+        assert message in proc.stderr, proc.stderr
+        assert "Traceback" not in proc.stderr
+        if "sarsa" not in arg and "not among" not in message:
+            assert str(f) in proc.stderr
 
 
 # ------------------------------------------------------------------ bench

@@ -158,6 +158,31 @@ def test_suite_openings_skip_mazes_without_one(tmp_path):
     assert m["oracle_steps"] == m["shortest_before"] > m["shortest_after"]
 
 
+@pytest.mark.slow
+def test_suite_with_tuned_params(block_run, tmp_path):
+    """--params reaches every maze's trials, is recorded, and one maze's entry is again
+    the plain --maze run with the same file."""
+    from test_experiments import TUNED_QL
+    res, out = block_run
+    tuned, _ = run(tmp_path, "tuned", "env-change", "--suite", "blocking:1",
+                   "--agents", "q_learning", "--trials", TRIALS, "--jobs", 2,
+                   "--params", TUNED_QL)
+    from tmgwr_agent.experiments.tune import load_tuned
+    assert tuned["params"] == {"files": [TUNED_QL],
+                               "agents": {"q_learning": load_tuned(TUNED_QL, "q_learning")}}
+    assert list(tuned)[-3:] == ["params", "agents", "suite"]
+    (m,) = tuned["suite"]["mazes"]
+    default = res["suite"]["mazes"][0]
+    assert m["name"] == default["name"] == "blocking-00"
+    assert m["agents"]["q_learning"] != default["agents"]["q_learning"]
+    plain, _ = run(tmp_path, "plain", "env-change", "--maze",
+                   out.with_name("out_mazes") / m["file"], "--event", m["event"],
+                   "--agents", "q_learning", "--trials", TRIALS, "--jobs", 1,
+                   "--params", TUNED_QL)
+    assert plain["agents"]["q_learning"] == m["agents"]["q_learning"]
+    assert plain["params"] == tuned["params"]
+
+
 def test_suite_goal_change(tmp_path):
     res, _ = run(tmp_path, "goals", "goal-change", "--suite", "shortcut:1",
                  "--agents", "q_learning", "--trials", 1, "--episodes", 3, "--jobs", 1)

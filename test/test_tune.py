@@ -14,13 +14,16 @@ from test_experiments import cli
 
 from maze_sim.suite import generate
 from tmgwr_agent.experiments.agent_factory import make_agent
+from tmgwr_agent.experiments.parallel import trial_seeds
 from tmgwr_agent.experiments.tune import (
     PENALTY,
     SEARCH,
     Task,
+    block_run,
     load_tuned,
     score,
     search_space,
+    tasks,
     write_params,
 )
 from tmgwr_common.params import ParamError, check_params_file, params_for, read_params_file
@@ -89,6 +92,25 @@ def test_tmgwr_file_is_what_the_nodes_read(tmp_path):
     (tmp_path / "bad.yaml").write_text("/**:\n  ros__parameters:\n    gama: 0.9\n")
     with pytest.raises(ParamError, match="did you mean 'gamma'"):
         load_tuned(tmp_path / "bad.yaml", "tmgwr")
+
+
+@pytest.mark.slow
+def test_tune_runs_are_the_experiment_runs(tmp_path):
+    """block_run is env_change.trial (steps 1-3): with the tuned file, the runs tune
+    scores are the steps `experiment env-change --suite ... --params` reports."""
+    from test_experiments import TUNED_QL
+    out = tmp_path / "suite.json"
+    cli("experiment", "env-change", "--suite", "blocking:1,open:1", "--agents",
+        "q_learning", "--trials", "2", "--jobs", "1", "--params", TUNED_QL, "--json", out,
+        "--quiet")
+    mazes = json.loads(out.read_text())["suite"]["mazes"]
+    task_list, _ = tasks("blocking:1,open:1", 0, 0)
+    values = load_tuned(TUNED_QL, "q_learning")
+    for task, m in zip(task_list, mazes, strict=True):
+        runs = [block_run("q_learning", values, task, s) for s in trial_seeds(0, 2)]
+        assert [r["steps"] for r in runs] == m["agents"]["q_learning"]["steps"]["values"]
+        assert [r["train_episodes"] for r in runs] == \
+            m["agents"]["q_learning"]["train_episodes"]["values"]
 
 
 @pytest.mark.parametrize("agent", sorted(SEARCH))

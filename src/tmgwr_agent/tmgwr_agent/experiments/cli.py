@@ -1,8 +1,10 @@
 """``./tmgwr experiment | demo | bench | tune`` (README, Experiments, Tuning).
 
 ``experiment SCENARIO --maze FILE --agents LIST --trials N --seed S --json OUT
-[--plot OUT.png] [--jobs J]`` with ``--goals``, ``--episodes``, ``--event``, ``--goal``
-for the scenarios that take them; ``--suite SPEC [--suite-seed K] [--suite-first I]``
+[--plot OUT.png] [--jobs J] [--params FILE | AGENT=FILE ...]`` with ``--goals``,
+``--episodes``, ``--event``, ``--goal`` for the scenarios that take them (``--params``:
+parameter files such as ``./tmgwr tune`` writes, :func:`.tune.experiment_params`);
+``--suite SPEC [--suite-seed K] [--suite-first I]``
 instead of ``--maze`` runs env-change or goal-change on generated mazes
 (:mod:`tmgwr_agent.experiments.suite_runner`); ``demo`` runs every scenario briefly and
 then the ROS graph demo (:mod:`tmgwr_agent.graph.demo`); ``bench`` measures the TMGWR core
@@ -61,6 +63,12 @@ def register(subparsers) -> None:
     p.add_argument("--goal", default="G",
                    help="goal of the env-change / timing training (default G)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--params", action="append", default=None, metavar="FILE|AGENT=FILE",
+                   help="parameter overrides from a ROS 2 parameter file such as tune "
+                        "writes (config/tuned/*.yaml): tmgwr agents read '/**', a "
+                        "baseline the section named after it; AGENT=FILE gives the file "
+                        "to that agent (a spec of --agents, or a name for all its specs) "
+                        "only. Repeatable, later files win; recorded in the JSON")
     p.add_argument("--suite", default=None, metavar="SPEC",
                    help="instead of --maze: generated mazes (env-change, goal-change), "
                         "FAMILY[:N] or all[:N] or a comma list (braided:3,rooms:3); "
@@ -169,9 +177,11 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     if args.suite:
         return _cmd_suite(args)
     try:
+        overrides = _overrides(args)
         result = run_scenario(args.scenario, args.maze or _default_maze(), args.agents,
                               args.trials, args.seed, args.goals, args.episodes, args.event,
-                              args.goal, args.jobs, progress=not args.quiet)
+                              args.goal, args.jobs, progress=not args.quiet,
+                              overrides=overrides, params_files=args.params or ())
     except UsageError as exc:
         return _fail(str(exc))
     write_json(result, args.json)
@@ -185,6 +195,16 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     return 0
 
 
+def _overrides(args: argparse.Namespace) -> dict | None:
+    """``--params``: parameter overrides per agent spec (None without the flag)."""
+    if not args.params:
+        return None
+    from tmgwr_agent.experiments.scenarios import DEFAULTS, check_agents
+    from tmgwr_agent.experiments.tune import experiment_params
+    agents = check_agents(args.agents or DEFAULTS[args.scenario]["agents"])
+    return experiment_params(agents, args.params)
+
+
 def _cmd_suite(args: argparse.Namespace) -> int:
     """``experiment SCENARIO --suite SPEC`` (:mod:`tmgwr_agent.experiments.suite_runner`)."""
     from tmgwr_agent.experiments.output import write_json
@@ -196,10 +216,12 @@ def _cmd_suite(args: argparse.Namespace) -> int:
         return _fail("--goal does not apply with --suite (every suite maze's goal is G)")
     maze_dir = maze_dir_for(args.json) if args.json and args.json != "-" else None
     try:
+        overrides = _overrides(args)
         result = run_suite(args.scenario, args.suite, args.agents, args.trials, args.seed,
                            args.suite_seed, args.suite_first, args.event, args.goals,
                            args.episodes, args.jobs, progress=not args.quiet,
-                           maze_dir=maze_dir)
+                           maze_dir=maze_dir, overrides=overrides,
+                           params_files=args.params or ())
     except UsageError as exc:
         return _fail(str(exc))
     write_json(result, args.json)

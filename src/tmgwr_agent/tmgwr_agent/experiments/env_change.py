@@ -28,9 +28,15 @@ Link rules: the TMGWR agent is run under both readings of Eq. 1-2 (README, Inter
 the default agent list of this scenario is ``tmgwr,tmgwr:literal,tmgwr:credit,q_learning,
 model_based,dyna_q_plus`` (plain ``tmgwr`` is the default rule of ``MapConfig.link_rule``;
 with the same seeds it repeats one of the two named runs exactly).
+
+Parameters: ``overrides`` (``experiment --params``) change an agent's declared defaults;
+``./tmgwr tune`` scores its runs with steps 1-3 of this same :func:`trial`
+(``to_optimal=False``).
 """
 
 from __future__ import annotations
+
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -44,6 +50,7 @@ from tmgwr_agent.experiments.runner import (
     run_episode,
     set_goal,
     train_until_converged,
+    with_overrides,
 )
 from tmgwr_agent.experiments.stats import stat
 
@@ -91,12 +98,15 @@ def oracle_steps(maze: Maze, event: str, goal: str = "G") -> int:
     return best
 
 
-def trial(spec: str, t: int, seed: np.random.SeedSequence, maze_path: str, event: str,
-          goal: str) -> dict:
-    maze = Maze.from_file(maze_path)
+def trial(spec: str, t: int, seed: np.random.SeedSequence, maze: str | Maze, event: str,
+          goal: str, overrides: Mapping[str, Any] | None = None, *,
+          to_optimal: bool = True) -> dict:
+    """Steps 1-4 for one agent and trial (``maze``: a file or a Maze); ``to_optimal``
+    False stops after step 3 (``episodes_to_optimal`` is then ``None``)."""
+    maze = maze if isinstance(maze, Maze) else Maze.from_file(maze)
     caps = Caps.for_maze(maze)
     world = make_world(maze, goal, caps)
-    agent = make_agent(spec, maze, np.random.default_rng(seed))
+    agent = make_agent(spec, maze, np.random.default_rng(seed), overrides)
     set_goal(world, agent, goal)
     conv = train_until_converged(world, agent, caps)
     world.fire_event(event)
@@ -104,7 +114,7 @@ def trial(spec: str, t: int, seed: np.random.SeedSequence, maze_path: str, event
     ep = run_episode(world, agent)
     steps = ep.steps if ep.reached_goal else None
     episodes = None
-    if steps is not None:
+    if steps is not None and to_optimal:
         n, used = 1, ep.steps
         while True:
             if greedy_optimal(world, agent, d_new):
@@ -120,10 +130,12 @@ def trial(spec: str, t: int, seed: np.random.SeedSequence, maze_path: str, event
 
 
 def run(maze_path: str, agents: list[str], trials: int, seed: int, event: str = "a",
-        goal: str = "G", jobs: int | None = None, progress: bool = True) -> dict:
+        goal: str = "G", jobs: int | None = None, progress: bool = True,
+        overrides: Mapping[str, Mapping[str, Any]] | None = None) -> dict:
+    """``overrides``: parameter overrides per agent spec (absent: the defaults)."""
     maze = Maze.from_file(maze_path)
-    res = agent_trials(trial, agents, seed, trials, (maze_path, event, goal), jobs,
-                       f"env-change {event}", progress)
+    res = agent_trials(with_overrides(trial, overrides), agents, seed, trials,
+                       (maze_path, event, goal), jobs, f"env-change {event}", progress)
     out = {a: {k: stat(r[k] for r in rs)
                for k in ("steps", "episodes_to_optimal", "train_episodes")}
            for a, rs in res.items()}

@@ -23,12 +23,20 @@ JSON: ``agents[NAME] = {"transitions": [{"from", "to", "previous_pct": STAT,
 
 from __future__ import annotations
 
+from typing import Any, Mapping
+
 import numpy as np
 
 from maze_sim.maze import Maze
 from tmgwr_agent.experiments.agent_factory import make_agent
 from tmgwr_agent.experiments.parallel import agent_trials
-from tmgwr_agent.experiments.runner import Caps, make_world, run_episode, set_goal
+from tmgwr_agent.experiments.runner import (
+    Caps,
+    make_world,
+    run_episode,
+    set_goal,
+    with_overrides,
+)
 from tmgwr_agent.experiments.stats import stat
 
 DEFAULT_GOALS = ("1", "2", "3", "4", "1")
@@ -36,11 +44,12 @@ DEFAULT_EPISODES = 1000
 
 
 def trial(spec: str, t: int, seed: np.random.SeedSequence, maze_path: str,
-          goals: tuple[str, ...], episodes: int) -> list[dict]:
+          goals: tuple[str, ...], episodes: int,
+          overrides: Mapping[str, Any] | None = None) -> list[dict]:
     maze = Maze.from_file(maze_path)
     caps = Caps.for_maze(maze)
     world = make_world(maze, goals[0], caps)
-    agent = make_agent(spec, maze, np.random.default_rng(seed))
+    agent = make_agent(spec, maze, np.random.default_rng(seed), overrides)
     set_goal(world, agent, goals[0])
     out = []
     for i, goal in enumerate(goals):
@@ -60,9 +69,11 @@ def trial(spec: str, t: int, seed: np.random.SeedSequence, maze_path: str,
 
 def run(maze_path: str, agents: list[str], trials: int, seed: int,
         goals: tuple[str, ...] = DEFAULT_GOALS, episodes: int = DEFAULT_EPISODES,
-        jobs: int | None = None, progress: bool = True) -> dict:
-    res = agent_trials(trial, agents, seed, trials, (maze_path, tuple(goals), episodes),
-                       jobs, "goal-change", progress)
+        jobs: int | None = None, progress: bool = True,
+        overrides: Mapping[str, Mapping[str, Any]] | None = None) -> dict:
+    """``overrides``: parameter overrides per agent spec (absent: the defaults)."""
+    res = agent_trials(with_overrides(trial, overrides), agents, seed, trials,
+                       (maze_path, tuple(goals), episodes), jobs, "goal-change", progress)
     out = {}
     for a, per_trial in res.items():
         transitions = []

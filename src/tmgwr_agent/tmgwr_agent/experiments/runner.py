@@ -32,12 +32,19 @@ default maze):
   slowest learner that converges, needs some 10 000 - 30 000 on the default maze).
 
 A run that hits a cap is a failed trial (``None`` -> ``null`` in the JSON).
+
+Parameter overrides (``experiment --params``): every scenario's trial function takes the
+agent's overrides as its last argument (``None``: the declared defaults);
+:func:`with_overrides` hands each agent its own when the trials of several agents run
+through one function (:func:`.parallel.agent_trials`, :func:`.parallel.run_items`).
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from functools import partial
+from typing import Any, Callable, Mapping
 
 from maze_sim.maze import Maze
 from maze_sim.world import GridWorld
@@ -67,6 +74,20 @@ class Episode:
     steps: int
     reached_goal: bool
     reached_previous_goal: bool
+
+
+def with_overrides(fn: Callable,
+                   overrides: Mapping[str, Mapping[str, Any]] | None) -> Callable:
+    """``fn(spec, *args)`` -> ``fn(spec, *args, overrides=overrides[spec])``: a trial
+    function that gives each agent spec its own parameter overrides (none: ``fn`` itself).
+    Picklable, for the process pool."""
+    if not overrides:
+        return fn
+    return partial(_call_with, fn, {a: dict(v) for a, v in overrides.items() if v})
+
+
+def _call_with(fn: Callable, overrides: dict[str, dict[str, Any]], spec: str, *args) -> Any:
+    return fn(spec, *args, overrides=overrides.get(spec))
 
 
 def make_world(maze: Maze, goal: str, caps: Caps) -> GridWorld:

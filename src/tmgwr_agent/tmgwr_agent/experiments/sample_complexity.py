@@ -14,12 +14,20 @@ on until convergence or the caps.
 
 from __future__ import annotations
 
+from typing import Any, Mapping
+
 import numpy as np
 
 from maze_sim.maze import Maze
 from tmgwr_agent.experiments.agent_factory import make_agent
 from tmgwr_agent.experiments.parallel import agent_trials
-from tmgwr_agent.experiments.runner import Caps, make_world, set_goal, train_until_converged
+from tmgwr_agent.experiments.runner import (
+    Caps,
+    make_world,
+    set_goal,
+    train_until_converged,
+    with_overrides,
+)
 from tmgwr_agent.experiments.stats import mean_curve, stat
 
 DEFAULT_GOALS = ("1", "2", "3", "4")
@@ -28,13 +36,14 @@ EVERY = 5
 
 
 def trial(spec: str, t: int, seed: np.random.SeedSequence, maze_path: str,
-          goals: tuple[str, ...], episodes: int) -> dict:
+          goals: tuple[str, ...], episodes: int,
+          overrides: Mapping[str, Any] | None = None) -> dict:
     maze = Maze.from_file(maze_path)
     caps = Caps.for_maze(maze)
     out = {}
     for g, child in zip(goals, seed.spawn(len(goals))):
         world = make_world(maze, g, caps)
-        agent = make_agent(spec, maze, np.random.default_rng(child))
+        agent = make_agent(spec, maze, np.random.default_rng(child), overrides)
         set_goal(world, agent, g)
         conv = train_until_converged(world, agent, caps, min_episodes=episodes)
         out[g] = {"curve": conv.curve[EVERY - 1:episodes:EVERY],
@@ -44,9 +53,12 @@ def trial(spec: str, t: int, seed: np.random.SeedSequence, maze_path: str,
 
 def run(maze_path: str, agents: list[str], trials: int, seed: int,
         goals: tuple[str, ...] = DEFAULT_GOALS, episodes: int = DEFAULT_EPISODES,
-        jobs: int | None = None, progress: bool = True) -> dict:
-    res = agent_trials(trial, agents, seed, trials, (maze_path, tuple(goals), episodes),
-                       jobs, "sample-complexity", progress)
+        jobs: int | None = None, progress: bool = True,
+        overrides: Mapping[str, Mapping[str, Any]] | None = None) -> dict:
+    """``overrides``: parameter overrides per agent spec (absent: the defaults)."""
+    res = agent_trials(with_overrides(trial, overrides), agents, seed, trials,
+                       (maze_path, tuple(goals), episodes), jobs, "sample-complexity",
+                       progress)
     out = {}
     for a, rs in res.items():
         out[a] = {"goals": {g: {"curve": mean_curve([r[g]["curve"] for r in rs]),

@@ -4,18 +4,21 @@
 maze file) and raises :class:`UsageError` with a message naming what is wrong; the CLI
 turns it into exit code 2. The JSON starts with the contract header (README, Experiment JSON)
 (``scenario, maze, trials, seed``), then the scenario's own top-level fields, the step
-caps used (:class:`.runner.Caps`), and ``agents``.
+caps used (:class:`.runner.Caps`), with parameter overrides (``--params``) the ``params``
+they came from (:func:`params_record`), and ``agents``.
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Mapping, Sequence
+
+import numpy as np
 
 from maze_sim.maze import Maze, MazeError, maze_file
 from tmgwr_agent.experiments import env_change, goal_change, sample_complexity, timing
-from tmgwr_agent.experiments.agent_factory import AGENT_NAMES, parse_spec
+from tmgwr_agent.experiments.agent_factory import AGENT_NAMES, make_agent, parse_spec
 from tmgwr_agent.experiments.names import SCENARIOS
 from tmgwr_agent.experiments.runner import Caps
 
@@ -64,6 +67,33 @@ def check_agents(agents: Sequence[str]) -> list[str]:
     return agents
 
 
+def check_overrides(agents: Sequence[str], overrides: Mapping[str, Mapping[str, Any]],
+                    maze: Maze) -> dict[str, dict[str, Any]]:
+    """Parameter overrides per agent spec, checked before any work: every spec is one of
+    ``agents`` and its agent is built once with them (an unknown name, a value out of
+    range or an invalid combination is refused, naming it)."""
+    out = {a: dict(overrides.get(a) or {}) for a in agents}
+    for spec in overrides:
+        if spec not in out:
+            raise UsageError(f"parameter overrides for {spec!r}, which is not among the "
+                             f"agents run ({', '.join(agents)})")
+    for spec, values in out.items():
+        if values:
+            try:
+                make_agent(spec, maze, np.random.default_rng(0), values)
+            except ValueError as exc:          # ParamError: a name, range, combination
+                raise UsageError(f"parameters of {spec}: {exc}") from None
+    return out
+
+
+def params_record(overrides: Mapping[str, Mapping[str, Any]],
+                  files: Sequence[str] = ()) -> dict:
+    """The JSON's ``params``: the ``--params`` arguments as given and the overrides every
+    agent ran with (``{}``: its declared defaults)."""
+    return {"files": [str(f) for f in files],
+            "agents": {a: dict(v) for a, v in overrides.items()}}
+
+
 def check_goals(maze: Maze, goals: Sequence[str]) -> tuple[str, ...]:
     for g in goals:
         if g not in maze.goals:
@@ -86,7 +116,12 @@ def run_scenario(scenario: str, maze_path: str | Path = DEFAULT_MAZE,
                  agents: Sequence[str] | None = None, trials: int = 10, seed: int = 0,
                  goals: Sequence[str] | None = None, episodes: int | None = None,
                  event: str = "a", goal: str = "G", jobs: int | None = None,
-                 progress: bool = True) -> dict:
+                 progress: bool = True,
+                 overrides: Mapping[str, Mapping[str, Any]] | None = None,
+                 params_files: Sequence[str] = ()) -> dict:
+    """``overrides``: parameter overrides per agent spec (``--params``; None: every agent
+    with its declared defaults, and no ``params`` in the JSON); ``params_files``: where
+    they came from, recorded beside them."""
     if scenario not in SCENARIOS:
         raise UsageError(f"unknown scenario {scenario!r}; scenarios: {', '.join(SCENARIOS)}")
     d = DEFAULTS[scenario]
@@ -100,8 +135,10 @@ def run_scenario(scenario: str, maze_path: str | Path = DEFAULT_MAZE,
     episodes = episodes if episodes is not None else d["episodes"]
     if episodes is not None and episodes < 1:
         raise UsageError(f"--episodes must be >= 1, got {episodes}")
+    if overrides is not None:
+        overrides = check_overrides(agents, overrides, maze)
     maze_s = str(maze_path)
-    common = dict(jobs=jobs, progress=progress)
+    common = dict(jobs=jobs, progress=progress, overrides=overrides)
     if scenario == "goal-change":
         if len(goals) < 2:
             raise UsageError("goal-change needs at least two goals (--goals 1,2,...)")
@@ -119,5 +156,7 @@ def run_scenario(scenario: str, maze_path: str | Path = DEFAULT_MAZE,
     out = {"scenario": scenario, "maze": maze_s, "trials": trials, "seed": seed}
     out.update({k: v for k, v in body.items() if k != "agents"})
     out["caps"] = asdict(Caps.for_maze(maze))
+    if overrides is not None:
+        out["params"] = params_record(overrides, params_files)
     out["agents"] = body["agents"]
     return out

@@ -27,6 +27,9 @@ every maze). So one maze's entry of the suite JSON is exactly what
 A maze without the event (``shortcut`` mazes have no block, ``blocking`` mazes no
 opening) or without the goals is skipped and listed in ``suite.skipped``.
 
+Parameter overrides (``--params``) apply to every maze and are recorded as ``params``
+before ``agents``, as in a single-maze run (:func:`.scenarios.params_record`).
+
 JSON: the scenario's header and ``agents`` (each statistic over every trial of every maze,
 maze by maze; env-change adds ``oracle_ratio``: steps / oracle_steps per trial), then::
 
@@ -76,13 +79,19 @@ import statistics
 import tempfile
 from dataclasses import asdict
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Mapping, Sequence
 
 from maze_sim.suite import SuiteError, SuiteMaze, suite
 from tmgwr_agent.experiments import env_change, goal_change
 from tmgwr_agent.experiments.parallel import run_items, trial_seeds
-from tmgwr_agent.experiments.runner import Caps
-from tmgwr_agent.experiments.scenarios import DEFAULTS, UsageError, check_agents
+from tmgwr_agent.experiments.runner import Caps, with_overrides
+from tmgwr_agent.experiments.scenarios import (
+    DEFAULTS,
+    UsageError,
+    check_agents,
+    check_overrides,
+    params_record,
+)
 from tmgwr_agent.experiments.stats import stat
 
 SUITE_SCENARIOS = ("env-change", "goal-change")
@@ -247,9 +256,12 @@ def run_suite(scenario: str, spec: str, agents: Sequence[str] | None = None,
               trials: int = 10, seed: int = 0, suite_seed: int = 0, first: int = 0,
               event: str = "block", goals: Sequence[str] | None = None,
               episodes: int | None = None, jobs: int | None = None, progress: bool = True,
-              maze_dir: str | Path | None = None) -> dict:
+              maze_dir: str | Path | None = None,
+              overrides: Mapping[str, Mapping[str, Any]] | None = None,
+              params_files: Sequence[str] = ()) -> dict:
     """Run ``scenario`` on every maze of ``spec``; returns the suite JSON (see above).
-    ``maze_dir``: where the maze files go (None: a temporary folder, removed after)."""
+    ``maze_dir``: where the maze files go (None: a temporary folder, removed after);
+    ``overrides``, ``params_files``: as for :func:`.scenarios.run_scenario`."""
     if scenario not in SUITE_SCENARIOS:
         raise UsageError(f"--suite runs {' and '.join(SUITE_SCENARIOS)}, not {scenario}")
     if trials < 1:
@@ -272,16 +284,21 @@ def run_suite(scenario: str, spec: str, agents: Sequence[str] | None = None,
     except SuiteError as exc:
         raise UsageError(str(exc)) from exc
     todo, skipped = select(mazes, scenario, kind, goals)
+    params = None
+    if overrides is not None:
+        probe = (todo[0][0] if todo else mazes[0]).maze()     # agents built once on it
+        overrides = check_overrides(agents, overrides, probe)
+        params = (overrides, tuple(params_files))
     if maze_dir is None:
         with tempfile.TemporaryDirectory(prefix="tmgwr_suite_") as tmp:
             return _run(scenario, spec, agents, trials, seed, suite_seed, first, kind,
-                        episodes, jobs, progress, Path(tmp), mazes, todo, skipped)
+                        episodes, jobs, progress, Path(tmp), mazes, todo, skipped, params)
     return _run(scenario, spec, agents, trials, seed, suite_seed, first, kind, episodes,
-                jobs, progress, Path(maze_dir), mazes, todo, skipped)
+                jobs, progress, Path(maze_dir), mazes, todo, skipped, params)
 
 
 def _run(scenario, spec, agents, trials, seed, suite_seed, first, kind, episodes, jobs,
-         progress, maze_dir: Path, mazes, todo, skipped) -> dict:
+         progress, maze_dir: Path, mazes, todo, skipped, params) -> dict:
     for sm in mazes:                      # every maze, skipped ones too: all inspectable
         sm.write(maze_dir)
     seeds = trial_seeds(seed, trials)
@@ -293,7 +310,8 @@ def _run(scenario, spec, agents, trials, seed, suite_seed, first, kind, episodes
             for t in range(trials):
                 items.append((a, t, seeds[t]) + extra)
                 owner.append((m, a))
-    fn = env_change.trial if scenario == "env-change" else goal_change.trial
+    fn = with_overrides(env_change.trial if scenario == "env-change" else goal_change.trial,
+                        params[0] if params else None)
     # Biggest mazes first (the pool's tail is shorter); results go back in item order.
     order = sorted(range(len(items)), key=lambda i: -todo[owner[i][0]][0].free_cells)
     done = run_items(fn, [items[i] for i in order], jobs,
@@ -333,11 +351,15 @@ def _run(scenario, spec, agents, trials, seed, suite_seed, first, kind, episodes
     out: dict = {"scenario": scenario, "maze": None, "trials": trials, "seed": seed}
     if scenario == "env-change":
         out.update({"event": kind, "goal": GOAL})
-        out["agents"] = _env_agents(entries, agents)
     else:
         seqs = {tuple(e["goals"]) for e in entries}
         out["episodes"] = episodes
         out["goals"] = list(next(iter(seqs))) if len(seqs) == 1 else None
+    if params:
+        out["params"] = params_record(*params)
+    if scenario == "env-change":
+        out["agents"] = _env_agents(entries, agents)
+    else:
         out["agents"] = ({a: {"transitions": _goal_rows(
             [trial for e in entries for trial in raw[e["name"]][a]])} for a in agents}
             if len(seqs) == 1 else {})

@@ -10,11 +10,11 @@ Objective (minimised), on a *training split* of the generated suite
 :data:`TRAIN_SUITE`, the families with a block event and small mazes): for every maze and
 each of ``--seeds`` trial seeds (``SeedSequence(--seed).spawn``, the same for every
 Optuna trial: common random numbers), one *run* is steps 1-3 of the env-change protocol
-(:mod:`.env_change`): train to convergence on G, fire the maze's block event, count the
-steps of the first episode until G. A run's ratio is steps / ``oracle_steps``; a run
-*fails* when training did not converge within the caps or the episode hit its step cap
-(:class:`.runner.Caps`); a failed episode's ratio is the cap's (``episode_steps /
-oracle_steps``). Then::
+(:func:`.env_change.trial` itself, ``to_optimal=False``): train to convergence on G, fire
+the maze's block event, count the steps of the first episode until G. A run's ratio is
+steps / ``oracle_steps``; a run *fails* when training did not converge within the caps
+or the episode hit its step cap (:class:`.runner.Caps`); a failed episode's ratio is the
+cap's (``episode_steps / oracle_steps``). Then::
 
     objective = geometric mean over mazes (median over seeds of the ratio)
                 + PENALTY * (failed runs / runs)
@@ -55,14 +55,16 @@ with other options is refused.
 
 Outputs: the best parameters as a parameter file in the ROS 2 layout (TMGWR: the ``/**``
 section every node of the graph reads; a baseline: a section named after it, so its
-``beta`` never reaches the motivation estimator's), read back by :func:`load_tuned`; and a
-JSON summary. ``--evaluate`` runs the same protocol on a *held-out* split (default: the
-training families at the indices after the training ones) with ``--eval-trials`` seeds,
-for the tuned parameters and the defaults alongside.
+``beta`` never reaches the motivation estimator's), read back by :func:`load_tuned` and
+by ``experiment --params`` (:func:`experiment_params`); and a JSON summary.
+``--evaluate`` runs the same protocol on a *held-out* split (default: the training
+families at the indices after the training ones) with ``--eval-trials`` seeds, for the
+tuned parameters and the defaults alongside.
 """
 
 from __future__ import annotations
 
+import difflib
 import json
 import math
 import os
@@ -79,19 +81,21 @@ import yaml
 from maze_sim.maze import Maze
 from maze_sim.suite import SuiteError, suite
 from maze_sim.suite import parse_spec as suite_counts
-from tmgwr_agent.experiments.agent_factory import make_agent
+from tmgwr_agent.experiments import env_change
+from tmgwr_agent.experiments.agent_factory import AGENT_NAMES, make_agent
 from tmgwr_agent.experiments.agent_factory import parse_spec as parse_agent
 from tmgwr_agent.experiments.env_change import oracle_steps
 from tmgwr_agent.experiments.parallel import run_items, trial_seeds, warm_up
-from tmgwr_agent.experiments.runner import (
-    Caps,
-    make_world,
-    run_episode,
-    set_goal,
-    train_until_converged,
-)
+from tmgwr_agent.experiments.runner import Caps
 from tmgwr_agent.experiments.scenarios import UsageError
-from tmgwr_common.params import Param, ParamError, make_config, read_params_file, specs
+from tmgwr_common.params import (
+    Param,
+    ParamError,
+    make_config,
+    read_params_file,
+    specs,
+    unknown_name_message,
+)
 
 GOAL = "G"
 #: Training split: the families with a block event, small mazes (``large`` costs minutes).
@@ -227,7 +231,6 @@ def search_space(agent: str, space: Mapping[str, Interval] | None = None) -> lis
     for pname, iv in wanted.items():
         p = declared.get(pname)
         if p is None:
-            from tmgwr_common.params import unknown_name_message
             raise UsageError(f"tune {agent}: " + unknown_name_message(pname, declared))
         if p.choices is not None or isinstance(p.default, (bool, str, tuple)):
             raise UsageError(f"tune {agent}: parameter {pname!r} is not numeric "
@@ -299,17 +302,12 @@ def tasks(spec: str, suite_seed: int, first: int) -> tuple[list[Task], list[str]
 
 def block_run(agent: str, overrides: Mapping[str, Any], task: Task,
               seed: np.random.SeedSequence) -> dict:
-    """Steps 1-3 of the env-change protocol (:func:`.env_change.trial`) with parameter
+    """Steps 1-3 of the env-change protocol, :func:`.env_change.trial` itself with the
     overrides: train on G to convergence, fire the block, the first episode's steps."""
     maze = Maze.from_text(task.text, source=task.name)
-    caps = Caps.for_maze(maze)
-    world = make_world(maze, GOAL, caps)
-    agent_ = make_agent(agent, maze, np.random.default_rng(seed), overrides)
-    set_goal(world, agent_, GOAL)
-    conv = train_until_converged(world, agent_, caps)
-    world.fire_event(task.event)
-    ep = run_episode(world, agent_)
-    return {"steps": ep.steps if ep.reached_goal else None, "train_episodes": conv.episodes}
+    r = env_change.trial(agent, 0, seed, maze, task.event, GOAL, overrides,
+                         to_optimal=False)
+    return {"steps": r["steps"], "train_episodes": r["train_episodes"]}
 
 
 def score(task_list: Sequence[Task], runs: Sequence[Sequence[dict]]) -> dict:
@@ -506,21 +504,88 @@ def write_params(path: str | Path, agent: str, params: Mapping[str, Any],
     return path
 
 
+def tuned_sections(path: str | Path) -> dict[str, dict[str, Any]]:
+    """Every section of a parameter file of agents, by agent name (``tmgwr`` for ``/**``),
+    each value checked by its agent's Config. A section no agent reads, an unknown name
+    or a value out of range is refused, naming it and the file."""
+    known = {params_section(a): a for a in AGENT_NAMES}
+    out: dict[str, dict[str, Any]] = {}
+    for section, values in read_params_file(path).items():
+        key = section if section == "/**" else section.lstrip("/")
+        if key not in known:
+            close = [c for c in known if c != "/**"]
+            hint = next(iter(difflib.get_close_matches(key, close, n=1)), None)
+            raise ParamError(
+                f"{path}: section '{section}' is read by no agent"
+                f"{f' (did you mean {hint!r}?)' if hint else ''}; sections: '/**' (tmgwr), "
+                + ", ".join(f"'{c}'" for c in close))
+        agent = known[key]
+        declared = {p.name: p for p in agent_specs(agent)}
+        where = f"{path} [{section}]"
+        checked = {}
+        for name, v in values.items():
+            if name not in declared:
+                raise ParamError(unknown_name_message(name, declared, where))
+            checked[name] = declared[name].check(v, where)
+        if agent != "tmgwr":    # the baselines' own cross-field checks (eps_min <= eps_start)
+            make_config(_config_class(agent), checked, where)
+        out[agent] = {**out.get(agent, {}), **checked}
+    return out
+
+
 def load_tuned(path: str | Path, agent: str) -> dict[str, Any]:
-    """The overrides a parameter file holds for ``agent`` (its section), each checked by
-    the agent's Config (an unknown name or a value out of range is refused)."""
-    entries = read_params_file(path)
-    values = dict(entries.get(params_section(agent), {}))
-    declared = {p.name: p for p in agent_specs(agent)}
-    for name, v in values.items():
-        if name not in declared:
-            from tmgwr_common.params import unknown_name_message
-            raise ParamError(unknown_name_message(name, declared, str(path)))
-        declared[name].check(v, str(path))
-    name, _ = parse_agent(agent)
-    if name != "tmgwr":       # the baselines' own cross-field checks (eps_min <= eps_start)
-        make_config(_config_class(name), values, str(path))
-    return values
+    """The overrides a parameter file holds for ``agent`` (its section; see
+    :func:`tuned_sections`, which checks the whole file)."""
+    return tuned_sections(path).get(parse_agent(agent)[0], {})
+
+
+def experiment_params(agents: Sequence[str],
+                      params: Sequence[str]) -> dict[str, dict[str, Any]]:
+    """``experiment --params``: the overrides of every agent spec of ``agents`` read from
+    the parameter files ``params``, in order (a later file's value wins).
+
+    ``FILE``: each agent takes its own section (TMGWR specs ``/**``, a baseline the section
+    named after it; sections of agents not run are checked, then ignored), and a file
+    with nothing for any of the agents is refused. ``AGENT=FILE``: only the specs
+    ``AGENT`` names take the file's section for them (``AGENT`` a spec of ``agents``, or an
+    agent name for all its specs, e.g. ``tmgwr:credit=a.yaml`` and ``tmgwr:literal=b.yaml``
+    give two TMGWR runs their own ``/**`` values). A spec's own options
+    (``tmgwr:credit``) win over a file."""
+    out: dict[str, dict[str, Any]] = {a: {} for a in agents}
+    for arg in params:
+        name, eq, path = arg.partition("=")
+        restricted = bool(eq) and not Path(arg).exists()
+        if restricted:
+            try:
+                base, _ = parse_agent(name)
+            except ValueError as exc:
+                raise UsageError(f"--params {arg}: {exc}") from None
+            targets = [a for a in agents
+                       if a == name or (name == base and parse_agent(a)[0] == base)]
+            if not targets:
+                raise UsageError(f"--params {arg}: agent {name!r} is not among the agents "
+                                 f"run ({', '.join(agents)})")
+        else:
+            targets, path = list(agents), arg
+        try:
+            sections = tuned_sections(path)
+        except ParamError as exc:
+            raise UsageError(str(exc)) from None
+        have = ", ".join(f"'{params_section(s)}'" for s in sections) or "none"
+        used = False
+        for spec in targets:
+            values = sections.get(parse_agent(spec)[0])
+            if values is None and restricted:
+                raise UsageError(f"--params {arg}: {path} has no section "
+                                 f"'{params_section(spec)}' for {spec} (its sections: "
+                                 f"{have})")
+            if values is not None:
+                out[spec].update(values)
+                used = True
+        if not used:
+            raise UsageError(f"--params {arg}: {path} has values for none of the agents "
+                             f"{', '.join(agents)} (its sections: {have})")
+    return out
 
 
 def _config_class(name: str):
