@@ -34,6 +34,7 @@ cell (row, col) is centred at x = col, y = row, resolution 1), the current goal 
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import time
@@ -50,6 +51,7 @@ from std_srvs.srv import Trigger
 from maze_sim.maze import DEFAULT_MAZE, N_ACTIONS, Maze, MazeError, maze_file
 from maze_sim.world import GridWorld
 from tmgwr_common import topics
+from tmgwr_common.checkpoint import CHECKPOINT_SPECS, Checkpoint, Checkpointer, CheckpointError
 from tmgwr_common.lockstep import WARN_PERIOD
 from tmgwr_common.node import (
     LATCHED_QOS,
@@ -100,6 +102,7 @@ SPECS = (
           "goal changes to this file at exit (empty = do not write)"),
     Param("start_delay", 0.0, "seconds to wait after start before the first observation",
           low=0.0, high=3600.0),
+    *CHECKPOINT_SPECS,
 )
 
 
@@ -168,6 +171,10 @@ class MazeSimNode(Node):
         self.t_start = None
         self.t_warm = None
         self.timer = CallbackTimer()
+        # the counters, goal and layout survive any stop (tmgwr_common.checkpoint)
+        self.checkpoints = Checkpointer("maze_sim", p, self.get_logger(),
+                                        {"maze": maze_fingerprint(maze)}, self.get_namespace())
+        self.restore(self.checkpoints.resume({"walls": ("b", 2)}, self.check_checkpoint))
 
         self.publish_grid()
         self.publish_goal()
@@ -255,6 +262,7 @@ class MazeSimNode(Node):
         self.timer.publish(self.obs_pub, m)
         self.sent_at = time.monotonic()
         self.first_sent = self.sent_at
+        self.checkpoints.step(self.step_id, self.run_id, self.checkpoint_state)
 
     def answered(self, step: int):
         """Book-keeping of an accepted action: say when the ring resumed after resends, and
@@ -355,6 +363,56 @@ class MazeSimNode(Node):
         if self.p["trajectory_path"] and self.current is not None:
             self.write_trajectory()
         print(f"maze_sim: {self.timer.summary()}", flush=True)
+        self.checkpoints.stop(self.step_id, self.run_id, self.checkpoint_state)
+
+    # ------------------------------------------------------------------ checkpoint
+    def checkpoint_state(self):
+        """(state, arrays) that continue this run: counters, goal, layout, noise generator.
+        A resumed simulator starts a new episode (the one cut by the stop is not resumed)."""
+        w = self.world
+        cell = lambda c: [int(v) for v in c] if c is not None else None   # noqa: E731
+        return ({"episode": w.episode, "total_steps": w.total_steps, "goal": cell(w.goal),
+                 "pending_goal": cell(self.pending_goal), "fired": list(w.fired),
+                 "goals_reached": self.goals_reached,
+                 "goal_changes": [[int(s), cell(c)] for s, c in self.goal_changes],
+                 "rng": w.rng.bit_generator.state},
+                {"walls": w.walls})
+
+    def check_checkpoint(self, ck: Checkpoint) -> None:
+        walls = ck.arrays["walls"]
+        if walls.shape != self.world.walls.shape:
+            raise CheckpointError(f"{ck.path}: a {walls.shape} layout, the maze is "
+                                  f"{self.world.walls.shape}: refused")
+        try:
+            episode, total = int(ck.state["episode"]), int(ck.state["total_steps"])
+            goal = tuple(int(v) for v in ck.state["goal"])
+            if episode < 0 or total < 0 or len(goal) != 2:
+                raise ValueError("negative counters or a goal that is not (row, col)")
+            if walls[self.world.maze.start] or walls[goal]:
+                raise ValueError("the start or the goal is a wall")
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise CheckpointError(f"{ck.path}: {exc}: refused") from None
+
+    def restore(self, ck: Checkpoint | None) -> None:
+        if ck is None:
+            return
+        w, s = self.world, ck.state
+        w.walls, w.fired = ck.arrays["walls"].astype(bool), [str(e) for e in s["fired"]]
+        w.set_goal(tuple(int(v) for v in s["goal"]))
+        w.episode, w.total_steps = int(s["episode"]), int(s["total_steps"])
+        try:
+            w.rng.bit_generator.state = s["rng"]
+        except (KeyError, TypeError, ValueError) as exc:
+            self.get_logger().warning(f"noise generator not restored ({exc})")
+        if s.get("pending_goal"):
+            self.pending_goal = w.request_goal(tuple(int(v) for v in s["pending_goal"]))
+        self.step_id = ck.step_id              # the next observation is step_id + 1
+        self.goals_reached = int(s.get("goals_reached", 0))
+        self.goal_changes = [(int(a), tuple(c)) for a, c in s.get("goal_changes", [])]
+        self.get_logger().info(
+            f"resumed at step {ck.step_id + 1} (new run {self.run_id}; the checkpoint's run "
+            f"{ck.run_id}): episode {w.episode + 1} starts, goal {w.goal}, "
+            f"{self.goals_reached} goals reached so far, events {w.fired or 'none'}")
 
     # ------------------------------------------------------------------ goal and layout
     def apply_goal(self, cell):
@@ -456,6 +514,13 @@ class MazeSimNode(Node):
         m.pose.position.x, m.pose.position.y = float(self.world.cell[1]), float(self.world.cell[0])
         m.pose.orientation.w = 1.0
         self.pose_pub.publish(m)
+
+
+def maze_fingerprint(maze: Maze) -> str:
+    """What a checkpoint's maze must match: the layout and start as loaded from the file."""
+    h = hashlib.sha256(maze.walls.astype(bool).tobytes())
+    h.update(repr((maze.walls.shape, tuple(maze.start))).encode())
+    return h.hexdigest()[:16]
 
 
 def main(args=None):

@@ -3,6 +3,7 @@
     ros2 launch tmgwr_agent agent.launch.py
     ros2 launch tmgwr_agent agent.launch.py maze:=paper_13x17.txt goal:=2 seed:=1 record:=true
     ros2 launch tmgwr_agent agent.launch.py composed:=true     # one process, one executor
+    ros2 launch tmgwr_agent agent.launch.py resume:=runs/20250101T000000Z  # continue a run
 
 Starts ``maze_sim`` and the four agent nodes (and, with ``record:=true``, the MCAP
 recorder first). Every hyperparameter defaults to its spec (the config dataclasses of the
@@ -55,10 +56,20 @@ def graph_nodes(context):
                      "seed": seed},
         "action_selector": {"seed": seed},
     }
+    resume_dir = LaunchConfiguration("resume").perform(context).strip()
+    if resume_dir:               # continue from the checkpoints there (README, Continuing)
+        import os
+        run_dir = os.path.abspath(os.path.expanduser(resume_dir))
+        if not os.path.isdir(run_dir):
+            raise ValueError(f"launch argument resume:={resume_dir}: no such directory")
+        for name in ("maze_sim", "map_learner", "motivation_estimator", "action_selector"):
+            overrides.setdefault(name, {}).update(checkpoint_dir=run_dir, resume=True)
+        overrides["map_learner"]["map_dir"] = run_dir
     if LaunchConfiguration("composed").perform(context).strip().lower() in ("true", "1"):
         # one process, one executor (tmgwr_agent composed): its parameters reach every node
         # of it, a name only the nodes that declare it (maze and goal: maze_sim)
-        shared = {**overrides["maze_sim"], **overrides["action_selector"]}
+        shared = {**overrides["maze_sim"], **overrides["action_selector"],
+                  **overrides.get("map_learner", {})}
         return [Node(package="tmgwr_agent", executable="composed", output="screen",
                      parameters=[*files, shared])]
     return [
@@ -84,6 +95,10 @@ def generate_launch_description():
         DeclareLaunchArgument("composed", default_value="false",
                               description="run the five nodes in one process on one "
                                           "executor (tmgwr_agent composed)"),
+        DeclareLaunchArgument("resume", default_value="",
+                              description="continue the run whose checkpoints are in this "
+                                          "directory (a ./tmgwr up run directory, or "
+                                          "$ROS_HOME/tmgwr/domain<ID>); '' = start fresh"),
         DeclareLaunchArgument("params_file", default_value="",
                               description="ROS 2 parameter file of overrides for the five "
                                           "nodes ('' = every parameter at its default)"),

@@ -2,7 +2,9 @@
 
 * ``up`` starts the five nodes (and the recorder, to ``runs/<UTC timestamp>/`` unless
   ``--no-record``) as separate processes and keeps them running until Ctrl-C, printing
-  each episode (steps, outcome) as the Observation topic shows it.
+  each episode (steps, outcome) as the Observation topic shows it. ``up --resume RUN``
+  continues a run from its directory's checkpoints (graph.resume; README, Continuing a
+  run).
 * ``goal X Y`` calls ``/set_goal`` (x = column, y = row); ``cell R C --block|--open`` and
   ``event NAME`` change the maze; ``reset`` restarts the episode. Each waits a bounded
   time for its service and says so when no graph is running.
@@ -17,6 +19,7 @@ import argparse
 import os
 import sys
 import time
+from pathlib import Path
 
 from tmgwr_agent.graph.output import say
 
@@ -45,6 +48,9 @@ def register(subparsers) -> None:
                    help="ROS 2 parameter file passed to every node (overrides only: "
                         "'/**: ros__parameters: {gamma: 0.9}' or per-node sections); "
                         "repeatable, later files win")
+    p.add_argument("--resume", metavar="RUN", help="continue run RUN (its directory, or "
+                   "its stamp under runs/) where it stopped: map, exploration state, "
+                   "counters, with the run's settings; records to RUN/resumed_<N>/")
     _domain_arg(p)
     p.set_defaults(func=cmd_up)
 
@@ -141,18 +147,48 @@ def cmd_reset(args) -> int:
 
 
 # --------------------------------------------------------------------------- up
+def _run_settings(args) -> tuple[dict, Path | None, Path | None]:
+    """(settings, run directory, bag directory) of ``up``: a new run, or with ``--resume``
+    the run's directory and settings (graph.resume) and a new bag inside it."""
+    from maze_sim.maze import maze_file
+    from tmgwr_agent.graph import resume
+    from tmgwr_agent.graph.supervisor import default_run_dir
+    maze = args.maze
+    if maze is not None:
+        try:
+            maze = str(maze_file(maze).resolve())
+        except FileNotFoundError as exc:
+            raise resume.ResumeError(f"--maze: {exc}") from None
+    given = {"maze": maze, "goal": args.goal, "seed": args.seed,
+             "params_files": [str(Path(f).expanduser().resolve()) for f in args.params_file],
+             "composed": args.composed}
+    if not args.resume:
+        run_dir = None if args.no_record else Path(args.record_dir or default_run_dir())
+        return given, run_dir, run_dir
+    run_dir = resume.find_run(args.resume)
+    settings = resume.merged_settings(run_dir, given)
+    bag = None if args.no_record else Path(args.record_dir or resume.resumed_bag_dir(run_dir))
+    return settings, run_dir, bag
+
+
 def cmd_up(args) -> int:
     _apply_domain(args)
+    from tmgwr_agent.graph.resume import ResumeError, write_settings
     from tmgwr_agent.graph.run import GraphRun, describe_exit
     from tmgwr_common.params import ParamError
     try:
-        run = GraphRun(maze=args.maze, seed=args.seed, goal=args.goal,
-                       record=not args.no_record, record_dir=args.record_dir,
-                       echo=not args.quiet, params_files=args.params_file)
-        if args.composed:             # one process instead of five (nodes/composed.py)
+        settings, run_dir, bag_dir = _run_settings(args)
+        run = GraphRun(maze=settings["maze"], seed=settings["seed"], goal=settings["goal"],
+                       record=bag_dir is not None, record_dir=bag_dir, run_dir=run_dir,
+                       echo=not args.quiet, params_files=settings["params_files"] or [])
+        if run_dir is not None and not args.resume:
+            write_settings(run_dir, settings)       # what --resume starts again with
+        elif args.resume:
+            say(f"resuming {run_dir}" + (f", recording to {bag_dir}" if bag_dir else ""))
+        if settings["composed"]:      # one process instead of five (nodes/composed.py)
             from tmgwr_agent.graph.supervisor import composed_specs
             run.specs = run.supervisor.specs = composed_specs(run.specs)
-    except ParamError as exc:
+    except (ParamError, ResumeError) as exc:
         say(f"up: {exc}", sys.stderr)
         return 2
     outcomes = {"goal": "reached the goal", "previous_goal": "ended at the previous goal",
@@ -199,4 +235,6 @@ def cmd_up(args) -> int:
     say("graph stopped: " + ", ".join(f"{k} exit {v}" for k, v in codes.items()))
     if run.record_dir:
         say(f"recording: {run.record_dir}")
+    if run.run_dir is not None:
+        say(f"continue this run: ./tmgwr up --resume {run.run_dir}")
     return code

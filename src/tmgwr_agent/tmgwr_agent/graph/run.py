@@ -35,12 +35,16 @@ class GraphRun:
                  goal: str | None = None, record: bool = True,
                  record_dir: str | Path | None = None, echo=True,
                  node_params: Mapping[str, Mapping[str, object]] | None = None,
-                 params_files=()):
+                 params_files=(), run_dir: str | Path | None = None):
+        """``run_dir``: the run's directory (maps, checkpoints; default: the recording's);
+        a resumed run records into a new bag inside it (graph.resume)."""
         self.record_dir: Path | None = None
         if record:
             self.record_dir = Path(record_dir) if record_dir else default_run_dir()
+        self.run_dir = Path(run_dir) if run_dir is not None else self.record_dir
         self.specs = graph_specs(maze=maze, seed=seed, goal=goal, record_dir=self.record_dir,
-                                 node_params=node_params, params_files=params_files)
+                                 node_params=node_params, params_files=params_files,
+                                 run_dir=self.run_dir)
         self.supervisor = GraphSupervisor(self.specs, env=os.environ, echo=echo)
         self.monitor = EpisodeMonitor()
         self.node = None

@@ -52,6 +52,10 @@ GRAPH_NODES: tuple[tuple[str, str], ...] = (
 )
 
 
+#: The nodes that keep a checkpoint (tmgwr_common.checkpoint; README, Continuing a run).
+CHECKPOINTED = ("maze_sim", "map_learner", "motivation_estimator", "action_selector")
+
+
 class GraphError(RuntimeError):
     """A node could not be started or died; the message names it and shows its output."""
 
@@ -289,14 +293,21 @@ def _print_line(line: str) -> None:
 def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | None = None,
                 record_dir: str | Path | None = None,
                 node_params: Mapping[str, Mapping[str, object]] | None = None,
-                params_files: Sequence[str | Path] = ()) -> list[NodeSpec]:
+                params_files: Sequence[str | Path] = (),
+                run_dir: str | Path | None = None) -> list[NodeSpec]:
     """The recorder (when ``record_dir``) and the five nodes, with parameter files and
     overrides. ``maze``, ``seed`` and ``goal`` are the simulator's (and, for the seed, the
     action selector's) parameters; ``node_params`` adds overrides per executable;
     ``params_files`` (ROS 2 parameter files, ``/**`` or per-node sections) go to every node
     of the five, checked first (a malformed file or an unknown name raises ParamError).
-    Without them every node runs on its specs' defaults."""
+    Without them every node runs on its specs' defaults. ``run_dir`` (default
+    ``record_dir``): the run's directory, for the learner's maps and the checkpoints of the
+    nodes that keep one (``resume`` on: a node restarted with these parameters, or the
+    graph started again on this directory, continues from its checkpoint)."""
     node_params = node_params or {}
+    if run_dir is None:
+        run_dir = record_dir
+    run_dir = Path(run_dir) if run_dir is not None else None
     files = [Path(f).expanduser().resolve() for f in params_files]
     for f in files:               # refused here, with file and line, not by each node
         check_params_file(f)
@@ -321,8 +332,11 @@ def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | No
                 # the recorder discovers topics every 0.5 s: let it subscribe to the
                 # Observation topic before the first step is published
                 params["start_delay"] = 1.0
-        if exe == "map_learner" and record_dir is not None:
-            params["map_dir"] = str(Path(record_dir).resolve())    # the run's own maps
+        if exe == "map_learner" and run_dir is not None:
+            params["map_dir"] = str(run_dir.resolve())             # the run's own maps
+        if exe in CHECKPOINTED and run_dir is not None:
+            params["checkpoint_dir"] = str(run_dir.resolve())
+            params["resume"] = True
         if seed is not None and exe in ("maze_sim", "action_selector"):
             params["seed"] = int(seed)
         params.update(node_params.get(exe, {}))

@@ -20,6 +20,14 @@ from tmgwr_agent.core.action_selector import ActionSelector, SelectorConfig
 from tmgwr_agent.core.sensorimotor_map import Links
 from tmgwr_agent.nodes.step_messages import outcome_of
 from tmgwr_common import topics
+from tmgwr_common.checkpoint import (
+    CHECKPOINT_SPECS,
+    Checkpoint,
+    Checkpointer,
+    CheckpointError,
+    joined_state,
+    split_state,
+)
 from tmgwr_common.lockstep import Lockstep
 from tmgwr_common.node import (
     NODE_OPTIONS,
@@ -37,6 +45,7 @@ NODE_SPECS = (
     Param("seed", 0, "seed of the selector's generator (exploration and tie-breaks)",
           low=0, high=2 ** 63 - 1, integer=True),
     Param("explore", True, "epsilon-greedy exploration (false: greedy Eq. 6 only)"),
+    *CHECKPOINT_SPECS,
 )
 
 
@@ -50,11 +59,17 @@ class ActionSelectorNode(Node):
         self.lockstep = Lockstep(pub, logger=self.get_logger(), what="motivation field")
         self.create_subscription(MotivationField, topics.MOTIVATION, self.on_motivation,
                                  STEP_QOS)
+        # epsilon, the walk and the generator survive any stop (tmgwr_common.checkpoint)
+        self.checkpoints = Checkpointer("action_selector", self.p, self.get_logger(),
+                                        namespace=self.get_namespace())
+        self.checkpoints.resume(check=self.restore)
         self.get_logger().info(f"action_selector ready: seed {self.p['seed']}, "
+                               f"epsilon {self.core.policy.epsilon:.3f}, "
                                f"{config.as_dict()}")
 
     def on_motivation(self, f: MotivationField):
         self.lockstep.on_step(f.run_id, f.step_id, lambda: self.choose(f))
+        self.checkpoints.step(self.lockstep.last_step, self.lockstep.run_id, self.checkpoint_state)
 
     def choose(self, f: MotivationField) -> Action:
         self.core.record(self.prev_winner, outcome_of(f))   # what TMGWRAgent.step does here
@@ -84,8 +99,34 @@ class ActionSelectorNode(Node):
         self.prev_winner = int(f.winner)
         return a
 
+    def checkpoint_state(self):
+        state, arrays = split_state(self.core.state_dict())
+        return {**state, "rng": self.core.rng.bit_generator.state,
+                "prev_winner": self.prev_winner}, arrays
+
+    def restore(self, ck: Checkpoint) -> None:
+        """Epsilon, the walk, the search flag and the generator from checkpoint ``ck``."""
+        d = joined_state(ck)
+        try:
+            if not 0.0 <= float(d["epsilon"]) <= 1.0:
+                raise ValueError(f"epsilon {d['epsilon']!r} outside [0, 1]")
+            rng = self.core.rng.bit_generator
+            before = rng.state
+            rng.state = d.pop("rng")
+            try:
+                self.core.load_state_dict(d)
+            except BaseException:
+                rng.state = before
+                raise
+            self.prev_winner = int(d.get("prev_winner", -1))
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise CheckpointError(f"{ck.path}: {exc!r}: refused") from None
+        self.get_logger().info(f"resumed epsilon {self.core.policy.epsilon:.3f}")
+
     def on_shutdown(self):
         print(f"action_selector: {self.lockstep.timer.summary()}", flush=True)
+        self.checkpoints.stop(self.lockstep.last_step, self.lockstep.run_id,
+                              self.checkpoint_state)
 
 
 def main(args=None):

@@ -50,9 +50,16 @@ from visualization_msgs.msg import Marker, MarkerArray
 from maze_sim.maze import ACTION_VECTORS
 from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap
 from tmgwr_agent.map_replica import ChangeEncoder
-from tmgwr_agent.map_store import MapStore, MapStoreError, default_map_dir, read_map
+from tmgwr_agent.map_store import (
+    MapStore,
+    MapStoreError,
+    default_map_dir,
+    read_map,
+    validate_state,
+)
 from tmgwr_agent.nodes.step_messages import fill_change, outcome_of
 from tmgwr_common import topics
+from tmgwr_common.checkpoint import CHECKPOINT_SPECS, Checkpoint, Checkpointer, CheckpointError
 from tmgwr_common.lockstep import Lockstep
 from tmgwr_common.node import (
     LATCHED_QOS,
@@ -94,6 +101,7 @@ NODE_SPECS = (
     Param("snapshot_period", 500, "steps between two latched whole-map snapshots "
           "(/sensorimotor_snapshot; also sent on request and for a new map)", low=1,
           high=1e9, integer=True),
+    *CHECKPOINT_SPECS,
 )
 
 
@@ -118,6 +126,12 @@ class MapLearnerNode(Node):
             self.get_logger().info(f"started from {self.p['initial_map']}: {self.map.size} nodes, "
                                    f"{self.map.link_count()} links, step {last_step} "
                                    f"(run {run_id or 'unknown'})")
+        # the map and its step survive any stop (tmgwr_common.checkpoint; before initial_map)
+        self.checkpoints = Checkpointer("map_learner", self.p, self.get_logger(),
+                                        default_dir=self.store.directory)
+        ck = self.checkpoints.resume(check=self.map_of_checkpoint)
+        if ck is not None:
+            self.map, last_step, run_id = self.map_of_checkpoint(ck), ck.step_id, ck.run_id
         self.V = np.zeros(0)
         self.published = (-1, -1)        # (step, version) of the last latched snapshot
 
@@ -157,6 +171,8 @@ class MapLearnerNode(Node):
             return
         self.lockstep.on_step(f.run_id, f.step_id, lambda: self.learn(f),
                               answer_again=lambda: self.make_state(f))
+        self.checkpoints.step(self.lockstep.last_step, self.lockstep.run_id,
+                              self.checkpoint_state)
 
     def learn(self, f: Features) -> SensorimotorState:
         x = np_f64(f.features)
@@ -347,9 +363,27 @@ class MapLearnerNode(Node):
         self.publish_map()
         return resp
 
+    def checkpoint_state(self):
+        return {"gain": self.gain}, self.map.state_dict()
+
+    def map_of_checkpoint(self, ck: Checkpoint) -> SensorimotorMap:
+        """The checkpoint's map, validated as completely as a loaded map file."""
+        try:
+            validate_state({**ck.arrays, "step_id": np.array(ck.step_id),
+                            "run_id": np.array(ck.run_id, dtype=np.uint64)}, str(ck.path))
+            m = SensorimotorMap(dim=ck.arrays["w"].shape[1],
+                                action_dim=ck.arrays["a"].shape[2], config=self.config)
+            m.load_state_dict(ck.arrays)
+        except (MapStoreError, KeyError, ValueError, IndexError) as exc:
+            raise CheckpointError(str(exc)) from None
+        self.gain = float(ck.state.get("gain", 1.0))
+        return m
+
     def on_shutdown(self):
         print(f"map_learner: {self.lockstep.timer.summary()}", flush=True)
         step = self.lockstep.last_step
+        if self.map is not None:
+            self.checkpoints.stop(step, self.lockstep.run_id, self.checkpoint_state)
         if self.map is not None and self.p["map_name"]:
             try:
                 path = self.store.save(self.map, self.p["map_name"], step,

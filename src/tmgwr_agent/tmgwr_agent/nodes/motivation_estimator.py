@@ -34,6 +34,14 @@ from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
 from tmgwr_agent.map_replica import APPLIED, GAP, Replica
 from tmgwr_agent.nodes.step_messages import change_of
 from tmgwr_common import topics
+from tmgwr_common.checkpoint import (
+    CHECKPOINT_SPECS,
+    Checkpoint,
+    Checkpointer,
+    CheckpointError,
+    joined_state,
+    split_state,
+)
 from tmgwr_common.lockstep import Lockstep
 from tmgwr_common.node import (
     LATCHED_QOS,
@@ -57,6 +65,7 @@ from tmgwr_interfaces.srv import SetGoal
 NODE_SPECS = (
     Param("field_period", 100, "steps between two latched publications of every node's "
           "potential (/potentials, for inspection)", low=1, high=1e9, integer=True),
+    *CHECKPOINT_SPECS,
 )
 
 
@@ -84,6 +93,10 @@ class MotivationEstimatorNode(Node):
         self.create_subscription(OccupancyGrid, topics.GRID, self.on_grid, LATCHED_QOS)
         self.sim_goal = self.create_client(SetGoal, topics.SIM_SET_GOAL)
         self.create_service(SetGoal, topics.SET_GOAL, self.on_set_goal)
+        # the outcome memory of Eq. 5' survives any stop (tmgwr_common.checkpoint)
+        self.checkpoints = Checkpointer("motivation_estimator", self.p, self.get_logger(),
+                                        namespace=self.get_namespace())
+        self.checkpoints.resume(check=self.restore)
         self.get_logger().info(f"motivation_estimator ready: {config.as_dict()}")
 
     # ------------------------------------------------------------------ per step
@@ -92,6 +105,8 @@ class MotivationEstimatorNode(Node):
         if s.run_id and not resent and not self.follow(s):
             return                          # held until the replica has this step's map
         self.lockstep.on_step(s.run_id, s.step_id, lambda: self.motivate(s))
+        self.checkpoints.step(self.lockstep.last_step, self.lockstep.run_id,
+                              lambda: split_state(self.core.state_dict()))
 
     def follow(self, s: SensorimotorState) -> bool:
         """Bring the replica to the map of state ``s``; False (``s`` held, a whole map
@@ -214,8 +229,18 @@ class MotivationEstimatorNode(Node):
             self.get_logger().error("maze_sim dropped the goal: "
                                     f"{answer.message if answer else 'no answer'}")
 
+    def restore(self, ck: Checkpoint) -> None:
+        """The core's state from checkpoint ``ck`` (the core refuses what it cannot take)."""
+        try:
+            self.core.load_state_dict(joined_state(ck))
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            self.core = type(self.core)(self.core.config)     # nothing half loaded
+            raise CheckpointError(f"{ck.path}: {exc!r}: refused") from None
+
     def on_shutdown(self):
         print(f"motivation_estimator: {self.lockstep.timer.summary()}", flush=True)
+        self.checkpoints.stop(self.lockstep.last_step, self.lockstep.run_id,
+                              lambda: split_state(self.core.state_dict()))
 
 
 def main(args=None):
