@@ -81,19 +81,26 @@ class ActionSelectorNode(Node):
         if f.terminal:
             a.action = Action.NONE          # no draw: the episode is over
         else:                               # what TMGWRAgent.act does
-            links = None
+            # The winner's neighbourhood in local ids: slot k's target is k (looked up as
+            # V[k], the potentials of the targets in slot order: the same E[i, k] V(k)
+            # products as on the whole field), the winner itself is K (its options, virtual
+            # links to itself, Eq. 5'), an empty slot -1 (V[-1] = 0).
+            links, node, goal = None, -1, -1
+            targets = np_i64(f.winner_link_targets)
+            K = len(targets)
+            V = np.append(np_f64(f.winner_link_potentials), [0.0, 0.0])
             if f.winner >= 0:
-                # slot k's target is looked up as V[k] (the potentials of the targets, in
-                # slot order): the same E[i, k] V(k) products as on the whole field
-                targets = np_i64(f.winner_link_targets)
-                K = len(targets)
-                links = Links(targets=np.where(targets >= 0, np.arange(K), -1),
+                self_slots = targets == f.winner
+                if self_slots.any():
+                    V[K] = V[np.flatnonzero(self_slots)[0]]
+                local = np.where(targets >= 0, np.arange(K), -1)
+                links = Links(targets=np.where(self_slots, K, local),
                               E=np_f64(f.winner_link_reliability),
                               actions=np_f64(f.winner_link_actions).reshape(
                                   K, f.action_dim or 1))
-            V = np.append(np_f64(f.winner_link_potentials), 0.0)   # V[-1] = 0: empty slots
-            action, a.explored = self.core.select(lambda node: links, int(f.winner), V,
-                                                  int(f.goal_node), self.p["explore"])
+                node, goal = K, (K if f.goal_node == f.winner else -1)
+            action, a.explored = self.core.select(lambda _node: links, node, V, goal,
+                                                  self.p["explore"])
             a.action = int(action)
             a.motor = f64(ACTION_VECTORS[action])
         self.prev_winner = int(f.winner)

@@ -31,8 +31,9 @@ from rclpy.node import Node
 from std_srvs.srv import Trigger
 
 from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
+from tmgwr_agent.core.sensorimotor_map import Links
 from tmgwr_agent.map_replica import APPLIED, GAP, Replica
-from tmgwr_agent.nodes.step_messages import change_of
+from tmgwr_agent.nodes.step_messages import change_of, outcome_of
 from tmgwr_common import topics
 from tmgwr_common.checkpoint import (
     CHECKPOINT_SPECS,
@@ -145,6 +146,9 @@ class MotivationEstimatorNode(Node):
         if self.core.follow_goal(goal_x):       # a new goal: V restarts from 0 (Algorithm 1)
             self.get_logger().info(f"step {s.step_id}: goal sensation {goal_x.tolist()}")
         m = self.replica.snapshot()
+        # what TMGWRAgent.step does here: note what the last action did (Eq. 5' options),
+        # then re-solve Eq. 4-5 on this step's map
+        self.core.record(s.previous_winner, s.winner, s.inserted, outcome_of(s), m.w)
         V = self.core.update(m)
         out = MotivationField()
         out.header = s.header
@@ -154,13 +158,17 @@ class MotivationEstimatorNode(Node):
         out.goal_node = int(self.core.goal_node)
         out.sweeps = int(self.core.sweeps)
         out.winner = s.winner
-        if s.winner >= 0:
-            targets = m.out[s.winner]
-            out.winner_link_targets = i32(targets)
-            out.winner_link_reliability = f64(m.E[s.winner])
-            out.winner_link_potentials = f64(self.core.V[targets])   # V[-1] = V[n] = 0
         out.action_dim = s.action_dim
-        out.winner_link_actions = s.winner_link_actions
+        if s.winner >= 0:          # what Eq. 6 ranks: the winner's links and its options
+            actions = np_f64(s.winner_link_actions).reshape(-1, s.action_dim or 1)
+            links = self.core.options_of(
+                s.winner, Links(m.out[s.winner], m.E[s.winner], actions))
+            out.winner_link_targets = i32(links.targets)
+            out.winner_link_reliability = f64(links.E)
+            out.winner_link_potentials = f64(self.core.V[links.targets])  # V[-1] = V[n] = 0
+            out.winner_link_actions = f64(links.actions.ravel())
+        else:
+            out.winner_link_actions = s.winner_link_actions
         out.episode_start = s.episode_start
         out.action = s.action
         out.bumped = s.bumped
