@@ -13,13 +13,25 @@ core); ``params_file:=FILE`` passes a ROS 2 parameter file of overrides to the f
     ros2 service call /set_goal tmgwr_interfaces/srv/SetGoal "{goal: {x: 11.0, y: 1.0, z: 0.0}}"
     ros2 service call /maze_sim/fire_event tmgwr_interfaces/srv/FireEvent "{event: a}"
 
+``namespace:=a`` puts every node (and the recorder) in ``/a``: topics and services are
+relative or private, so two agents run side by side in one domain (``/a/set_goal``,
+``/a/maze_sim/fire_event``, ...).
+
+When any node exits, the launch ends: with exit code 0 when it finished (maze_sim's
+``exit_when_done``), else non-zero, saying which node exited with which code and its last
+error line (e.g. ``maze_sim exited with code 2: [maze_sim] cannot start: ...``). Ctrl-C
+stops every node. The launch file sets no DDS setting (``ROS_DOMAIN_ID``,
+``ROS_AUTOMATIC_DISCOVERY_RANGE``, ``ROS_STATIC_PEERS``, ``RMW_IMPLEMENTATION``, Fast DDS
+profiles): the nodes inherit the user's environment (README, DDS settings).
+
 The pip-only environment has no ``launch`` package (not on PyPI): there ``./tmgwr up``
 does the same with tmgwr_agent.graph.supervisor.
 """
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.actions import DeclareLaunchArgument, OpaqueFunction, RegisterEventHandler, Shutdown
 from launch.conditions import IfCondition
+from launch.event_handlers import OnProcessExit, OnProcessIO
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
@@ -46,10 +58,45 @@ def int_argument(context, name: str) -> int:
     return value
 
 
+class NodeExited(RuntimeError):
+    """A node exited while the graph ran (``ros2 launch`` prints the message and exits 1)."""
+
+
+class ExitWatch:
+    """Ends the launch when any node exits: a clean finish (exit code 0) shuts it down, any
+    other exit raises :class:`NodeExited`, which ``ros2 launch`` reports as 'Caught
+    exception in launch ...: maze_sim exited with code 2: <its last error line>' and turns
+    into exit code 1. Exits during a shutdown (Ctrl-C, another node's exit) are expected."""
+
+    def __init__(self):
+        self.last_line: dict[str, str] = {}
+
+    def on_output(self, event) -> None:
+        lines = [ln.strip() for ln in event.text.decode(errors="replace").splitlines()]
+        lines = [ln for ln in lines if ln]
+        if lines:
+            self.last_line[event.process_name] = lines[-1]
+
+    def on_exit(self, event, context):
+        if context.is_shutdown:
+            return None
+        name = event.process_name.rsplit("-", 1)[0]          # maze_sim-2 -> maze_sim
+        code = event.returncode
+        if code == 0:
+            return [Shutdown(reason=f"{name} finished (exit code 0)")]
+        why = self.last_line.get(event.process_name, "no output")
+        raise NodeExited(f"{name} exited with code {code}: {why}")
+
+    def handlers(self):
+        return [RegisterEventHandler(OnProcessIO(on_stderr=self.on_output)),
+                RegisterEventHandler(OnProcessExit(on_exit=self.on_exit))]
+
+
 def graph_nodes(context):
     """The five nodes, each with the user's parameter file (if any), then its overrides."""
     params_file = LaunchConfiguration("params_file").perform(context)
     files = [params_file] if params_file else []
+    namespace = LaunchConfiguration("namespace")
     seed = int_argument(context, "seed")
     overrides = {
         "maze_sim": {"maze": LaunchConfiguration("maze"), "goal": LaunchConfiguration("goal"),
@@ -71,10 +118,10 @@ def graph_nodes(context):
         shared = {**overrides["maze_sim"], **overrides["action_selector"],
                   **overrides.get("map_learner", {})}
         return [Node(package="tmgwr_agent", executable="composed", output="screen",
-                     parameters=[*files, shared])]
+                     namespace=namespace, parameters=[*files, shared])]
     return [
         Node(package=package, executable=executable, name=executable, output="screen",
-             parameters=[*files, overrides.get(executable, {})])
+             namespace=namespace, parameters=[*files, overrides.get(executable, {})])
         for package, executable in GRAPH
     ]
 
@@ -99,12 +146,17 @@ def generate_launch_description():
                               description="continue the run whose checkpoints are in this "
                                           "directory (a ./tmgwr up run directory, or "
                                           "$ROS_HOME/tmgwr/domain<ID>); '' = start fresh"),
+        DeclareLaunchArgument("namespace", default_value="",
+                              description="ROS namespace of every node ('' = the root): "
+                                          "two graphs in one domain need two namespaces"),
         DeclareLaunchArgument("params_file", default_value="",
                               description="ROS 2 parameter file of overrides for the five "
                                           "nodes ('' = every parameter at its default)"),
     ]
     recorder = Node(
         package="tmgwr_agent", executable="recorder", name="recorder", output="screen",
+        namespace=LaunchConfiguration("namespace"),
         parameters=[{"output_dir": LaunchConfiguration("output_dir")}],
         condition=IfCondition(LaunchConfiguration("record")))
-    return LaunchDescription(arguments + [recorder, OpaqueFunction(function=graph_nodes)])
+    return LaunchDescription(arguments + ExitWatch().handlers()
+                             + [recorder, OpaqueFunction(function=graph_nodes)])

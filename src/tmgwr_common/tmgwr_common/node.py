@@ -18,7 +18,9 @@
   ``array.array`` rclpy stores from a numpy array in one memcpy, :func:`np_f64` etc. read
   them back without a Python loop.
 * :func:`run`: the Jazzy ``main()`` idiom (init, spin an executor (:func:`make_executor`), shutdown
-  hook, destroy, try_shutdown), exiting 2 with the error when the node cannot start.
+  hook, destroy, try_shutdown), exiting 2 with the error when the node cannot start. SIGINT
+  and SIGTERM (:class:`StopSignals`) only ask the loop to stop, so Ctrl-C ends every node
+  with exit code 0 and no traceback.
 """
 
 from __future__ import annotations
@@ -263,22 +265,84 @@ def make_executor():
     return SingleThreadedExecutor()
 
 
+class StopSignals:
+    """SIGINT and SIGTERM as a request to stop, nothing more: the handler sets
+    :attr:`received` and the main loop of :func:`run` ends at its next turn (at most its
+    spin timeout later).
+
+    rclpy's own handler shuts the context down from the signal, possibly while a callback
+    runs (its next publish fails: ``[FATAL] Exception in 'subscriptions' callback``), and
+    then lets a second SIGINT raise KeyboardInterrupt wherever the node is, e.g. while the
+    learner saves its map. A terminal's Ctrl-C under ``ros2 launch`` sends exactly that: one
+    SIGINT from the terminal to the whole process group, one more from the launch. Here a
+    callback always completes, the context is shut down after the node is destroyed, and
+    every further signal is just counted."""
+
+    def __init__(self):
+        self.received: str | None = None
+        self.count = 0
+        self.installed = False
+
+    def install(self) -> "StopSignals":
+        import signal
+        if not self.installed:
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                signal.signal(sig, self._handler)
+            self.installed = True
+        return self
+
+    def _handler(self, signum, frame) -> None:          # noqa: ARG002
+        import signal
+        self.count += 1
+        self.received = self.received or signal.Signals(signum).name
+
+    def ignore_from_now(self) -> None:
+        """Ignore both signals for the rest of the process: Python's finalization resets a
+        Python handler to the default action (a late SIGINT would kill the process at exit
+        with code -2), an ignored signal it leaves ignored."""
+        import signal
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_IGN)
+
+
+def started_by_ros2_run(argv0: str | None = None) -> bool:
+    """Whether this process is a node's installed executable, what ``ros2 run`` and
+    ``ros2 launch`` start: ``<prefix>/lib/<package>/<executable>``."""
+    argv0 = sys.argv[0] if argv0 is None and sys.argv else argv0
+    return bool(argv0) and Path(argv0).parent.parent.name == "lib"
+
+
+#: The process's stop request. Installed here, at import, in a node's own process (a
+#: Ctrl-C while the node still imports numba must not print a KeyboardInterrupt
+#: traceback), and by :func:`run` in any other; never in a tool that merely imports this
+#: module (``./tmgwr up``, pytest keep their own Ctrl-C).
+STOP = StopSignals()
+if started_by_ros2_run():
+    STOP.install()
+
+
 def run(factory: Callable[[], Any], name: str, args=None,
         executor_factory: Callable[[], Any] | None = None) -> int:
     """Init rclpy, build the node, spin it; exit code 2 when it cannot start.
 
     A node may define ``on_shutdown()`` (called once after spinning stops, for any reason:
-    Ctrl-C, SIGTERM via rclpy's handler, ``rclpy.shutdown``) and ``finished`` (spinning
+    Ctrl-C or SIGTERM (:class:`StopSignals`), ``rclpy.shutdown``) and ``finished`` (spinning
     stops when it becomes true). ``executor_factory`` overrides :func:`make_executor`.
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException
+    from rclpy.signals import SignalHandlerOptions
 
     args = list(args if args is not None else sys.argv)
+    stop = STOP.install()
+    if stop.received:
+        print(f"[{name}] stopped ({stop.received}) before it started", flush=True)
+        stop.ignore_from_now()
+        return 0
     try:
         for f in params_files(args):     # rcl's own parse error names neither file nor line
             read_params_file(f)
-        rclpy.init(args=args)
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except (ParamError, RuntimeError) as exc:    # RCLError is a RuntimeError
         print(f"[{name}] cannot start: {exc}", file=sys.stderr, flush=True)
         return 2
@@ -294,7 +358,7 @@ def run(factory: Callable[[], Any], name: str, args=None,
         executor.add_node(node)
         try:
             # spin() is spin_once() in a loop; looping ourselves lets a node finish.
-            while rclpy.ok() and not getattr(node, "finished", False):
+            while rclpy.ok() and not stop.received and not getattr(node, "finished", False):
                 executor.spin_once(timeout_sec=0.2)
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
@@ -312,4 +376,5 @@ def run(factory: Callable[[], Any], name: str, args=None,
                     code = code or 1
             node.destroy_node()
         rclpy.try_shutdown()
+        stop.ignore_from_now()
     return code

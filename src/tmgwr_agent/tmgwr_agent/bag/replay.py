@@ -30,7 +30,7 @@ from mcap.reader import make_reader
 from tmgwr_agent.bag import definitions
 from tmgwr_agent.bag import qos as bag_qos
 from tmgwr_agent.bag.recover import require_finished
-from tmgwr_common import topics as T
+from tmgwr_common.topics import GraphNames
 
 LATCHED_DEPTH = 1
 STREAM_DEPTH = 100
@@ -122,6 +122,7 @@ def replay(bag: str | Path, rate: float = 1.0, topics: list[str] | None = None,
         if unknown:
             raise ValueError(f'topics not in {bag}: {", ".join(unknown)} '
                              f'(recorded: {", ".join(sorted(channels))})')
+        T = GraphNames.of_bag(channels)     # the recorded graph's names (its namespace)
         if T.SENSORIMOTOR_STATE in wanted and T.MAP_SNAPSHOT in channels \
                 and T.MAP_SNAPSHOT not in wanted:
             wanted.add(T.MAP_SNAPSHOT)      # what the map changes start from

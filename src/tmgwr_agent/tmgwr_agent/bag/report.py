@@ -49,7 +49,9 @@ from typing import Any
 import numpy as np
 
 from tmgwr_agent.map_replica import APPLIED, FULL, GAP, MapChange, Replica
-from tmgwr_common import topics as T
+from tmgwr_common.topics import GraphNames
+
+T = GraphNames()         # names at the root namespace (texts, defaults)
 
 GOAL_EVENT = re.compile(r"step (\d+): goal -> row (-?\d+), col (-?\d+)")
 STEP_EVENT = re.compile(r"step (\d+): (.*)")
@@ -179,6 +181,7 @@ def read_bag(bag: str | Path) -> dict[str, Any]:
     last_raw: dict[str, tuple[Any, bytes]] = {}
     require_finished(bag, bag_files(bag))   # a killed recorder's bag: recover it first
     with AnyReader(_bag_paths(bag)) as reader:
+        T = data["names"] = GraphNames.of_bag({c.topic for c in reader.connections})
         for c in reader.connections:
             entry = data["topics"].setdefault(c.topic, {"type": c.msgtype, "count": 0})
             entry["count"] += c.msgcount
@@ -666,7 +669,7 @@ def report(bag: str | Path, output: str | Path | None = None, figures: bool = Tr
     ``maze`` (the run's maze file, optional) names the goal cells."""
     bag = Path(bag)
     data = read_bag(bag)
-    if T.OBSERVATION not in data["topics"]:
+    if data["names"].OBSERVATION not in data["topics"]:
         raise ValueError(f'{bag} has no {T.OBSERVATION} topic: not a recording of the graph '
                          f'(topics: {", ".join(sorted(data["topics"])) or "none"})')
     summary = summarise(data, bag)

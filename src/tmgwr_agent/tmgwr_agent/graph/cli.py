@@ -52,6 +52,7 @@ def register(subparsers) -> None:
                    "its stamp under runs/) where it stopped: map, exploration state, "
                    "counters, with the run's settings; records to RUN/resumed_<N>/")
     _domain_arg(p)
+    _namespace_arg(p)
     p.set_defaults(func=cmd_up)
 
     p = subparsers.add_parser("goal", help="change the goal of a running graph (/set_goal)",
@@ -87,10 +88,22 @@ def _domain_arg(p: argparse.ArgumentParser) -> None:
                    "environment's, else 0)")
 
 
+def _namespace_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--namespace", default="/", metavar="NS", help="the graph's ROS namespace "
+                   "(default /; a graph started with __ns:=/a or namespace:=a is in /a)")
+
+
 def _client_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--timeout", type=float, default=10.0, metavar="SEC",
                    help="how long to wait for the service (default 10 s)")
     _domain_arg(p)
+    _namespace_arg(p)
+
+
+def _name(args, name: str, node: str = "") -> str:
+    """A service name of the graph in ``--namespace`` (fully qualified)."""
+    from tmgwr_common import topics
+    return topics.qualified(name, args.namespace, node)
 
 
 def _apply_domain(args) -> None:
@@ -121,7 +134,7 @@ def _service(args, make, name: str, what: str) -> int:
 def cmd_goal(args) -> int:
     from tmgwr_agent.graph.clients import set_goal_request
     from tmgwr_common import topics
-    return _service(args, lambda: set_goal_request(args.x, args.y), topics.SET_GOAL,
+    return _service(args, lambda: set_goal_request(args.x, args.y), _name(args, topics.SET_GOAL),
                     f"goal (x={args.x:g}, y={args.y:g})")
 
 
@@ -130,20 +143,21 @@ def cmd_cell(args) -> int:
     from tmgwr_common import topics
     what = f"cell (row {args.row}, col {args.col}) {'block' if args.blocked else 'open'}"
     return _service(args, lambda: set_cell_request(args.row, args.col, args.blocked),
-                    topics.SET_CELL, what)
+                    _name(args, topics.SET_CELL, topics.SIMULATOR), what)
 
 
 def cmd_event(args) -> int:
     from tmgwr_agent.graph.clients import fire_event_request
     from tmgwr_common import topics
-    return _service(args, lambda: fire_event_request(args.name), topics.FIRE_EVENT,
+    return _service(args, lambda: fire_event_request(args.name),
+                    _name(args, topics.FIRE_EVENT, topics.SIMULATOR),
                     f"event {args.name!r}")
 
 
 def cmd_reset(args) -> int:
     from tmgwr_agent.graph.clients import reset_request
     from tmgwr_common import topics
-    return _service(args, reset_request, topics.RESET, "reset")
+    return _service(args, reset_request, _name(args, topics.RESET, topics.SIMULATOR), "reset")
 
 
 # --------------------------------------------------------------------------- up
@@ -180,7 +194,8 @@ def cmd_up(args) -> int:
         settings, run_dir, bag_dir = _run_settings(args)
         run = GraphRun(maze=settings["maze"], seed=settings["seed"], goal=settings["goal"],
                        record=bag_dir is not None, record_dir=bag_dir, run_dir=run_dir,
-                       echo=not args.quiet, params_files=settings["params_files"] or [])
+                       echo=not args.quiet, params_files=settings["params_files"] or [],
+                       namespace=args.namespace)
         if run_dir is not None and not args.resume:
             write_settings(run_dir, settings)       # what --resume starts again with
         elif args.resume:
@@ -209,7 +224,8 @@ def cmd_up(args) -> int:
     if run.record_dir:
         say(f"recording to {run.record_dir}")
     say("Ctrl-C stops the graph; from another shell: ./tmgwr goal X Y | cell R C --block "
-          "| event a | reset" + (f" --domain-id {domain}" if domain != "0" else ""))
+          "| event a | reset" + (f" --domain-id {domain}" if domain != "0" else "")
+          + (f" --namespace {run.namespace}" if run.namespace != "/" else ""))
 
     code = 0
     last_note = time.monotonic()

@@ -148,7 +148,8 @@ class _Demo:
 
         say(f"-- phase 3: fire event {EVENT!r} (a corridor of the learnt route closes)")
         srv, req = fire_event_request(EVENT)
-        self._request("event", srv, topics.FIRE_EVENT, req, f"event {EVENT!r}",
+        self._request("event", srv, topics.of_node(topics.SIMULATOR, topics.FIRE_EVENT), req,
+                      f"event {EVENT!r}",
                       f"event {EVENT!r} refused")
         res = self.wait_phase("event", self.mon.last_step_id)
         self.describe("event", res, f"after event {EVENT!r}")

@@ -35,16 +35,18 @@ class GraphRun:
                  goal: str | None = None, record: bool = True,
                  record_dir: str | Path | None = None, echo=True,
                  node_params: Mapping[str, Mapping[str, object]] | None = None,
-                 params_files=(), run_dir: str | Path | None = None):
+                 params_files=(), run_dir: str | Path | None = None,
+                 namespace: str = ""):
         """``run_dir``: the run's directory (maps, checkpoints; default: the recording's);
         a resumed run records into a new bag inside it (graph.resume)."""
         self.record_dir: Path | None = None
         if record:
             self.record_dir = Path(record_dir) if record_dir else default_run_dir()
         self.run_dir = Path(run_dir) if run_dir is not None else self.record_dir
+        self.namespace = "/" + namespace.strip("/")
         self.specs = graph_specs(maze=maze, seed=seed, goal=goal, record_dir=self.record_dir,
                                  node_params=node_params, params_files=params_files,
-                                 run_dir=self.run_dir)
+                                 run_dir=self.run_dir, namespace=namespace)
         self.supervisor = GraphSupervisor(self.specs, env=os.environ, echo=echo)
         self.monitor = EpisodeMonitor()
         self.node = None
@@ -61,7 +63,7 @@ class GraphRun:
             self.record_dir.parent.mkdir(parents=True, exist_ok=True)
         # our own signal handling: the nodes must be stopped in order, not this context first
         rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-        self.node = rclpy.create_node("tmgwr_graph_observer")
+        self.node = rclpy.create_node("tmgwr_graph_observer", namespace=self.namespace)
         subscribe_monitor(self.node, self.monitor)
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
@@ -91,7 +93,8 @@ class GraphRun:
         self.executor.spin_once(timeout_sec=timeout)
 
     def call(self, srv_type, name: str, request, timeout: float = 10.0):
-        """A service call from the observer node (its executor completes the future)."""
+        """A service call from the observer node (its executor completes the future);
+        ``name`` resolves in the graph's namespace (``topics.of_node`` for a private one)."""
         return call(self.node, srv_type, name, request, timeout, executor=self.executor)
 
     def _shutdown_ros(self) -> None:

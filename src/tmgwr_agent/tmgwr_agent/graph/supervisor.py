@@ -71,6 +71,7 @@ class NodeSpec:
     name: str = ""                       # label for output; default: the executable
     ready: re.Pattern = READY
     argv: Sequence[str] = ()             # a plain command instead of the package executable
+    namespace: str = ""                  # ROS namespace (-r __ns:=...); "" = the root
 
     @property
     def label(self) -> str:
@@ -81,6 +82,8 @@ class NodeSpec:
             return list(self.argv)
         cmd = [str(executable_path(self.package, self.executable))]
         ros_args: list[str] = []
+        if self.namespace.strip("/"):
+            ros_args += ["-r", f"__ns:=/{self.namespace.strip('/')}"]
         for f in self.params_files:
             ros_args += ["--params-file", str(f)]
         for key, value in self.params.items():
@@ -294,7 +297,8 @@ def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | No
                 record_dir: str | Path | None = None,
                 node_params: Mapping[str, Mapping[str, object]] | None = None,
                 params_files: Sequence[str | Path] = (),
-                run_dir: str | Path | None = None) -> list[NodeSpec]:
+                run_dir: str | Path | None = None,
+                namespace: str = "") -> list[NodeSpec]:
     """The recorder (when ``record_dir``) and the five nodes, with parameter files and
     overrides. ``maze``, ``seed`` and ``goal`` are the simulator's (and, for the seed, the
     action selector's) parameters; ``node_params`` adds overrides per executable;
@@ -303,7 +307,9 @@ def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | No
     Without them every node runs on its specs' defaults. ``run_dir`` (default
     ``record_dir``): the run's directory, for the learner's maps and the checkpoints of the
     nodes that keep one (``resume`` on: a node restarted with these parameters, or the
-    graph started again on this directory, continues from its checkpoint)."""
+    graph started again on this directory, continues from its checkpoint). ``namespace``
+    puts every node in that ROS namespace (``__ns:=``), so graphs run side by side in one
+    domain."""
     node_params = node_params or {}
     if run_dir is None:
         run_dir = record_dir
@@ -316,7 +322,7 @@ def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | No
         # The recorder logs "recording ... to DIR" once its writer is open.
         specs.append(NodeSpec("tmgwr_agent", "recorder", (),
                               {"output_dir": str(record_dir), **node_params.get("recorder", {})},
-                              ready=RECORDER_READY))
+                              ready=RECORDER_READY, namespace=namespace))
     for package, exe in GRAPH_NODES:
         params: dict[str, object] = {}
         if exe == "maze_sim":
@@ -340,7 +346,7 @@ def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | No
         if seed is not None and exe in ("maze_sim", "action_selector"):
             params["seed"] = int(seed)
         params.update(node_params.get(exe, {}))
-        specs.append(NodeSpec(package, exe, files, params))
+        specs.append(NodeSpec(package, exe, files, params, namespace=namespace))
     return specs
 
 

@@ -22,7 +22,8 @@ observation when none comes (``resend_period``); every node answers a step it al
 handled with its cached output, so a resend never changes what is learnt, and follows a
 newer run (a restarted simulator) from its first step (:mod:`tmgwr_common.lockstep`).
 
-Inspection and control:
+Inspection and control (names at the root namespace: topics are relative and the nodes'
+services private, so under ``__ns:=/a`` each is prefixed with ``/a``):
 
 =====================  ==================================  ==========================
 name                   type                                by / QoS
@@ -50,3 +51,7 @@ only) and ``-p name:=value`` both work; an invalid value, or a name no node of t
 declares, stops the node at start (exit code 2) naming the parameter. ``TMGWR_EXECUTOR``
 (``events`` default, or ``single``) picks the executor.
 """
+
+# First, before any node module imports numba: in a node's own process this installs the
+# stop request of tmgwr_common.node (a Ctrl-C while the node still starts is a clean stop).
+import tmgwr_common.node  # noqa: E402, F401

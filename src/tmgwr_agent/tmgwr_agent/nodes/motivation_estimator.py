@@ -85,14 +85,16 @@ class MotivationEstimatorNode(Node):
         self.held: SensorimotorState | None = None   # a state waiting for a whole map
         self.create_subscription(SensorimotorSnapshot, topics.MAP_SNAPSHOT, self.on_snapshot,
                                  LATCHED_QOS)
-        self.snapshot_client = self.create_client(Trigger, topics.REQUEST_SNAPSHOT)
+        self.snapshot_client = self.create_client(
+            Trigger, topics.of_node(topics.LEARNER, topics.REQUEST_SNAPSHOT))
         self.asked = False                  # a snapshot request is under way
         self.potentials_pub = self.create_publisher(Potentials, topics.POTENTIALS, LATCHED_QOS)
         # /set_goal checks the cell against the simulator's grid (latched: it arrives
         # whenever this node starts) and hands it to the simulator's own service.
         self.walls: np.ndarray | None = None
         self.create_subscription(OccupancyGrid, topics.GRID, self.on_grid, LATCHED_QOS)
-        self.sim_goal = self.create_client(SetGoal, topics.SIM_SET_GOAL)
+        self.sim_goal = self.create_client(SetGoal, topics.of_node(topics.SIMULATOR,
+                                                                   topics.SIM_SET_GOAL))
         self.create_service(SetGoal, topics.SET_GOAL, self.on_set_goal)
         # the outcome memory of Eq. 5' survives any stop (tmgwr_common.checkpoint)
         self.checkpoints = Checkpointer("motivation_estimator", self.p, self.get_logger(),
@@ -209,7 +211,8 @@ class MotivationEstimatorNode(Node):
             resp.message = f"goal (x={g.x}, y={g.y}, z={g.z}) refused: not finite"
         elif self.walls is None or not self.sim_goal.service_is_ready():
             resp.message = (f"goal (x={g.x}, y={g.y}) refused: the simulator is not "
-                            f"available ({topics.GRID} / {topics.SIM_SET_GOAL})")
+                            f"available ({self.resolve_topic_name(topics.GRID)} / "
+                            f"{self.resolve_service_name(self.sim_goal.srv_name)})")
         else:
             col, row = int(math.floor(g.x + 0.5)), int(math.floor(g.y + 0.5))
             rows, cols = self.walls.shape

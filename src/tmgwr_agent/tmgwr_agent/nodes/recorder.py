@@ -63,7 +63,8 @@ GRAPH_STEP_TOPICS = (
 #: The recorder's parameters (read-only ROS parameters, declared like every node's).
 SPECS = (
     Param("output_dir", "", "bag directory; empty: runs/<UTC timestamp>/"),
-    Param("topics", ("",), "topics to record; empty: all (discovered periodically)"),
+    Param("topics", ("",), "topics to record (relative names resolve in the recorder's "
+          "namespace); empty: all of its namespace (discovered periodically)"),
     Param("exclude", "", "regular expression of topics not to record"),
     Param("compression", "zstd", "chunk compression", choices=tuple(COMPRESSIONS)),
     Param("chunk_size", 1 << 20, "uncompressed chunk size in bytes", low=1024, high=1 << 30,
@@ -100,7 +101,10 @@ class Recorder(Node):
         # its final counts are logged after the context has shut down (on SIGINT/SIGTERM).
         super().__init__("recorder", enable_rosout=False, **NODE_OPTIONS)
         p = self._declare_parameters()
-        self.topic_list: list[str] = [t if t.startswith("/") else "/" + t for t in p["topics"]]
+        # names resolve in the recorder's namespace, like every node's (relative names)
+        self.topic_list: list[str] = [self.resolve_topic_name(t) for t in p["topics"]]
+        ns = self.get_namespace()
+        self.namespace_prefix = "" if ns == "/" else ns + "/"
         self.exclude = re.compile(p["exclude"]) if p["exclude"] else None
         self.queue_depth = p["queue_depth"]
         self.drain_max = p["drain_max"]
@@ -153,9 +157,9 @@ class Recorder(Node):
             if not entry:
                 continue
             name, _, type_name = entry.partition("=")
-            if not (name.startswith("/") and type_name.count("/") == 2):
+            if not (name and type_name.count("/") == 2):
                 raise ValueError(f"parameter 'expect': {entry!r} is not NAME=pkg/msg/Type")
-            expect[name] = type_name
+            expect[self.resolve_topic_name(name)] = type_name
         values["expect"] = expect
         return values
 
@@ -164,6 +168,8 @@ class Recorder(Node):
         if self.topic_list:
             return topic in self.topic_list
         if any(part.startswith("_") for part in topic.split("/")):   # hidden topics
+            return False
+        if not topic.startswith(self.namespace_prefix):   # another graph's namespace
             return False
         return not (self.exclude and self.exclude.search(topic))
 

@@ -1,0 +1,160 @@
+"""ROS conventions of the graph (issue 10, item 5), with the real ``ros2`` command line:
+
+* relative topic names and private (``~/``) services: two graphs in one ROS_DOMAIN_ID,
+  one under ``__ns:=/a`` and one under ``/b``, both step, each answers only its own
+  services (``./tmgwr goal --namespace``), and ``ros2 launch ... namespace:=a`` runs one
+  under ``/a`` (before, every name was absolute: the two graphs drove each other's ring);
+* ``ros2 launch`` ends, non-zero and saying which node exited and why, when a node exits
+  (before, a maze_sim that refused ``maze:=`` left the launch running with the other four
+  idle for ever);
+* Ctrl-C (SIGINT to the launch's process group, what a terminal sends) stops every node
+  with exit code 0 and no traceback (before: ``[FATAL] ... Exception in 'subscriptions'
+  callback`` and KeyboardInterrupt tracebacks; ``test/measure_ctrl_c.py`` counts them over
+  many stops).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import time
+
+import pytest
+from measure_ctrl_c import NODES, one_stop
+from ros_helpers import ROOT, RosProcess, require_ros2, ros2_cli, ros2_run, ros_env
+from test_nodes import goals_reached
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+
+def launch(domain, *args, env=None) -> RosProcess:
+    return RosProcess([require_ros2(), "launch", "tmgwr_agent", "agent.launch.py", *args],
+                      ros_env(domain, env), name="ros2 launch")
+
+
+def graph_in(namespace: str, domain: int, tmp_path, seed: int) -> dict[str, RosProcess]:
+    """The five nodes in ``namespace`` as ``./tmgwr up --namespace`` starts them."""
+    from tmgwr_agent.graph.supervisor import graph_specs
+    procs = {}
+    env = {"ROS_HOME": str(tmp_path / "ros_home")}
+    for spec in graph_specs(seed=seed, goal="2", namespace=namespace):
+        procs[spec.label] = ros2_run(spec.package, spec.executable, *spec.command()[1:],
+                                     domain=domain, name=f"{namespace}/{spec.label}", env=env)
+    return procs
+
+
+@pytest.mark.timeout(240)
+def test_two_namespaced_graphs_step_side_by_side_in_one_domain(ros_domain, tmp_path):
+    a = graph_in("a", ros_domain, tmp_path, seed=1)
+    b = graph_in("b", ros_domain, tmp_path, seed=2)
+    procs = {**{f"a/{k}": p for k, p in a.items()}, **{f"b/{k}": p for k, p in b.items()}}
+    try:
+        for p in procs.values():
+            p.wait_for_line("ready", timeout=90)
+        t0 = time.monotonic()
+        while min(len(goals_reached(a["maze_sim"])), len(goals_reached(b["maze_sim"]))) < 2:
+            dead = [n for n, p in procs.items() if not p.running()]
+            assert not dead, procs[dead[0]].describe("died")
+            assert time.monotonic() - t0 < 120, a["maze_sim"].describe("no goals in /a")
+            time.sleep(0.5)
+        want = {"/a/observation", "/b/observation", "/a/action", "/b/action"}
+        for _ in range(5):                      # `ros2 topic list` shows what it discovered
+            listing = ros2_cli("topic", "list", "--no-daemon", "--spin-time", "2",
+                               domain=ros_domain)
+            with listing:
+                names = set(listing.wait(timeout=60).split())
+            if want <= names:
+                break
+        assert want <= names, names
+        assert "/observation" not in names and "/action" not in names, names
+        # the CLI reaches one graph: /a's goal moves to goal 1 (row 2, col 15), /b's stays
+        cli = RosProcess([str(ROOT / ".venv" / "bin" / "python"), "-m", "tmgwr_agent.cli",
+                          "goal", "15", "2", "--namespace", "a"], ros_env(ros_domain),
+                         name="./tmgwr goal")
+        with cli:
+            out = cli.wait(timeout=60)
+        assert "accepted" in out, out
+        a["maze_sim"].wait_for_line(r"goal -> row 2, col 15|goal change to \(2, 15\)", 30)
+        assert not any("(2, 15)" in ln or "row 2, col 15" in ln for ln in b["maze_sim"].lines)
+        # each learner keeps its maps in its own directory
+        for p in procs.values():
+            p.stop()
+        for ns, g in (("a", a), ("b", b)):
+            assert g["map_learner"].proc.returncode == 0, g["map_learner"].describe("exit")
+            assert (tmp_path / "ros_home" / "tmgwr" / f"domain{ros_domain}_{ns}" /
+                    "map.npz").is_file()
+    finally:
+        for p in procs.values():
+            p.stop()
+
+
+@pytest.mark.timeout(180)
+def test_ros2_launch_with_a_namespace_then_ctrl_c(ros_domain, tmp_path):
+    p = launch(ros_domain, "namespace:=a", "seed:=1", env={"ROS_HOME": str(tmp_path)})
+    with p:
+        p.wait_for_line(r"\[maze_sim-\d+\].*goal \(\d+, \d+\) reached", timeout=120)
+        ok = ros2_cli("service", "call", "/a/maze_sim/reset", "std_srvs/srv/Trigger",
+                      domain=ros_domain)
+        with ok:
+            assert "success=True" in ok.wait(timeout=60)
+        os.killpg(p.proc.pid, signal.SIGINT)           # a terminal's Ctrl-C
+        out = p.wait(timeout=60)                        # exit code 0 or it raises
+    for node in NODES:
+        assert re.search(rf"\[{node}-\d+\]: process has finished cleanly", out), (node, out)
+    assert not re.search(r"Traceback|FATAL|KeyboardInterrupt", out), out
+    assert (tmp_path / "tmgwr" / f"domain{ros_domain}_a" / "map.npz").is_file()
+
+
+@pytest.mark.timeout(120)
+@pytest.mark.parametrize("arg, reason", [
+    ("maze:=no_such_maze.txt", "no_such_maze.txt"),
+    ("goal:=Z", "'Z'"),
+])
+def test_ros2_launch_ends_non_zero_saying_which_node_exited_and_why(ros_domain, arg, reason):
+    p = launch(ros_domain, arg)
+    with p:
+        out = p.wait(timeout=90, check=False)
+    assert p.proc.returncode not in (0, None), p.describe("the launch did not fail")
+    line = next((ln for ln in out.splitlines() if "maze_sim exited with code 2" in ln), None)
+    assert line and reason in line and "cannot start" in line, out
+    # the other nodes were stopped, not left idle
+    assert not re.search(r"Traceback|FATAL", out), out
+
+
+@pytest.mark.timeout(150)
+def test_ros2_launch_ends_non_zero_when_a_running_node_dies(ros_domain, tmp_path):
+    p = launch(ros_domain, env={"ROS_HOME": str(tmp_path)})
+    with p:
+        p.wait_for_line(r"\[maze_sim-\d+\].*goal \(\d+, \d+\) reached", timeout=120)
+        pid = int(re.search(r"\[motivation_estimator-\d+\]: process started with pid \[(\d+)\]",
+                            p.output)[1])
+        os.kill(pid, signal.SIGKILL)
+        out = p.wait(timeout=60, check=False)
+    assert p.proc.returncode == 1, p.describe("the launch did not end with code 1")
+    assert "motivation_estimator exited with code -9" in out, out
+    for node in set(NODES) - {"motivation_estimator"}:
+        assert re.search(rf"\[{node}-\d+\]: process has finished cleanly", out), (node, out)
+
+
+@pytest.mark.timeout(300)
+def test_ctrl_c_mid_stepping_is_clean(ros_domain, tmp_path):
+    """Three Ctrl-C stops of a stepping launch (the measurement runs 20+)."""
+    for seed, wait in ((0, 2.0), (1, 3.5), (2, 5.0)):
+        ok, why, code = one_stop(ros_domain, seed, wait, ["record:=true",
+                                 f"output_dir:={tmp_path}/bag{seed}"], tmp_path)
+        assert ok, f"stop {seed}: {why} (log {tmp_path}/launch_{seed}.log)"
+
+
+def test_the_launch_file_sets_no_dds_setting():
+    text = (ROOT / "src" / "tmgwr_agent" / "launch" / "agent.launch.py").read_text()
+    code = "\n".join(ln for ln in text.splitlines() if not ln.lstrip().startswith("#"))
+    code = code.split('"""', 2)[-1]                 # past the module docstring
+    for name in ("SetEnvironmentVariable", "ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE",
+                 "ROS_LOCALHOST_ONLY", "ROS_STATIC_PEERS", "RMW_IMPLEMENTATION", "FASTRTPS",
+                 "FASTDDS", "CYCLONEDDS", "additional_env", "environ"):
+        assert name not in code, name
+    assert subprocess.run(["grep", "-q", "namespace", str(ROOT / "src" / "tmgwr_agent" /
+                                                          "launch" / "agent.launch.py")]
+                          ).returncode == 0
