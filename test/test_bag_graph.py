@@ -138,6 +138,76 @@ def test_recorder_lost_nothing(graph_run):
     assert m.group(1) == m.group(2)
     info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert info["message_count"] == int(m.group(2))
+    # and it counted the step ids live: no gap on any per-step topic, and said so
+    assert "step gaps: none on 5 per-step topics" in out, out[-3000:]
+    gaps = json.loads(info["custom_data"]["step_gaps"])
+    assert sorted(gaps) == sorted(PER_STEP)
+    assert all(r["missing"] == 0 for runs in gaps.values() for r in runs.values()), gaps
+
+
+def recorded_missing(bag) -> dict[str, list[list[int]]]:
+    """The step ids each per-step topic lacks between its first and last, as ranges, read
+    from the bag itself."""
+    from rosbags.highlevel import AnyReader
+    ids: dict[str, set[int]] = {}
+    with AnyReader([bag]) as reader:
+        conns = [c for c in reader.connections if c.topic in PER_STEP]
+        for conn, _t, raw in reader.messages(connections=conns):
+            ids.setdefault(conn.topic, set()).add(int(reader.deserialize(raw, conn.msgtype)
+                                                      .step_id))
+    out = {}
+    for topic, have in ids.items():
+        ranges, lo = [], None
+        for k in range(min(have), max(have) + 2):
+            if k not in have and k <= max(have) and lo is None:
+                lo = k
+            elif (k in have or k > max(have)) and lo is not None:
+                ranges.append([lo, k - 1])
+                lo = None
+        out[topic] = ranges
+    return out
+
+
+@pytest.mark.timeout(240)
+def test_a_paused_recorder_says_exactly_what_it_lost(ros_domain, tmp_path):
+    """Issue 10: a recorder paused for 10 s lost 1711 consecutive steps on every step topic,
+    yet ended with 'received 25421, written 25421'. The ring does not wait for the recorder
+    (keep-last 10 per-step publishers), so a paused recorder loses what their history no
+    longer holds; now it says exactly which steps, live and at the end, and the bag's
+    metadata holds the same ranges as the bag itself lacks."""
+    import os
+    import signal
+    bag = tmp_path / "paused"
+    up = RosProcess([str(ROOT / ".venv/bin/python"), "-m", "tmgwr_agent.cli", "up",
+                     "--seed", "1", "--record-dir", str(bag), "--domain-id", str(ros_domain)],
+                    ros_env(ros_domain), name="up")
+    with up:
+        line = up.wait_for_line(r"^graph up in ROS_DOMAIN_ID", timeout=90)
+        pid = int(re.search(r"recorder \(pid (\d+)\)", line)[1])
+        up.wait_for_line(r"\[maze_sim\].*goal \(\d+, \d+\) reached", timeout=90)
+        os.kill(pid, signal.SIGSTOP)
+        time.sleep(10.0)
+        os.kill(pid, signal.SIGCONT)
+        up.wait_for_line(r"\[recorder\].*GAP on /", timeout=30)     # said at once
+        time.sleep(3.0)
+        up.proc.send_signal(signal.SIGINT)
+        up.wait_for_line(r"^recording: ", timeout=60)
+        out = up.wait(timeout=60, check=False)
+    assert up.proc.returncode == 0, up.describe("./tmgwr up failed")
+    info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    stated = json.loads(info["custom_data"]["step_gaps"])
+    actual = recorded_missing(bag)
+    figures = {}
+    for topic in PER_STEP:
+        [(run, r)] = stated[topic].items()
+        assert r["ranges"] == actual[topic] and not r["ranges_cut"], (topic, r, actual[topic])
+        assert r["missing"] == sum(b - a + 1 for a, b in actual[topic]) > 0, (topic, r)
+        assert f"{r['missing']} MISSING" in out, out[-4000:]
+        figures[topic] = (r["missing"], r["last"] - r["first"] + 1)
+    m = re.search(r"step gaps: (\d+) steps MISSING on 5 per-step topics", out)
+    assert m and int(m[1]) == sum(v[0] for v in figures.values()), out[-3000:]
+    print("paused 10 s: missing / steps per topic: "
+          + ", ".join(f"{t} {a}/{b}" for t, (a, b) in figures.items()))
 
 
 def test_report_states_the_runs_own_figures(graph_run, tmp_path):

@@ -327,3 +327,56 @@ def test_replay_rerecorded_is_byte_identical_with_timing(ros_domain, tmp_path):
     fast = (c[599][0] - c[0][0]) / 1e9
     assert fast == pytest.approx(orig / 4, rel=0.1), (orig, fast)
 
+
+
+# Publishes argv[1] Observations of run 7 (steps 0..n-1) with a deep reliable history, once
+# the recorder matched and after argv[2] seconds; then waits until they are acknowledged.
+QUEUED_PUBLISHER = r"""
+import sys, time
+import rclpy
+from rclpy.duration import Duration
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from tmgwr_interfaces.msg import Observation
+n, pause = int(sys.argv[1]), float(sys.argv[2])
+rclpy.init()
+node = rclpy.create_node("queued_publisher")
+pub = node.create_publisher(Observation, "/observation",
+                            QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+while pub.get_subscription_count() < 1:
+    time.sleep(0.02)
+print("MATCHED", flush=True)
+time.sleep(pause)
+for i in range(n):
+    pub.publish(Observation(run_id=7, step_id=i))
+print("PUBLISHED", flush=True)
+print("ACKED", pub.wait_for_all_acked(Duration(seconds=30)), flush=True)
+node.destroy_node(); rclpy.shutdown()
+"""
+
+
+def test_a_stop_with_messages_still_queued_writes_them_all(ros_domain, tmp_path):
+    """The cause of the CI flake '/action step 646 missing against /observation step 647 at
+    the stop': the recorder, stopped last, closed the bag with the nodes' last messages still
+    queued on its subscriptions. Here 300 messages arrive while the recorder is paused and
+    its stop request is already pending: it writes every one (it drains its subscriptions
+    before closing), and says there is no gap."""
+    bag = tmp_path / "queued"
+    rec = start_recorder(ros_domain, bag, "topics:=[/observation]", "drain_max:=0")
+    pub = spawn_python(QUEUED_PUBLISHER, "300", "1.0", domain=ros_domain, name="publisher")
+    with rec, pub:
+        rec.wait_for_line(r"recording .* to ", timeout=30)
+        pub.wait_for_line("^MATCHED", timeout=30)
+        os.kill(rec.proc.pid, signal.SIGSTOP)
+        pub.wait_for_line("^PUBLISHED", timeout=30)
+        time.sleep(0.5)
+        os.kill(rec.proc.pid, signal.SIGINT)       # pending until the recorder runs again
+        os.kill(rec.proc.pid, signal.SIGCONT)
+        rec.wait_for_line(r"recorded: received", timeout=30)
+        out = rec.wait(timeout=30)
+        assert "ACKED True" in pub.wait(timeout=60)
+    assert "/observation: received 300, written 300" in out, out
+    assert "run 7: steps 0-299, no gap" in out and "step gaps: none" in out, out
+    assert read_step_ids([bag]) == list(range(300))
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    gaps = json.loads(meta["custom_data"]["step_gaps"])
+    assert gaps["/observation"]["7"]["missing"] == 0

@@ -321,6 +321,24 @@ if started_by_ros2_run():
     STOP.install()
 
 
+def wait_for_acknowledgments(node, timeout: float = 1.0) -> bool:
+    """Wait (at most ``timeout`` s in all) until every reliable subscriber acknowledged what
+    ``node``'s publishers sent. A DataWriter destroyed with samples in flight drops them: a
+    subscriber that had not yet received the node's last message (the recorder, busy or
+    late under load) never gets it. True when everything was acknowledged."""
+    from rclpy.duration import Duration
+    deadline = time.monotonic() + timeout
+    done = True
+    for pub in list(node.publishers):
+        left = deadline - time.monotonic()
+        try:
+            done = pub.wait_for_all_acked(Duration(nanoseconds=max(0, int(left * 1e9)))) \
+                and done
+        except Exception:  # noqa: BLE001 -- a publisher already destroyed, a context gone
+            pass
+    return done
+
+
 def run(factory: Callable[[], Any], name: str, args=None,
         executor_factory: Callable[[], Any] | None = None) -> int:
     """Init rclpy, build the node, spin it; exit code 2 when it cannot start.
@@ -328,6 +346,8 @@ def run(factory: Callable[[], Any], name: str, args=None,
     A node may define ``on_shutdown()`` (called once after spinning stops, for any reason:
     Ctrl-C or SIGTERM (:class:`StopSignals`), ``rclpy.shutdown``) and ``finished`` (spinning
     stops when it becomes true). ``executor_factory`` overrides :func:`make_executor`.
+    Before the node is destroyed its reliable subscribers get (a bounded time) to
+    acknowledge its last messages (:func:`wait_for_acknowledgments`).
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException
@@ -374,6 +394,7 @@ def run(factory: Callable[[], Any], name: str, args=None,
                 except Exception as exc:  # noqa: BLE001 -- still shut down cleanly
                     print(f"[{name}] shutdown hook failed: {exc}", file=sys.stderr, flush=True)
                     code = code or 1
+            wait_for_acknowledgments(node)
             node.destroy_node()
         rclpy.try_shutdown()
         stop.ignore_from_now()

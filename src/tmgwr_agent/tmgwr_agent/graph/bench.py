@@ -204,7 +204,7 @@ def bytes_per_step(run, steps: int, check, settle: float = 1.0,
         check()
     for c in counts.values():
         c[0] = c[1] = 0
-    seen = counts.get(topics.OBSERVATION, [0, 0])   # one observation a step (and resends)
+    seen = counts.get(node.resolve_topic_name(topics.OBSERVATION), [0, 0])  # one a step
     t0 = time.monotonic()
     while seen[0] < steps and time.monotonic() - t0 < limit:
         run.spin_once(0.05)

@@ -22,15 +22,25 @@ The latched whole-map snapshots (``/sensorimotor_snapshot``) and potentials
 local, a recorder that joins late still records the newest whole map, which the per-step
 map changes of ``/sensorimotor_state`` build on (``./tmgwr report`` rebuilds the map).
 
-Shutdown: SIGINT and SIGTERM shut the context down; the bag is then finished (summary,
-indexes, metadata.yaml) and the received and written counts are logged per topic. A
-recorder killed outright leaves at most ``flush_period`` seconds unflushed; ``./tmgwr
-recover`` makes such a file valid again.
+Gaps: on the per-step topics (``gap_topics``: the ring's five) every message's (run_id,
+step_id) is read from its bytes (:mod:`tmgwr_agent.bag.gaps`); a step id that jumps ahead
+is logged at once as a gap naming the missing steps, and at the end each topic's steps,
+resends and gaps are logged and stored in the bag's metadata (``custom_data.step_gaps``,
+JSON). A recorder that falls behind (paused, starved of CPU) loses what its publishers'
+keep-last history no longer holds, and says exactly which steps.
+
+Shutdown: SIGINT and SIGTERM stop the loop (tmgwr_common.node.run); whatever is still
+queued on the subscriptions is taken and written, then the bag is finished (summary,
+indexes, metadata.yaml) and the received and written counts and the gaps are logged per
+topic. A recorder killed outright leaves at most ``flush_period`` seconds unflushed;
+``./tmgwr recover`` makes such a file valid again.
 """
 
 from __future__ import annotations
 
+import json
 import re
+import time
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -39,6 +49,7 @@ from rclpy.node import Node
 
 from tmgwr_agent.bag import definitions
 from tmgwr_agent.bag import qos as bag_qos
+from tmgwr_agent.bag.gaps import StepGaps
 from tmgwr_agent.bag.writer import COMPRESSIONS, BagWriter, TopicInfo
 from tmgwr_common import topics
 from tmgwr_common.node import NODE_OPTIONS, declare_parameters, run
@@ -84,7 +95,11 @@ SPECS = (
           "are not missed (only those the topics/exclude parameters record)"),
     Param("drain_max", 100, "messages taken directly after each callback before returning "
           "to the executor (0: one per callback)", low=0, high=100000, integer=True),
+    Param("gap_topics", tuple(name for name, _ in (e.split("=") for e in GRAPH_STEP_TOPICS)),
+          "per-step topics (Header, run_id, step_id first) whose step ids are checked for "
+          "gaps as they arrive (relative names resolve in the recorder's namespace)"),
 )
+GAP_WARN_PERIOD = 2.0       # seconds between two gap warnings of one topic
 
 
 def default_output_dir(now: datetime | None = None) -> Path:
@@ -121,6 +136,10 @@ class Recorder(Node):
         self.early: set[str] = set()          # subscribed before a publisher was seen
         self.early_types: dict[str, str] = {}
         self._warned: set[str] = set()
+        self.gaps = StepGaps()
+        self.gap_topics = {self.resolve_topic_name(t) for t in p["gap_topics"] if t}
+        self._gap_warned: dict[str, float] = {}      # topic -> time of its last warning
+        self._drains: dict[str, tuple[object, type, object]] = {}   # for the final drain
         for topic, type_name in p["expect"].items():
             if self._wanted(topic):
                 try:
@@ -240,12 +259,17 @@ class Recorder(Node):
         self.received[topic] = 0
         write = self.writer.write
         received = self.received
+        count_gaps = topic in self.gap_topics
 
         def store(data: bytes, msg_info: dict) -> None:
             if topic not in self.writer.topics:             # first message of an early one
                 self.writer.add_topic(self._topic_info(
                     topic, type_name, self.get_publishers_info_by_topic(topic)))
             received[topic] += 1
+            if count_gaps:
+                gap = self.gaps.add(topic, data)
+                if gap is not None:
+                    self._warn_gap(topic, *gap)
             try:
                 write(topic, data, msg_info["received_timestamp"],
                       msg_info["source_timestamp"], msg_info["publication_sequence_number"])
@@ -268,14 +292,60 @@ class Recorder(Node):
         sub = self.create_subscription(msg_class, topic, on_message, sub_qos, raw=True)
         handle = sub.handle
         self.subscriptions_by_topic[topic] = sub
+        self._drains[topic] = (handle, msg_class, store)
         self.get_logger().info(
             f"subscribed to {topic} [{type_name}] ({sub_qos.reliability.name.lower()}, "
             f"{sub_qos.durability.name.lower()}, depth {sub_qos.depth})"
             + (" before its publisher appeared" if infos is None else ""))
 
+    def _warn_gap(self, topic: str, run_id: int, first: int, last: int) -> None:
+        """A gap on a per-step topic: at once for the first one of a topic, then at most
+        every GAP_WARN_PERIOD s with the count since (all of them are in the summary)."""
+        now = time.monotonic()
+        if now - self._gap_warned.get(topic, -GAP_WARN_PERIOD) < GAP_WARN_PERIOD:
+            return
+        self._gap_warned[topic] = now
+        total = sum(r.missing for r in self.gaps.topics[topic].values())
+        steps = f"steps {first}-{last}" if last > first else f"step {first}"
+        self.get_logger().warning(
+            f"GAP on {topic} (run {run_id}): {steps} not recorded ({last - first + 1} "
+            f"messages; {total} missing on {topic} so far): the recorder fell behind what "
+            "its publishers keep")
+
     # ------------------------------------------------------------------ end
+    def drain(self, quiet: float = 0.2, limit: float = 2.0) -> int:
+        """Take and write what is still queued on every subscription, until nothing more
+        arrives for ``quiet`` seconds (at most ``limit``): the graph's nodes stop before
+        the recorder, and their last messages may still be on their way or waiting here
+        when the recorder is told to stop. Returns how many were written."""
+        n = 0
+        start = last = time.monotonic()
+        while time.monotonic() - last < quiet and time.monotonic() - start < limit:
+            took = 0
+            for handle, msg_class, store in self._drains.values():
+                while True:
+                    with handle:
+                        taken = handle.take_message(msg_class, True)
+                    if taken is None:
+                        break
+                    store(*taken)
+                    took += 1
+            if took:
+                n += took
+                last = time.monotonic()
+            else:
+                time.sleep(0.01)
+        return n
+
     def on_shutdown(self) -> None:
-        """Finish the bag (summary, indexes, metadata.yaml) and log what was recorded."""
+        """Finish the bag (summary, indexes, metadata.yaml) and log what was recorded and
+        every gap of the per-step topics."""
+        try:
+            drained = self.drain()
+        except Exception as exc:  # noqa: BLE001 -- the bag must still be finished
+            drained = 0
+            self.get_logger().warning(f"could not take the last queued messages: {exc}")
+        self.writer.custom_data["step_gaps"] = json.dumps(self.gaps.as_dict())
         meta = self.writer.close()
         written = {t["topic_metadata"]["name"]: t["message_count"]
                    for t in meta["topics_with_message_count"]}
@@ -285,6 +355,12 @@ class Recorder(Node):
             self.get_logger().info(f"  {topic}: received {self.received[topic]}, written "
                                    f"{written.get(topic, 0)}"
                                    + (f", {failed} FAILED to write" if failed else ""))
+            for line in self.gaps.topic_lines(topic):
+                self.get_logger().info(f"    {line}")
+        if drained:
+            self.get_logger().info(f"{drained} messages still queued at the stop were written")
+        (self.get_logger().warning if self.gaps.missing else self.get_logger().info)(
+            self.gaps.summary())
         files = ", ".join(str(p) for p in self.writer.file_paths())
         self.get_logger().info(
             f'recorded: received {total_r}, written {total_w} messages on '
