@@ -6,9 +6,10 @@
   file is ``NAME.npz`` (``NAME`` when it already ends in ``.npz``) in one directory, the
   store's.
 * The directory (:func:`default_map_dir`): the graph's run directory under ``./tmgwr up``
-  (it passes ``map_dir``), else ``$ROS_HOME/tmgwr/<graph>`` (``ROS_HOME`` defaults to
-  ``~/.ros``), ``<graph>`` naming the ROS domain and the namespace, so graphs in other
-  domains or namespaces never share a file. :meth:`MapStore.lock` holds an ``flock`` on
+  (it passes ``map_dir``), else the graph's directory of :mod:`tmgwr_common.checkpoint`
+  (``$ROS_HOME/tmgwr/<graph>``, ``ROS_HOME`` defaulting to ``~/.ros``, ``<graph>`` naming
+  the ROS domain and the namespace), so graphs in other domains or namespaces never share
+  a file. :meth:`MapStore.lock` holds an ``flock`` on
   ``DIR/.lock`` for the learner's life: a second learner on the same directory is refused.
 * Writes (:meth:`MapStore.save`) go through :meth:`SensorimotorMap.save` into a private
   temporary directory inside the store, are stamped with :data:`FORMAT_VERSION`, synced,
@@ -40,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap
+from tmgwr_common.checkpoint import graph_dir
 
 FORMAT_VERSION = 1
 """Version of the map file layout this module reads and writes: the arrays of
@@ -87,22 +89,11 @@ def map_file_name(name: str) -> str:
     return name if name.endswith(SUFFIX) else name + SUFFIX
 
 
-def ros_home() -> Path:
-    """``$ROS_HOME``, else ``~/.ros`` (what rcl itself uses for logs)."""
-    home = os.environ.get("ROS_HOME")
-    return Path(home) if home else Path.home() / ".ros"
-
-
-def graph_key(domain_id: int | str, namespace: str = "/") -> str:
-    """A directory name unique per graph: ``domain<ID>`` plus the namespace
-    (``/a/b`` -> ``domain7_a_b``)."""
-    ns = "_".join(part for part in namespace.split("/") if part)
-    return f"domain{int(domain_id)}" + (f"_{ns}" if ns else "")
-
-
-def default_map_dir(domain_id: int | str, namespace: str = "/") -> Path:
-    """``$ROS_HOME/tmgwr/<graph_key>``."""
-    return ros_home() / "tmgwr" / graph_key(domain_id, namespace)
+def default_map_dir(domain_id: int | str | None = None, namespace: str = "/") -> Path:
+    """The learner's maps, when ``map_dir`` is not given: the graph's own directory,
+    ``$ROS_HOME/tmgwr/domain<ID>[_<namespace>]`` (:func:`tmgwr_common.checkpoint.graph_dir`,
+    where the other nodes keep their checkpoints; ``domain_id`` None: ``$ROS_DOMAIN_ID``)."""
+    return graph_dir(domain_id, namespace)
 
 
 # ----------------------------------------------------------------------------- reading
