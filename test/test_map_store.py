@@ -293,6 +293,12 @@ def graph(tmp_path_factory):
                                          domain=domain)
         for p in procs.values():
             p.wait_for_line("ready|recording", timeout=90)
+        # the tests ask about names, not about an empty map: wait for the first learnt
+        # step (a save before it is refused with "the map is empty", whatever the name)
+        t0 = time.monotonic()
+        while not call(domain, [[SAVE, "SaveMap", {"path": "probe"}]])[0]["success"]:
+            assert time.monotonic() - t0 < 60, procs["maze_sim"].describe("no step yet")
+            time.sleep(0.5)
         yield domain, run_dir, procs
     finally:
         for p in reversed(list(procs.values())):
