@@ -3,7 +3,9 @@
 Each kernel is the loop form of an equation the calling module states in numpy terms; they
 exist because a step of the agent is a few dozen tiny array operations, and numpy's
 per-call overhead (microseconds) would dominate it. Dead node slots are skipped through the
-``alive`` mask; link slots hold -1 when empty.
+``alive`` mask; link slots hold -1 when empty. Callers pass the arguments positionally:
+numba's dispatcher takes keyword arguments through a slow path (2-4 us a call, more than
+most kernels' work).
 
 Compilation is lazy (for the argument types of the first call) and cached on disk
 (``cache=True``: ``__pycache__`` next to this file, or under ``NUMBA_CACHE_DIR``).
@@ -173,6 +175,36 @@ def contradicted(out, E, n, bump_t, succ):
 
 
 @njit(cache=True)
+def option_lists(n, absorbing, rho, U, osucc, onb):
+    """The options of Eq. 5' (``rho[i, a] > 0``) as flat lists, node by node (CSR: node
+    i's are ``[first[i], first[i + 1])``, primitives in order): rho, the successor
+    ``osucc``, U, and a wall cell's known neighbours ``onb``. Absorbing nodes have none.
+    (The sweeps read these lists: a few times faster than the (node, primitive) tables.)"""
+    A = rho.shape[1]
+    first = np.zeros(n + 1, dtype=np.int64)
+    for i in range(n):
+        first[i + 1] = first[i]
+        if not absorbing[i]:
+            for a in range(A):
+                if rho[i, a] > 0.0:
+                    first[i + 1] += 1
+    m = first[n]
+    o_rho = np.empty(m)
+    o_succ = np.empty(m, dtype=np.int64)
+    o_U = np.empty(m)
+    o_nb = np.empty((m, onb.shape[2]), dtype=np.int64)
+    c = 0
+    for i in range(n):
+        if not absorbing[i]:
+            for a in range(A):
+                if rho[i, a] > 0.0:
+                    o_rho[c], o_succ[c], o_U[c] = rho[i, a], osucc[i, a], U[i, a]
+                    o_nb[c] = onb[i, a]
+                    c += 1
+    return first, o_rho, o_succ, o_U, o_nb
+
+
+@njit(cache=True)
 def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, absorbing,
                     alive, U, rho, osucc, onb):
     """Synchronous sweeps of Eq. 4-5 (with the options of the value of the unknown) until
@@ -182,21 +214,16 @@ def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, abso
     ``absorbing[i]`` has no successor (a terminal state: Delta_V(i) = R_i - V(i)). Node i's
     option for primitive a (``rho[i, a] > 0``) is a virtual successor worth
     ``rho S + (1 - rho) (R_i + gamma max_k E[i, k] V(k))`` with ``S = V(osucc[i, a])``
-    for a known successor, else ``U[i, a]`` (motivation.py, Eq. 5').
+    for a known successor, else ``U[i, a]`` (motivation.py, Eq. 5';
+    :func:`option_successor`, here over :func:`option_lists`).
     Nodes from which no link path leads to a source (R > 0 or an option) get exactly
     V = 0 (:func:`reaches_source`), as do dead slots. Returns the number of sweeps.
     """
     K = out.shape[1]
-    A = rho.shape[1]
-    source = np.zeros(n, dtype=np.bool_)
+    first, o_rho, o_succ, o_U, o_nb = option_lists(n, absorbing, rho, U, osucc, onb)
+    source = np.empty(n, dtype=np.bool_)
     for i in range(n):
-        if R[i] > 0.0:
-            source[i] = True
-        elif not absorbing[i]:
-            for a in range(A):
-                if rho[i, a] > 0.0:
-                    source[i] = True
-                    break
+        source[i] = R[i] > 0.0 or first[i + 1] > first[i]
     live = np.empty(n, dtype=np.bool_)
     reaches_source(out, E, n, absorbing, alive, source, live)
     for i in range(n):
@@ -212,7 +239,7 @@ def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, abso
                 continue
             best = 0.0
             if not absorbing[i]:
-                for s in range(K):
+                for s in range(K):                      # max_k E[i, k] V(k)
                     j = out[i, s]
                     if j >= 0:
                         ev = E[i, s] * V[j]
@@ -220,16 +247,26 @@ def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, abso
                             best = ev
                 stay = R[i] + gamma * best      # where a failed test leaves the agent
                 opt = 0.0
-                for a in range(A):
-                    r = rho[i, a]
-                    if r > 0.0:
-                        sv = option_successor(V, U, osucc, onb, i, a, gamma)
-                        ov = r * sv + (1.0 - r) * stay
-                        if ov > opt:
-                            opt = ov
+                for c in range(first[i], first[i + 1]):   # max_a O(i, a), Eq. 5'
+                    j = o_succ[c]
+                    if j >= 0:                  # S: a known successor
+                        sv = V[j]
+                    elif j == -2:               # S: gamma max V beside a remembered wall
+                        sv = 0.0
+                        for b in range(o_nb.shape[1]):
+                            q = o_nb[c, b]
+                            if q >= 0 and V[q] > sv:
+                                sv = V[q]
+                        sv = gamma * sv
+                    else:                       # S: the optimistic U of unknown space
+                        sv = o_U[c]
+                    r = o_rho[c]
+                    ov = r * sv + (1.0 - r) * stay
+                    if ov > opt:
+                        opt = ov
                 if opt > best:
                     best = opt
-            step = beta * (R[i] + gamma * best - V[i])      # beta * Delta_V(i)
+            step = beta * (R[i] + gamma * best - V[i])      # beta * Delta_V(i), Eq. 4
             new[i] = V[i] + step
             if abs(step) > tol * new[i] + v_floor:
                 done = False

@@ -105,6 +105,7 @@ the step clock, the forward model ``delta``) is plain data: :meth:`state_dict` /
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -281,8 +282,8 @@ class MotivationEstimator:
     def rewards(self, m: SensorimotorMap, g: int, scale: float) -> np.ndarray:
         """Eq. 10: R_i = sim(i, g) = exp(-|w_i - w_g|^2 / (2 sigma_g^2)), 0 for dead slots."""
         R = np.empty(m.n)
-        kernels.goal_rewards(w=m.w, alive=m.alive, n=m.n, g=g, sigma=self.goal_sigma * scale,
-                             floor=self.goal_sim_floor, R=R)
+        kernels.goal_rewards(m.w, m.alive, m.n, g, self.goal_sigma * scale,
+                             self.goal_sim_floor, R)
         return R
 
     def _prepare(self, m: SensorimotorMap) -> int:
@@ -308,8 +309,7 @@ class MotivationEstimator:
             self._scale = self.link_scale(m) or 1.0
             self._scale_version = m.version
         if self.value_unknown:                        # represented only once sensed
-            d = m.w[g] - self.goal_x
-            if float(np.sqrt(d @ d)) > 0.5 * self._scale:
+            if math.dist(m.w[g], self.goal_x) > 0.5 * self._scale:
                 self.R = np.zeros(n)
                 return n
         self.goal_node = g
@@ -372,7 +372,7 @@ class MotivationEstimator:
         if self.goal_node < 0 or not 0 <= self._winner < n:
             return False
         absorbing = self._absorbing(m, n)
-        key = (m.version, self.goal_node, int(absorbing.sum()), self._bumps)
+        key = (m.version, self.goal_node, np.count_nonzero(absorbing), self._bumps)
         if key != self._reach_key:
             self._reach_key = key
             self._reach = np.zeros(n, dtype=bool)
@@ -398,11 +398,10 @@ class MotivationEstimator:
         absorbing = self._absorbing(m, n)
         if self.value_unknown:
             self._options(m, n)
-        self.sweeps = kernels.value_iteration(
-            out=m.out, E=m.E, R=self.R, V=self.V, n=n, beta=self.beta, gamma=self.gamma,
-            tol=self.vi_tol, v_floor=V_FLOOR, max_sweeps=self.vi_max_sweeps,
-            absorbing=absorbing, alive=m.alive, U=self.U[:n], rho=self.rho[:n],
-            osucc=self.osucc[:n], onb=self.onb[:n])
+        self.sweeps = kernels.value_iteration(               # Eq. 4-5'
+            m.out, m.E, self.R, self.V, n, self.beta, self.gamma, self.vi_tol, V_FLOOR,
+            self.vi_max_sweeps, absorbing, m.alive, self.U[:n], self.rho[:n],
+            self.osucc[:n], self.onb[:n])
         return self.V[:n]
 
     def exploit(self, m: SensorimotorMap) -> np.ndarray:
@@ -416,12 +415,10 @@ class MotivationEstimator:
             if self.goal_x is None or n == 0:
                 self.V0[:] = 0.0
             else:
-                kernels.value_iteration(
-                    out=m.out, E=m.E, R=self.R, V=self.V0, n=n, beta=self.beta,
-                    gamma=self.gamma, tol=self.vi_tol, v_floor=V_FLOOR,
-                    max_sweeps=self.vi_max_sweeps, absorbing=self._absorbing(m, n),
-                    alive=m.alive, U=self.U[:n], rho=np.zeros((n, N_PRIMITIVES)),
-                    osucc=self.osucc[:n], onb=self.onb[:n])
+                kernels.value_iteration(                     # Eq. 4-5, no option
+                    m.out, m.E, self.R, self.V0, n, self.beta, self.gamma, self.vi_tol,
+                    V_FLOOR, self.vi_max_sweeps, self._absorbing(m, n), m.alive,
+                    self.U[:n], np.zeros((n, N_PRIMITIVES)), self.osucc[:n], self.onb[:n])
             self._v0_fresh = True
         return self.V0
 

@@ -232,8 +232,8 @@ class SensorimotorMap:
 
     def winner_of(self, x: np.ndarray, C: np.ndarray) -> tuple[int, float]:
         """(b, d_b): the node minimising d_n (``distances``), -1 when the map is empty."""
-        b, d = kernels.merge_distance_argmin(w=self.w, c=self.c, alive=self.alive, n=self.n,
-                                             x=x, C=C, alpha_c=self.alpha_c)
+        b, d = kernels.merge_distance_argmin(self.w, self.c, self.alive, self.n, x, C,
+                                             self.alpha_c)
         return int(b), float(d)
 
     def nearest_by_weight(self, x: np.ndarray) -> int:
@@ -323,9 +323,8 @@ class SensorimotorMap:
         kernels.habituate(self.h, i, tau, self.kappa_h)
 
     def _adapt(self, b: int, x: np.ndarray, C: np.ndarray) -> None:
-        kernels.adapt(w=self.w, c=self.c, h=self.h, out=self.out, n=self.n, b=b, x=x, C=C,
-                      eps_b=self.eps_b, eps_n=self.eps_n, tau_b=self.tau_b,
-                      tau_n=self.tau_n, kappa=self.kappa_h)
+        kernels.adapt(self.w, self.c, self.h, self.out, self.n, b, x, C, self.eps_b,
+                      self.eps_n, self.tau_b, self.tau_n, self.kappa_h)
 
     def _update_links(self, i: int, j: int, a: np.ndarray) -> None:
         """Eq. 1-2 on the transition i -> j under action a, the credit rule, then ageing
@@ -333,9 +332,8 @@ class SensorimotorMap:
         if kernels.needs_wider_rows(self.out, i, j):
             self._grow_degree()             # the kernel needs a free slot for a new link
         created, ends = kernels.update_links(
-            out=self.out, E=self.E, A=self.a, age=self.age, n=self.n, i=i, j=j, a=a,
-            alpha=self.alpha, sigma_a=self.sigma_a, eta_a=self.eta_a, E_init=self.E_init,
-            E_min=self.E_min, max_age=self.max_age, credit=self.link_rule == "credit")
+            self.out, self.E, self.a, self.age, self.n, i, j, a, self.alpha, self.sigma_a,
+            self.eta_a, self.E_init, self.E_min, self.max_age, self.link_rule == "credit")
         if created or len(ends):
             self.version += 1
         if len(ends):
