@@ -4,6 +4,7 @@
     ros2 launch tmgwr_agent agent.launch.py maze:=paper_13x17.txt goal:=2 seed:=1 record:=true
     ros2 launch tmgwr_agent agent.launch.py composed:=true     # one process, one executor
     ros2 launch tmgwr_agent agent.launch.py resume:=runs/20250101T000000Z  # continue a run
+    ros2 launch tmgwr_agent agent.launch.py autostart:=false   # then: ros2 lifecycle set
 
 Starts ``maze_sim`` and the four agent nodes (and, with ``record:=true``, the MCAP
 recorder first). Every hyperparameter defaults to its spec (the config dataclasses of the
@@ -12,6 +13,12 @@ core); ``params_file:=FILE`` passes a ROS 2 parameter file of overrides to the f
 
     ros2 service call /set_goal tmgwr_interfaces/srv/SetGoal "{goal: {x: 11.0, y: 1.0, z: 0.0}}"
     ros2 service call /maze_sim/fire_event tmgwr_interfaces/srv/FireEvent "{event: a}"
+
+``map_learner`` is a managed (lifecycle) node, started as a launch_ros ``LifecycleNode``:
+with ``autostart:=true`` (the default) it configures and activates itself, so the graph
+steps at once; with ``autostart:=false`` it waits unconfigured (the ring waits with it)
+until ``ros2 lifecycle set /map_learner configure`` and ``... activate``, or a ChangeState
+event of a launch file that includes this one (ros2/demos ``lifecycle_py`` style).
 
 ``namespace:=a`` puts every node (and the recorder) in ``/a``: topics and services are
 relative or private, so two agents run side by side in one domain (``/a/set_goal``,
@@ -33,16 +40,15 @@ from launch.actions import DeclareLaunchArgument, OpaqueFunction, RegisterEventH
 from launch.conditions import IfCondition
 from launch.event_handlers import OnProcessExit, OnProcessIO
 from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
+from launch_ros.actions import LifecycleNode, Node
 
-#: (package, executable) of the graph in data-flow order; the names are a contract.
-GRAPH = (
-    ("maze_sim", "maze_sim"),
-    ("tmgwr_agent", "sensory_preprocessor"),
-    ("tmgwr_agent", "map_learner"),
-    ("tmgwr_agent", "motivation_estimator"),
-    ("tmgwr_agent", "action_selector"),
-)
+# the graph in data-flow order and the nodes that keep a checkpoint: one place, shared
+# with ./tmgwr up (the names are a contract)
+from tmgwr_agent.graph.supervisor import CHECKPOINTED, GRAPH_NODES
+
+#: The managed (lifecycle) nodes: started as launch_ros LifecycleNode actions, so a launch
+#: file that includes this one can send them ChangeState events and watch OnStateTransition.
+MANAGED = ("map_learner",)
 
 
 def int_argument(context, name: str) -> int:
@@ -56,6 +62,10 @@ def int_argument(context, name: str) -> int:
     if value < 0:
         raise ValueError(f"launch argument {name}:={text}: expected an integer >= 0")
     return value
+
+
+def true_argument(context, name: str) -> bool:
+    return LaunchConfiguration(name).perform(context).strip().lower() in ("true", "1")
 
 
 class NodeExited(RuntimeError):
@@ -109,10 +119,12 @@ def graph_nodes(context):
         run_dir = os.path.abspath(os.path.expanduser(resume_dir))
         if not os.path.isdir(run_dir):
             raise ValueError(f"launch argument resume:={resume_dir}: no such directory")
-        for name in ("maze_sim", "map_learner", "motivation_estimator", "action_selector"):
+        for name in CHECKPOINTED:
             overrides.setdefault(name, {}).update(checkpoint_dir=run_dir, resume=True)
         overrides["map_learner"]["map_dir"] = run_dir
-    if LaunchConfiguration("composed").perform(context).strip().lower() in ("true", "1"):
+    if not true_argument(context, "autostart"):   # the learner waits for `ros2 lifecycle set`
+        overrides.setdefault("map_learner", {})["autostart"] = False
+    if true_argument(context, "composed"):
         # one process, one executor (tmgwr_agent composed): its parameters reach every node
         # of it, a name only the nodes that declare it (maze and goal: maze_sim)
         shared = {**overrides["maze_sim"], **overrides["action_selector"],
@@ -120,9 +132,10 @@ def graph_nodes(context):
         return [Node(package="tmgwr_agent", executable="composed", output="screen",
                      namespace=namespace, parameters=[*files, shared])]
     return [
-        Node(package=package, executable=executable, name=executable, output="screen",
-             namespace=namespace, parameters=[*files, overrides.get(executable, {})])
-        for package, executable in GRAPH
+        (LifecycleNode if executable in MANAGED else Node)(
+            package=package, executable=executable, name=executable, output="screen",
+            namespace=namespace, parameters=[*files, overrides.get(executable, {})])
+        for package, executable in GRAPH_NODES
     ]
 
 
@@ -146,6 +159,10 @@ def generate_launch_description():
                               description="continue the run whose checkpoints are in this "
                                           "directory (a ./tmgwr up run directory, or "
                                           "$ROS_HOME/tmgwr/domain<ID>); '' = start fresh"),
+        DeclareLaunchArgument("autostart", default_value="true",
+                              description="the map learner (a lifecycle node) configures "
+                                          "and activates itself; false: it waits "
+                                          "unconfigured for `ros2 lifecycle set`"),
         DeclareLaunchArgument("namespace", default_value="",
                               description="ROS namespace of every node ('' = the root): "
                                           "two graphs in one domain need two namespaces"),

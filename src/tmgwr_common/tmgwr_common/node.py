@@ -339,12 +339,27 @@ def wait_for_acknowledgments(node, timeout: float = 1.0) -> bool:
     return done
 
 
+def end_node(node) -> None:
+    """A node's end once spinning stopped: a managed (lifecycle) node takes its ``shutdown``
+    transition (:func:`tmgwr_common.lifecycle.end`: its ``on_shutdown(state)`` runs), any
+    other node runs its ``on_shutdown()`` hook when it has one. Raises when that failed."""
+    from rclpy.lifecycle import LifecycleNodeMixin
+    if isinstance(node, LifecycleNodeMixin):
+        from tmgwr_common.lifecycle import end
+        end(node)
+        return
+    hook = getattr(node, "on_shutdown", None)
+    if hook is not None:
+        hook()
+
+
 def run(factory: Callable[[], Any], name: str, args=None,
         executor_factory: Callable[[], Any] | None = None) -> int:
     """Init rclpy, build the node, spin it; exit code 2 when it cannot start.
 
     A node may define ``on_shutdown()`` (called once after spinning stops, for any reason:
-    Ctrl-C or SIGTERM (:class:`StopSignals`), ``rclpy.shutdown``) and ``finished`` (spinning
+    Ctrl-C or SIGTERM (:class:`StopSignals`), ``rclpy.shutdown``; a lifecycle node takes its
+    ``shutdown`` transition instead, :func:`end_node`) and ``finished`` (spinning
     stops when it becomes true). ``executor_factory`` overrides :func:`make_executor`.
     Before the node is destroyed its reliable subscribers get (a bounded time) to
     acknowledge its last messages (:func:`wait_for_acknowledgments`).
@@ -387,13 +402,11 @@ def run(factory: Callable[[], Any], name: str, args=None,
         code = int(getattr(node, "exit_code", 0))
     finally:
         if node is not None:
-            hook = getattr(node, "on_shutdown", None)
-            if hook is not None:
-                try:
-                    hook()
-                except Exception as exc:  # noqa: BLE001 -- still shut down cleanly
-                    print(f"[{name}] shutdown hook failed: {exc}", file=sys.stderr, flush=True)
-                    code = code or 1
+            try:
+                end_node(node)
+            except Exception as exc:  # noqa: BLE001 -- still shut down cleanly
+                print(f"[{name}] shutdown hook failed: {exc}", file=sys.stderr, flush=True)
+                code = code or 1
             wait_for_acknowledgments(node)
             node.destroy_node()
         rclpy.try_shutdown()

@@ -21,8 +21,10 @@ another node of the graph declares, as with a shared ``/**`` file); ``-p node:na
 Executor: ``--executor single`` (rclpy's SingleThreadedExecutor) or ``events`` (the
 experimental EventsExecutor), default ``TMGWR_EXECUTOR`` as for every node
 (:func:`tmgwr_common.node.make_executor`). The process stops when maze_sim finishes
-(``exit_when_done``) with its exit code, on Ctrl-C or SIGTERM; every node's ``on_shutdown``
-then runs (the learner saves its map, the recorder finishes its bag last).
+(``exit_when_done``) with its exit code, on Ctrl-C or SIGTERM (which, as in every node's
+process, only ask the loop to stop: :class:`tmgwr_common.node.StopSignals`); every node's
+``on_shutdown`` then runs (the learner, a managed node, takes its ``shutdown`` transition
+and saves its map; the recorder finishes its bag last).
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ import argparse
 import sys
 from typing import Any, Callable
 
-from tmgwr_common.node import EXECUTORS, make_executor, params_files
+from tmgwr_common.node import EXECUTORS, STOP, end_node, make_executor, params_files
 from tmgwr_common.params import ParamError, read_params_file
 
 NAME = "composed"
@@ -115,11 +117,13 @@ def run_composed(record: bool, executor_kind: str | None, args: list[str]) -> in
     start (the nodes built so far are destroyed)."""
     import rclpy
     from rclpy.executors import ExternalShutdownException
+    from rclpy.signals import SignalHandlerOptions
 
+    stop = STOP.install()        # Ctrl-C / SIGTERM only ask the loop to stop (as one node)
     try:
         for f in params_files(args):
             read_params_file(f)
-        rclpy.init(args=args)
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except (ParamError, RuntimeError) as exc:
         print(f"[{NAME}] cannot start: {exc}", file=sys.stderr, flush=True)
         return 2
@@ -144,16 +148,11 @@ def run_composed(record: bool, executor_kind: str | None, args: list[str]) -> in
               flush=True)
         sim = nodes[-1][1]
         try:
-            while rclpy.ok() and not any(getattr(n, "finished", False) for _, n in nodes):
+            while rclpy.ok() and not stop.received and not any(
+                    getattr(n, "finished", False) for _, n in nodes):
                 executor.spin_once(timeout_sec=0.2)
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
-        except RuntimeError:
-            # Ctrl-C inside a callback the EventsExecutor runs reaches us as pybind11's
-            # "Unable to convert call argument" RuntimeError; with the context shut down
-            # it is that interrupt, not a failure
-            if rclpy.ok():
-                raise
         finally:
             executor.shutdown(timeout_sec=0.5)
             if aside is not None:
@@ -161,16 +160,15 @@ def run_composed(record: bool, executor_kind: str | None, args: list[str]) -> in
         code = int(getattr(sim, "exit_code", 0))
     finally:
         for name, node in reversed(nodes):      # the simulator first, the recorder last
-            hook = getattr(node, "on_shutdown", None)
-            if hook is not None:
-                try:
-                    hook()
-                except Exception as exc:  # noqa: BLE001 -- still shut the others down
-                    print(f"[{NAME}] {name}: shutdown hook failed: {exc}", file=sys.stderr,
-                          flush=True)
-                    code = code or 1
+            try:
+                end_node(node)                  # the learner: its shutdown transition
+            except Exception as exc:  # noqa: BLE001 -- still shut the others down
+                print(f"[{NAME}] {name}: shutdown hook failed: {exc}", file=sys.stderr,
+                      flush=True)
+                code = code or 1
             node.destroy_node()
         rclpy.try_shutdown()
+        stop.ignore_from_now()
     return code
 
 

@@ -24,14 +24,34 @@ Persistence (:mod:`tmgwr_agent.map_store`; README, Maps on disk): maps live in o
 directory, ``map_dir`` (``./tmgwr up`` passes the run's directory; default
 ``$ROS_HOME/tmgwr/domain<ID>[_<namespace>]``), held by this learner alone. The private
 ``~/save_map`` and ``~/load_map`` services take a map *name* (``NAME`` -> ``NAME.npz`` in
-that directory), never a path; a refused name, file or content leaves the node running and
-the response says why. The map is saved as ``map_name`` on shutdown (SIGINT/SIGTERM) and
-``initial_map`` (a name in ``map_dir``, or a path given by whoever starts the node) starts
-the learner from a saved map, so a restarted learner continues with the same map (the file
-also records the last step it learnt and its run, so a resent step is answered, not learnt
-twice). A map saved in another run brings that run's id along: the learner follows the
-simulator's current run from its first step (``tmgwr_common.lockstep``), learning on with
-the loaded map. A loaded map is validated completely before it replaces the live one.
+that directory), never a path; a refused name, file or content leaves the node running
+and the response says why. The map is saved as ``map_name`` on deactivate and on shutdown
+(SIGINT/SIGTERM) and ``initial_map`` (a name in ``map_dir``, or a path given by whoever
+starts the node) starts the learner from a saved map, so a restarted learner continues
+with the same map (the file also records the last step it learnt and its run, so a resent
+step is answered, not learnt twice). A map saved in another run brings that run's id
+along: the learner follows the simulator's current run from its first step
+(``tmgwr_common.lockstep``), learning on with the loaded map. A loaded map is validated
+completely before it replaces the live one.
+
+Lifecycle (a managed node, ``rclpy.lifecycle.LifecycleNode`` as in ros2/demos
+``lifecycle_py``; :mod:`tmgwr_common.lifecycle`; ``ros2 lifecycle get/set /map_learner``):
+
+* ``configure``: hold the map directory, load the map (``initial_map``, else the checkpoint
+  with ``resume``, else none until the first features), create the publishers (lifecycle
+  publishers: silent unless active) and the services (they answer while configured);
+* ``activate``: join the lockstep (subscribe to ``/features``; the simulator resends the
+  step the ring waits for, within ``resend_period``) and publish the map;
+* ``deactivate``: stop stepping (the ring waits, nothing is lost) and save the map and the
+  checkpoint; ``activate`` goes on from the same map and step;
+* ``cleanup``: drop the map, the publishers and services, release the directory;
+* ``shutdown`` (from any state; Ctrl-C and SIGTERM take it too): save as on deactivate
+  (atomic), release everything.
+
+``autostart`` (default true) configures and activates the node as soon as it is built, so
+``ros2 run``, ``ros2 launch``, ``./tmgwr up`` and the composed graph step by themselves; a
+configure that fails then stops the learner at start (exit code 2, saying why). With
+``autostart:=false`` it waits unconfigured for ``ros2 lifecycle set`` or a lifecycle manager.
 """
 
 from __future__ import annotations
@@ -42,7 +62,8 @@ from pathlib import Path
 
 import numpy as np
 from geometry_msgs.msg import Point
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle.publisher import LifecyclePublisher
 from std_msgs.msg import ColorRGBA
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
@@ -60,6 +81,7 @@ from tmgwr_agent.map_store import (
 from tmgwr_agent.nodes.step_messages import fill_change, outcome_of
 from tmgwr_common import topics
 from tmgwr_common.checkpoint import CHECKPOINT_SPECS, Checkpoint, Checkpointer, CheckpointError
+from tmgwr_common.lifecycle import LIFECYCLE_SPECS, autostart, refuse_invalid_transitions
 from tmgwr_common.lockstep import Lockstep
 from tmgwr_common.node import (
     LATCHED_QOS,
@@ -70,6 +92,7 @@ from tmgwr_common.node import (
     f64,
     np_f64,
     run,
+    wait_for_acknowledgments,
 )
 from tmgwr_common.params import Param
 from tmgwr_interfaces.msg import (
@@ -102,20 +125,56 @@ NODE_SPECS = (
           "(/sensorimotor_snapshot; also sent on request and for a new map)", low=1,
           high=1e9, integer=True),
     *CHECKPOINT_SPECS,
+    *LIFECYCLE_SPECS,
 )
 
 
-class MapLearnerNode(Node):
+class MapLearnerNode(LifecycleNode):
+    """A managed node (module docstring, Lifecycle): the map exists from ``configure`` to
+    ``cleanup``/``shutdown``; the learner steps only while ``active``."""
+
     def __init__(self):
         super().__init__("map_learner", **NODE_OPTIONS)
         self.config, self.p = declare_parameters(self, MapConfig, NODE_SPECS)
-        self.map: SensorimotorMap | None = None
-        last_step, run_id = -1, 0
-        self.gain = 1.0
-        self.prev_winner = -1
         if self.p["map_path"]:                              # the old form: DIR/NAME.npz
             old = Path(self.p["map_path"])
             self.p["map_dir"], self.p["map_name"] = str(old.parent), old.name
+        refuse_invalid_transitions(self)
+        self.map: SensorimotorMap | None = None
+        self.store: MapStore | None = None
+        self.checkpoints: Checkpointer | None = None
+        self.lockstep: Lockstep | None = None
+        self.features_sub = None
+        self.map_timer = None
+        self.refusal = ""                  # why the last transition failed ("" = none)
+        self.exit_code = 0
+        self.motivation_raw: bytes | None = None
+        if self.p["autostart"]:
+            autostart(self)                 # ValueError: exit code 2 with the reason
+            self.get_logger().info(f"map_learner ready: {self.config.as_dict()}")
+        else:
+            self.get_logger().info(
+                "map_learner ready, unconfigured (autostart false): waiting for `ros2 "
+                f"lifecycle set {self.get_fully_qualified_name()} configure`, then activate")
+
+    # ------------------------------------------------------------------ lifecycle
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """The map directory (held), the map (``initial_map``, else the checkpoint with
+        ``resume``, else empty until the first features), publishers and services."""
+        try:
+            self.configure()
+        except (MapStoreError, CheckpointError, ValueError, OSError) as exc:
+            self.refusal = str(exc)
+            self.get_logger().error(f"configure failed: {exc}")
+            self.release()
+            return TransitionCallbackReturn.FAILURE
+        self.refusal = ""
+        return TransitionCallbackReturn.SUCCESS
+
+    def configure(self) -> None:
+        self.map, last_step, run_id = None, -1, 0
+        self.gain = 1.0
+        self.prev_winner = -1
         self.store = MapStore(self.p["map_dir"] or default_map_dir(
             os.environ.get("ROS_DOMAIN_ID") or 0, self.get_namespace()))
         self.store.lock()
@@ -135,31 +194,137 @@ class MapLearnerNode(Node):
         self.V = np.zeros(0)
         self.published = (-1, -1)        # (step, version) of the last latched snapshot
 
-        state_pub = self.create_publisher(SensorimotorState, topics.SENSORIMOTOR_STATE,
-                                          STEP_QOS)
+        state_pub = self.create_lifecycle_publisher(SensorimotorState,
+                                                    topics.SENSORIMOTOR_STATE, STEP_QOS)
         self.lockstep = Lockstep(state_pub, last_step=last_step, run_id=run_id,
                                  logger=self.get_logger(), what="features")
-        self.map_pub = self.create_publisher(MapMsg, topics.MAP, LATCHED_QOS)
-        self.marker_pub = self.create_publisher(MarkerArray, topics.MAP_MARKERS, LATCHED_QOS)
-        self.create_subscription(Features, topics.FEATURES, self.on_features, STEP_QOS)
+        self.map_pub = self.create_lifecycle_publisher(MapMsg, topics.MAP, LATCHED_QOS)
+        self.marker_pub = self.create_lifecycle_publisher(MarkerArray, topics.MAP_MARKERS,
+                                                          LATCHED_QOS)
         # Marker colours only: the newest field is enough (best effort, depth 1, never
         # stalls its publisher), kept serialized and decoded only when markers are drawn.
-        self.create_subscription(Potentials, topics.POTENTIALS, self.on_motivation,
-                                 SENSOR_QOS, raw=True)
-        self.motivation_raw: bytes | None = None
-        self.create_service(SaveMap, topics.SAVE_MAP, self.on_save)
-        self.create_service(LoadMap, topics.LOAD_MAP, self.on_load)
+        self.potentials_sub = self.create_subscription(
+            Potentials, topics.POTENTIALS, self.on_motivation, SENSOR_QOS, raw=True)
+        self.motivation_raw = None
+        self.own_services = [self.create_service(SaveMap, topics.SAVE_MAP, self.on_save),
+                         self.create_service(LoadMap, topics.LOAD_MAP, self.on_load)]
         # the map as consumers replicate it: per-step changes, latched whole-map snapshots
         self.encoder: ChangeEncoder | None = None
         self.encoder_of: SensorimotorMap | None = None       # the map it encodes
-        self.snapshot_pub = self.create_publisher(SensorimotorSnapshot, topics.MAP_SNAPSHOT,
-                                                  LATCHED_QOS)
-        self.create_service(Trigger, topics.REQUEST_SNAPSHOT, self.on_request_snapshot)
+        self.snapshot_pub = self.create_lifecycle_publisher(
+            SensorimotorSnapshot, topics.MAP_SNAPSHOT, LATCHED_QOS)
+        self.own_services.append(self.create_service(Trigger, topics.REQUEST_SNAPSHOT,
+                                                 self.on_request_snapshot))
         self.next_map_time = 0.0        # time.monotonic() before which publish_map waits
-        self.create_timer(1.0 / self.p["publish_rate"], self.publish_map)
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Join the lockstep: subscribe to the features (the simulator's next resend brings
+        the step the ring waits for) and publish the map."""
+        super().on_activate(state)                   # the lifecycle publishers
+        self.features_sub = self.create_subscription(Features, topics.FEATURES,
+                                                     self.on_features, STEP_QOS)
+        self.map_timer = self.create_timer(1.0 / self.p["publish_rate"], self.publish_map)
+        self.published = (-1, -1)
         if self.map is not None:
             self.publish_map()
-        self.get_logger().info(f"map_learner ready: {self.config.as_dict()}")
+        ls = self.lockstep
+        self.get_logger().info(
+            "active: stepping " + (f"on from step {ls.last_step} of run {ls.run_id}"
+                                   if ls.run_id else "from the simulator's next step")
+            + (f" with {self.map.size} nodes" if self.map is not None else ""))
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop stepping (the ring waits; the simulator resends until we are back) and save
+        the map and the checkpoint."""
+        self.stop_stepping()
+        super().on_deactivate(state)
+        self.get_logger().info(f"inactive: stepping stopped after step "
+                               f"{self.lockstep.last_step}; {self.save_all(print_=False)}")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Drop the map and everything configure made; the map directory is released."""
+        self.release()
+        self.get_logger().info("unconfigured: map dropped, map directory released")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """The end (Ctrl-C, SIGTERM, ``ros2 lifecycle set ... shutdown``): save the map and
+        the checkpoint (atomic), release everything. FAILURE when the map was not saved."""
+        if self.lockstep is not None:
+            print(f"map_learner: {self.lockstep.timer.summary()}", flush=True)
+        ok = True
+        if state.label == "active":
+            self.stop_stepping()
+        if self.store is not None:
+            try:
+                self.save_all(print_=True, strict=True)
+            except MapStoreError as exc:
+                self.refusal = f"map NOT saved: {exc}"
+                print(f"map_learner: {self.refusal}", flush=True)
+                ok = False
+        wait_for_acknowledgments(self)       # subscribers get our last messages first
+        self.release()
+        return TransitionCallbackReturn.SUCCESS if ok else TransitionCallbackReturn.FAILURE
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.get_logger().error(f"error while leaving {state.label}: back to unconfigured")
+        self.stop_stepping()
+        self.release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def stop_stepping(self) -> None:
+        if self.features_sub is not None:
+            self.destroy_subscription(self.features_sub)
+            self.features_sub = None
+        if self.map_timer is not None:
+            self.destroy_timer(self.map_timer)
+            self.map_timer = None
+
+    def release(self) -> None:
+        """Undo configure: publishers, services, the map, the directory lock."""
+        self.stop_stepping()
+        for pub in [p for p in self.publishers if isinstance(p, LifecyclePublisher)]:
+            self.destroy_lifecycle_publisher(pub)
+        for srv in getattr(self, "own_services", []):
+            self.destroy_service(srv)
+        self.own_services = []
+        if getattr(self, "potentials_sub", None) is not None:
+            self.destroy_subscription(self.potentials_sub)
+            self.potentials_sub = None
+        if self.checkpoints is not None and self.checkpoints.store is not None:
+            self.checkpoints.store.close()
+        if self.store is not None:
+            self.store.close()
+        self.map, self.store, self.checkpoints, self.lockstep = None, None, None, None
+        self.encoder = self.encoder_of = None
+
+    def save_all(self, print_: bool, strict: bool = False) -> str:
+        """Write the checkpoint and save the map as ``map_name`` (both atomic); what was
+        done, in words. ``strict``: a refused map save raises MapStoreError."""
+        step, run_id = self.lockstep.last_step, self.lockstep.run_id
+        if self.map is None:
+            return "no map yet: nothing saved"
+        if print_:                       # the end: rclpy's logging may be gone
+            self.checkpoints.stop(step, run_id, self.checkpoint_state)
+        elif step >= 0 and self.checkpoints.store is not None:
+            self.checkpoints.save(step, run_id, self.checkpoint_state,
+                                  self.get_logger().warning)
+        if not self.p["map_name"]:
+            return "map not saved (map_name empty)"
+        try:
+            path = self.store.save(self.map, self.p["map_name"], step, run_id)
+        except MapStoreError as exc:
+            if strict:
+                raise
+            self.get_logger().warning(f"map NOT saved: {exc}")
+            return f"map NOT saved: {exc}"
+        text = (f"saved {self.map.size} nodes, {self.map.link_count()} links (step {step}) "
+                f"to {path}")
+        if print_:
+            print(f"map_learner: {text}", flush=True)
+        return text
 
     # ------------------------------------------------------------------ per step
     def on_features(self, f: Features):
@@ -248,6 +413,8 @@ class MapLearnerNode(Node):
     def on_request_snapshot(self, _req, resp):
         if self.map is None:
             resp.success, resp.message = False, "no map yet: nothing learnt"
+        elif self.features_sub is None:
+            resp.success, resp.message = False, "inactive: the map is not published"
         else:
             resp.success, resp.message = True, "published " + self.publish_snapshot()
         return resp
@@ -378,21 +545,6 @@ class MapLearnerNode(Node):
             raise CheckpointError(str(exc)) from None
         self.gain = float(ck.state.get("gain", 1.0))
         return m
-
-    def on_shutdown(self):
-        print(f"map_learner: {self.lockstep.timer.summary()}", flush=True)
-        step = self.lockstep.last_step
-        if self.map is not None:
-            self.checkpoints.stop(step, self.lockstep.run_id, self.checkpoint_state)
-        if self.map is not None and self.p["map_name"]:
-            try:
-                path = self.store.save(self.map, self.p["map_name"], step,
-                                       self.lockstep.run_id)
-            except MapStoreError as exc:
-                print(f"map_learner: map NOT saved: {exc}", flush=True)
-                raise
-            print(f"map_learner: saved {self.map.size} nodes, {self.map.link_count()} links "
-                  f"(step {step}) to {path}", flush=True)
 
 
 def main(args=None):

@@ -1,0 +1,166 @@
+"""map_learner is a managed (lifecycle) node (issue 10, ROS conventions), driven with the
+real ``ros2 lifecycle`` command line (skipped, saying why, where there is no ``ros2``):
+
+* the graph starts by itself (``autostart`` true): ``ros2 lifecycle get`` says active;
+* ``deactivate``: stepping stops (the simulator resends the next step, unanswered) and the
+  map is saved at the step the learner stopped at;
+* ``activate``: stepping resumes from that very map (same nodes, the same step, version on);
+* refused transitions (one the CLI does not offer, one sent raw to ``change_state``) leave
+  the node active and the graph stepping;
+* ``autostart:=false``: the learner waits unconfigured, the ring with it, until ``ros2
+  lifecycle set ... configure`` and ``activate``; then the graph steps.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+
+import numpy as np
+import pytest
+from ros_helpers import RosProcess, require_ros2, ros2_cli, ros2_run
+from test_nodes import goals_reached
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+LEARNER = "/map_learner"
+
+
+def ros2(domain: int, *args: str, check: bool = True, tries: int = 4) -> str:
+    """``ros2 ARGS`` (no daemon); retried while the node is not discovered yet."""
+    for attempt in range(tries):
+        p = ros2_cli(*args, domain=domain)
+        with p:
+            out = p.wait(timeout=60, check=False)
+        if "Node not found" not in out or attempt == tries - 1:
+            break
+        time.sleep(1.0)
+    if check:
+        assert p.proc.returncode == 0 and "failed" not in out.lower(), p.describe("ros2 failed")
+    return out
+
+
+def state(domain: int) -> str:
+    out = ros2(domain, "lifecycle", "get", LEARNER, "--no-daemon", "--spin-time", "2")
+    return out.split()[0] if out.split() else out
+
+
+def start_graph(domain: int, tmp_path, learner_params: dict | None = None
+                ) -> dict[str, RosProcess]:
+    """The five nodes as ``./tmgwr up`` starts them, the maps in ``tmp_path``."""
+    from tmgwr_agent.graph.supervisor import graph_specs
+    procs = {}
+    specs = graph_specs(seed=1, run_dir=tmp_path,
+                        node_params={"map_learner": learner_params or {}})
+    for spec in specs:
+        procs[spec.label] = ros2_run(spec.package, spec.executable, *spec.command()[1:],
+                                     domain=domain, name=spec.label,
+                                     env={"ROS_HOME": str(tmp_path / "ros_home")})
+    return procs
+
+
+def wait_goals(sim: RosProcess, n: int, procs, timeout: float = 120.0) -> None:
+    t0 = time.monotonic()
+    while len(goals_reached(sim)) < n:
+        dead = [k for k, p in procs.items() if not p.running()]
+        assert not dead, procs[dead[0]].describe("died")
+        assert time.monotonic() - t0 < timeout, sim.describe(f"fewer than {n} goals")
+        time.sleep(0.3)
+
+
+def saved_map(path) -> tuple[int, int, int]:
+    """(step, nodes alive, map version) of a saved map file."""
+    with np.load(path) as d:
+        return int(d["step_id"]), int(d["alive"].sum()), int(d["meta"][0])
+
+
+@pytest.mark.timeout(300)
+def test_deactivate_saves_and_stops_activate_resumes_refusals_leave_it_running(
+        ros_domain, tmp_path):
+    require_ros2()
+    procs = start_graph(ros_domain, tmp_path)
+    sim, learner = procs["maze_sim"], procs["map_learner"]
+    try:
+        for p in procs.values():
+            p.wait_for_line("ready", timeout=90)
+        wait_goals(sim, 2, procs)
+        assert state(ros_domain) == "active"
+
+        # deactivate: stepping stops at step N, the map of step N is saved
+        ros2(ros_domain, "lifecycle", "set", LEARNER, "deactivate", "--no-daemon",
+             "--spin-time", "2")
+        line = learner.wait_for_line(r"inactive: stepping stopped after step \d+", 30)
+        n = int(re.search(r"after step (\d+)", line)[1])
+        assert "saved" in line, line
+        step, size, version = saved_map(tmp_path / "map.npz")
+        assert step == n and size > 0, (step, n, line)
+        assert state(ros_domain) == "inactive"
+        # the simulator waits on step n + 1 and resends it; no goal is reached meanwhile
+        sim.wait_for_line(rf"no action for step {n + 1} of run \d+ .*resending", 20)
+        goals = len(goals_reached(sim))
+        time.sleep(2.0)
+        assert len(goals_reached(sim)) == goals
+
+        # activate: stepping resumes from the same map and step
+        ros2(ros_domain, "lifecycle", "set", LEARNER, "activate", "--no-daemon",
+             "--spin-time", "2")
+        line = learner.wait_for_line(r"active: stepping on from step", 30)
+        assert f"from step {n} " in line and f"with {size} nodes" in line, (line, n, size)
+        sim.wait_for_line(rf"step {n + 1} answered after \d+ resends", 30)
+        wait_goals(sim, goals + 2, procs)
+        assert state(ros_domain) == "active"
+
+        # refused: a transition the active state does not have (the CLI refuses it) ...
+        out = ros2(ros_domain, "lifecycle", "set", LEARNER, "configure", "--no-daemon",
+                   "--spin-time", "2", check=False)
+        assert "Unknown transition requested" in out, out
+        # ... and the same sent raw to the node's change_state service (rclpy would raise)
+        out = ros2(ros_domain, "service", "call", f"{LEARNER}/change_state",
+                   "lifecycle_msgs/srv/ChangeState", "{transition: {id: 1}}", check=False)
+        assert "success=False" in out, out
+        learner.wait_for_line(r"refused transition 1 .* from active", 20)
+        goals = len(goals_reached(sim))
+        wait_goals(sim, goals + 1, procs)
+        assert state(ros_domain) == "active" and learner.running()
+
+        # the end: Ctrl-C saves the map that went on from the deactivated one
+        learner.stop()
+        assert learner.proc.returncode == 0, learner.describe("exit")
+        last_step, _, last_version = saved_map(tmp_path / "map.npz")
+        assert last_step > n and last_version > version
+        assert "Traceback" not in learner.output, learner.output
+    finally:
+        for p in procs.values():
+            p.stop()
+
+
+@pytest.mark.timeout(240)
+def test_autostart_false_waits_unconfigured_until_configure_and_activate(ros_domain, tmp_path):
+    require_ros2()
+    procs = start_graph(ros_domain, tmp_path, {"autostart": False})
+    sim, learner = procs["maze_sim"], procs["map_learner"]
+    try:
+        for p in procs.values():
+            p.wait_for_line("ready", timeout=90)
+        assert state(ros_domain) == "unconfigured"
+        sim.wait_for_line(r"no action for step 0 of run \d+ .*resending", 30)
+        assert not goals_reached(sim)
+        ros2(ros_domain, "lifecycle", "set", LEARNER, "configure", "--no-daemon",
+             "--spin-time", "2")
+        assert state(ros_domain) == "inactive"
+        ros2(ros_domain, "lifecycle", "set", LEARNER, "activate", "--no-daemon",
+             "--spin-time", "2")
+        wait_goals(sim, 1, procs)
+        # cleanup needs inactive: deactivate, cleanup (the map dropped), then shutdown
+        for transition, goal in (("deactivate", "inactive"), ("cleanup", "unconfigured"),
+                                 ("shutdown", "finalized")):
+            ros2(ros_domain, "lifecycle", "set", LEARNER, transition, "--no-daemon",
+                 "--spin-time", "2")
+            assert state(ros_domain) == goal, transition
+        assert learner.running()
+        learner.stop()
+        assert learner.proc.returncode == 0, learner.describe("exit")
+        assert "Traceback" not in learner.output, learner.output
+    finally:
+        for p in procs.values():
+            p.stop()
