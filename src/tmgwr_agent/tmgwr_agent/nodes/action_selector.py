@@ -7,7 +7,10 @@ potentials V of their targets: all Eq. 6 reads), ``Action`` out. The core
 action did (walk direction, tried primitives, the Eq. 7 decay at the goal), then ``select``,
 which draws from ``numpy.random.default_rng(seed)``, the generator the in-process agent is
 given, so a seed fixes the trajectory over the graph as in-process. A terminal observation
-is answered with ``Action.NONE`` (no draw: the episode is over).
+is answered with ``Action.NONE`` (no draw: the episode is over). After every answer the
+epsilon draw of the next choice is made ahead (:meth:`EpsilonGreedy.draw_ahead`, as the
+in-process agent makes it before it plans) and ``Action.walk_next`` says whether it chose
+the random walk: the motivation estimator then skips Eq. 4-5 for that step.
 """
 
 from __future__ import annotations
@@ -104,6 +107,7 @@ class ActionSelectorNode(Node):
             a.action = int(action)
             a.motor = f64(ACTION_VECTORS[action])
         self.prev_winner = int(f.winner)
+        a.walk_next = bool(self.p["explore"] and self.core.policy.draw_ahead())
         return a
 
     def checkpoint_state(self):

@@ -13,6 +13,16 @@ computed then (a resent step is answered from the replica as it is). The goal is
 when it changes the potentials restart from 0 (Algorithm 1 line 5), exactly as
 :meth:`TMGWRAgent.set_goal` does in-process.
 
+When the selector's epsilon draw for its next action, made ahead, chose the random walk
+(``Action.walk_next``; every step while epsilon is 1), Eq. 4-5 are not solved for that
+step, as :meth:`TMGWRAgent.step` does in-process: this node hears the selector's
+``Action`` of the previous step and holds a state until that action has arrived (the
+simulator made the state after it, so it was sent first; a resent state with the action
+still missing is solved in full, with a warning). The first state of a run has no action
+before it: solved, as the in-process agent solves its first step. A field not solved
+carries the winner's links without options, potentials 0, goal node -1 and 0 sweeps, and
+no ``/potentials`` goes out for it.
+
 ``/set_goal`` (``tmgwr_interfaces/SetGoal``, x = column, y = row) changes the goal of the
 whole system in one call: a goal that is not finite, outside the maze or in a wall (per the
 simulator's latched grid) is refused with a message; otherwise the cell goes to the
@@ -56,6 +66,7 @@ from tmgwr_common.node import (
 )
 from tmgwr_common.params import Param
 from tmgwr_interfaces.msg import (
+    Action,
     MotivationField,
     Potentials,
     SensorimotorSnapshot,
@@ -78,6 +89,11 @@ class MotivationEstimatorNode(Node):
         self._ids = np.zeros(0, dtype=np.int32)
         pub = self.create_publisher(MotivationField, topics.MOTIVATION, STEP_QOS)
         self.lockstep = Lockstep(pub, logger=self.get_logger(), what="state")
+        # the selector's last action (run, step, walk_next): when its draw for the next
+        # action chose the random walk, Eq. 4-5 need not be solved for it
+        self.heard: tuple[int, int, bool] | None = None
+        self.waiting: SensorimotorState | None = None   # a state awaiting that action
+        self.create_subscription(Action, topics.ACTION, self.on_action, STEP_QOS)
         self.create_subscription(SensorimotorState, topics.SENSORIMOTOR_STATE, self.on_state,
                                  STEP_QOS)
         # the map of this step: a replica of the learner's, kept by its per-step changes
@@ -103,8 +119,33 @@ class MotivationEstimatorNode(Node):
         self.get_logger().info(f"motivation_estimator ready: {config.as_dict()}")
 
     # ------------------------------------------------------------------ per step
+    def on_action(self, a: Action):
+        self.heard = (a.run_id, a.step_id, a.walk_next)
+        w = self.waiting
+        if w is not None and (w.run_id, w.step_id - 1) == (a.run_id, a.step_id):
+            self.waiting = None
+            self.on_state(w)
+
+    def awaits_action(self, s: SensorimotorState) -> bool:
+        """Whether state ``s`` waits for the selector's action of the step before (this
+        node computed that step, so the selector answered it: the action is on its way)."""
+        if (s.run_id, s.step_id - 1) != (self.lockstep.run_id, self.lockstep.last_step) or (
+                self.heard is not None and self.heard[:2] == (s.run_id, s.step_id - 1)):
+            return False
+        w, self.waiting = self.waiting, s
+        if w is not None and (w.run_id, w.step_id) == (s.run_id, s.step_id):
+            self.waiting = None             # resent and the action still missing
+            self.get_logger().warning(
+                f"step {s.step_id} (run {s.run_id}): no action of step {s.step_id - 1} "
+                "heard from the selector: Eq. 4-5 solved without its draw",
+                throttle_duration_sec=5.0)
+            return False
+        return True
+
     def on_state(self, s: SensorimotorState):
         resent = (s.run_id, s.step_id) == (self.lockstep.run_id, self.lockstep.last_step)
+        if s.run_id and not resent and self.awaits_action(s):
+            return                          # held until the previous step's action came
         if s.run_id and not resent and not self.follow(s):
             return                          # held until the replica has this step's map
         self.lockstep.on_step(s.run_id, s.step_id, lambda: self.motivate(s))
@@ -151,7 +192,9 @@ class MotivationEstimatorNode(Node):
         # what TMGWRAgent.step does here: note what the last action did (Eq. 5' options),
         # then re-solve Eq. 4-5 on this step's map
         self.core.record(s.previous_winner, s.winner, s.inserted, outcome_of(s), m.w)
-        V = self.core.update(m)
+        heard = self.heard if self.heard and self.heard[:2] == (s.run_id, s.step_id - 1) \
+            else None               # the selector's action of the step before
+        V = self.core.update(m, skip=heard is not None and heard[2])
         out = MotivationField()
         out.header = s.header
         out.run_id = s.run_id
@@ -163,11 +206,15 @@ class MotivationEstimatorNode(Node):
         out.action_dim = s.action_dim
         if s.winner >= 0:          # what Eq. 6 ranks: the winner's links and its options
             actions = np_f64(s.winner_link_actions).reshape(-1, s.action_dim or 1)
-            links = self.core.options_of(
-                s.winner, Links(m.out[s.winner], m.E[s.winner], actions))
+            links = Links(m.out[s.winner], m.E[s.winner], actions)
+            if V is not None:
+                links = self.core.options_of(s.winner, links)
+                potentials = self.core.V[links.targets]              # V[-1] = V[n] = 0
+            else:                  # not solved: the next action walks
+                potentials = np.zeros(len(links.targets))
             out.winner_link_targets = i32(links.targets)
             out.winner_link_reliability = f64(links.E)
-            out.winner_link_potentials = f64(self.core.V[links.targets])  # V[-1] = V[n] = 0
+            out.winner_link_potentials = f64(potentials)
             out.winner_link_actions = f64(links.actions.ravel())
         else:
             out.winner_link_actions = s.winner_link_actions
@@ -176,7 +223,7 @@ class MotivationEstimatorNode(Node):
         out.bumped = s.bumped
         out.goal_reached = s.goal_reached
         out.terminal = s.terminal
-        if s.step_id % self.p["field_period"] == 0:
+        if s.step_id % self.p["field_period"] == 0 and V is not None:
             self.publish_potentials(s, V)
         return out
 
