@@ -643,6 +643,60 @@ def update_links(out, E, A, age, n, i, j, a, alpha, sigma_a, eta_a, E_init, E_mi
     return created, age_links(out, E, age, n, i, slot, E_min, max_age)
 
 
+@njit(cache=True)
+def match(w, c, h, alive, out, n, prev, x, C, alpha_c, beta_c, a_T, h_T, learn, eps_b, eps_n,
+          tau_b, tau_n, kappa):
+    """The matching and adaptation of one input x (sensorimotor_map.py, one call a step):
+    writes its Merge-GNG context ``C_t = (1 - beta_c) w_prev + beta_c c_prev`` into C (x
+    itself at an episode start, ``prev`` < 0), finds the winner b = argmin d_n and, when
+    learning, applies the GWR test: returns ``(b, True)`` when a node must be inserted (an
+    empty map, or activity ``exp(-sqrt(d_b)) < a_T`` with ``h_b <= h_T``: the caller
+    inserts), else adapts b and its neighbours towards (x, C) and returns ``(b, False)``."""
+    if prev >= 0:
+        for k in range(C.shape[0]):
+            C[k] = (1.0 - beta_c) * w[prev, k] + beta_c * c[prev, k]
+    else:
+        C[:] = x
+    b, d_b = merge_distance_argmin(w, c, alive, n, x, C, alpha_c)
+    if not learn:
+        return b, False
+    if b < 0 or (np.exp(-np.sqrt(d_b)) < a_T and h[b] <= h_T):
+        return b, True
+    adapt(w, c, h, out, n, b, x, C, eps_b, eps_n, tau_b, tau_n, kappa)
+    return b, False
+
+
+@njit(cache=True)
+def link_step(out, E, A, age, alive, n, i, j, a, alpha, sigma_a, eta_a, E_init, E_min,
+              max_age, credit, keep1, keep2):
+    """The link stage of one transition i -> j (sensorimotor_map.py): returns -1, having
+    changed nothing, when i -> j would be a new link and row i has no free slot (the
+    caller widens the rows and calls again); else :func:`update_links`, then GWR's removal
+    of the end nodes of deleted links that are left without any link (never ``keep1`` or
+    ``keep2``), and returns the number of structural changes: 1 when a link was created
+    or deleted, plus one per node removed."""
+    if needs_wider_rows(out, i, j):
+        return -1
+    created, ends = update_links(out, E, A, age, n, i, j, a, alpha, sigma_a, eta_a, E_init,
+                                 E_min, max_age, credit)
+    changes = 1 if created or len(ends) else 0
+    for k in ends:
+        if k == keep1 or k == keep2 or not alive[k]:
+            continue
+        linked = False
+        for s in range(out.shape[1]):
+            if out[k, s] >= 0:
+                linked = True
+        for r in range(n):
+            for s in range(out.shape[1]):
+                if out[r, s] == k:
+                    linked = True
+        if not linked:
+            alive[k] = False
+            changes += 1
+    return changes
+
+
 # ---------------------------------------------------------------- the on-disk cache
 #: Every kernel, by name (what the warm-up must compile).
 KERNELS = {name: obj for name, obj in list(globals().items())

@@ -162,6 +162,7 @@ class SensorimotorMap:
         self.prev: int = -1        # previous winner (-1: start of an episode)
         self.winner: int = -1
         self.inserted = False      # whether the last update inserted a node
+        self._C = np.zeros(dim)    # the context of the last input (step)
 
     # ------------------------------------------------------------------ storage
     def _alloc(self, cap: int, degree: int) -> None:
@@ -277,24 +278,22 @@ class SensorimotorMap:
         With ``learn`` False only the winner is found (greedy rollouts).
         """
         x = np.asarray(x, dtype=float)
-        C = self.context()
-        if C is None:
-            C = x                       # no history at an episode start: neutral context
+        C = self._C     # the context C_t (context(); x at an episode start: neutral)
         self.inserted = False
-        b, d_b = self.winner_of(x, C)
-        if not learn:
+        # winner, GWR test, adaptation of the winner and its neighbours
+        b, insert = kernels.match(self.w, self.c, self.h, self.alive, self.out, self.n,
+                                  self.prev, x, C, self.alpha_c, self.beta_c, self.a_T,
+                                  self.h_T, learn, self.eps_b, self.eps_n, self.tau_b,
+                                  self.tau_n, self.kappa_h)
+        if not learn or not insert:
             winner = b
         elif b < 0:
             winner = self._insert(x, C)
         else:
-            if np.exp(-np.sqrt(d_b)) < self.a_T and self.h[b] <= self.h_T:
-                lam = self.insert_at
-                winner = self._insert(self.w[b] + lam * (x - self.w[b]),
-                                      self.c[b] + lam * (C - self.c[b]))
-                self._habituate(b, self.tau_b)
-            else:
-                winner = b
-                self._adapt(b, x, C)
+            lam = self.insert_at
+            winner = self._insert(self.w[b] + lam * (x - self.w[b]),
+                                  self.c[b] + lam * (C - self.c[b]))
+            self._habituate(b, self.tau_b)
         if learn and self.prev >= 0 and action is not None:
             self.terminal[self.prev] = False    # walked on from prev: not an episode end
             self._update_links(self.prev, winner, np.asarray(action, dtype=float))
@@ -322,31 +321,19 @@ class SensorimotorMap:
     def _habituate(self, i: int, tau: float) -> None:
         kernels.habituate(self.h, i, tau, self.kappa_h)
 
-    def _adapt(self, b: int, x: np.ndarray, C: np.ndarray) -> None:
-        kernels.adapt(self.w, self.c, self.h, self.out, self.n, b, x, C, self.eps_b,
-                      self.eps_n, self.tau_b, self.tau_n, self.kappa_h)
-
     def _update_links(self, i: int, j: int, a: np.ndarray) -> None:
         """Eq. 1-2 on the transition i -> j under action a, the credit rule, then ageing
-        (:func:`kernels.update_links`); nodes left without links are removed."""
-        if kernels.needs_wider_rows(self.out, i, j):
-            self._grow_degree()             # the kernel needs a free slot for a new link
-        created, ends = kernels.update_links(
-            self.out, self.E, self.a, self.age, self.n, i, j, a, self.alpha, self.sigma_a,
-            self.eta_a, self.E_init, self.E_min, self.max_age, self.link_rule == "credit")
-        if created or len(ends):
-            self.version += 1
-        if len(ends):
-            for k in np.unique(ends):
-                self._remove_if_isolated(int(k))
-
-    def _remove_if_isolated(self, k: int) -> None:
-        if k in (self.prev, self.winner) or not self.alive[k]:
-            return
-        if (self.out[k] >= 0).any() or (self.out[: self.n] == k).any():
-            return
-        self.alive[k] = False
-        self.version += 1
+        (:func:`kernels.update_links`); nodes left without links are removed (except the
+        previous and current winner; :func:`kernels.link_step`)."""
+        for _ in range(2):      # again once the rows are wider, when a new link needs it
+            changes = kernels.link_step(
+                self.out, self.E, self.a, self.age, self.alive, self.n, i, j, a, self.alpha,
+                self.sigma_a, self.eta_a, self.E_init, self.E_min, self.max_age,
+                self.link_rule == "credit", self.prev, self.winner)
+            if changes >= 0:
+                self.version += changes
+                return
+            self._grow_degree()
 
     # ------------------------------------------------------------------ persistence
     def state_dict(self) -> dict[str, np.ndarray]:
