@@ -164,3 +164,33 @@ def test_autostart_false_waits_unconfigured_until_configure_and_activate(ros_dom
     finally:
         for p in procs.values():
             p.stop()
+
+
+@pytest.mark.timeout(200)
+@pytest.mark.parametrize("executor", ["events", "single"])
+def test_composed_graph_deactivate_activate_resumes_at_once(ros_domain, tmp_path, executor):
+    """The learner in the composed graph (one process, one executor): the ring resumes at
+    the first resend after activate (a subscription made at activation once took ~10 s
+    to get the features there; the learner now keeps it from configure on)."""
+    require_ros2()
+    graph = ros2_run("tmgwr_agent", "composed", "--executor", executor, "--ros-args", "-p",
+                     f"map_learner:map_dir:={tmp_path}", domain=ros_domain, name="composed")
+    with graph:
+        graph.wait_for_line("composed ready", timeout=90)
+        wait_goals(graph, 2, {"composed": graph})
+        ros2(ros_domain, "lifecycle", "set", LEARNER, "deactivate", "--no-daemon",
+             "--spin-time", "2")
+        line = graph.wait_for_line(r"inactive: stepping stopped after step \d+", 30)
+        n = int(re.search(r"after step (\d+)", line)[1])
+        graph.wait_for_line(rf"no action for step {n + 1} of run \d+ .*resending", 20)
+        ros2(ros_domain, "lifecycle", "set", LEARNER, "activate", "--no-daemon",
+             "--spin-time", "2")
+        t0 = time.monotonic()
+        graph.wait_for_line(rf"step {n + 1} answered after \d+ resends", 15)
+        assert time.monotonic() - t0 < 5.0          # resend_period 1 s, plus the CLI's exit
+        goals = len(goals_reached(graph))
+        wait_goals(graph, goals + 1, {"composed": graph})
+        graph.stop()
+    assert graph.proc.returncode == 0, graph.describe("exit")
+    assert saved_map(tmp_path / "map.npz")[0] > n
+    assert "Traceback" not in graph.output, graph.output

@@ -40,8 +40,9 @@ Lifecycle (a managed node, ``rclpy.lifecycle.LifecycleNode`` as in ros2/demos
 * ``configure``: hold the map directory, load the map (``initial_map``, else the checkpoint
   with ``resume``, else none until the first features), create the publishers (lifecycle
   publishers: silent unless active) and the services (they answer while configured);
-* ``activate``: join the lockstep (subscribe to ``/features``; the simulator resends the
-  step the ring waits for, within ``resend_period``) and publish the map;
+* ``activate``: join the lockstep (learn and answer ``/features``, subscribed since
+  configure; the simulator resends the step the ring waits for, within ``resend_period``)
+  and publish the map;
 * ``deactivate``: stop stepping (the ring waits, nothing is lost) and save the map and the
   checkpoint; ``activate`` goes on from the same map and step;
 * ``cleanup``: drop the map, the publishers and services, release the directory;
@@ -144,7 +145,7 @@ class MapLearnerNode(LifecycleNode):
         self.store: MapStore | None = None
         self.checkpoints: Checkpointer | None = None
         self.lockstep: Lockstep | None = None
-        self.features_sub = None
+        self.stepping = False              # active: features are learnt and answered
         self.map_timer = None
         self.refusal = ""                  # why the last transition failed ("" = none)
         self.exit_code = 0
@@ -205,6 +206,11 @@ class MapLearnerNode(LifecycleNode):
         # stalls its publisher), kept serialized and decoded only when markers are drawn.
         self.potentials_sub = self.create_subscription(
             Potentials, topics.POTENTIALS, self.on_motivation, SENSOR_QOS, raw=True)
+        # subscribed from configure on, so that activate finds it matched (a subscription
+        # created at activation took up to ~10 s to get the features in the composed
+        # graph); features are dropped unless active (on_features)
+        self.features_sub = self.create_subscription(Features, topics.FEATURES,
+                                                     self.on_features, STEP_QOS)
         self.motivation_raw = None
         self.own_services = [self.create_service(SaveMap, topics.SAVE_MAP, self.on_save),
                          self.create_service(LoadMap, topics.LOAD_MAP, self.on_load)]
@@ -218,11 +224,10 @@ class MapLearnerNode(LifecycleNode):
         self.next_map_time = 0.0        # time.monotonic() before which publish_map waits
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Join the lockstep: subscribe to the features (the simulator's next resend brings
-        the step the ring waits for) and publish the map."""
+        """Join the lockstep: answer the features again (the simulator's next resend
+        brings the step the ring waits for) and publish the map."""
         super().on_activate(state)                   # the lifecycle publishers
-        self.features_sub = self.create_subscription(Features, topics.FEATURES,
-                                                     self.on_features, STEP_QOS)
+        self.stepping = True
         self.map_timer = self.create_timer(1.0 / self.p["publish_rate"], self.publish_map)
         self.published = (-1, -1)
         if self.map is not None:
@@ -275,9 +280,7 @@ class MapLearnerNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def stop_stepping(self) -> None:
-        if self.features_sub is not None:
-            self.destroy_subscription(self.features_sub)
-            self.features_sub = None
+        self.stepping = False
         if self.map_timer is not None:
             self.destroy_timer(self.map_timer)
             self.map_timer = None
@@ -290,9 +293,10 @@ class MapLearnerNode(LifecycleNode):
         for srv in getattr(self, "own_services", []):
             self.destroy_service(srv)
         self.own_services = []
-        if getattr(self, "potentials_sub", None) is not None:
-            self.destroy_subscription(self.potentials_sub)
-            self.potentials_sub = None
+        for name in ("potentials_sub", "features_sub"):
+            if getattr(self, name, None) is not None:
+                self.destroy_subscription(getattr(self, name))
+                setattr(self, name, None)
         if self.checkpoints is not None and self.checkpoints.store is not None:
             self.checkpoints.store.close()
         if self.store is not None:
@@ -328,6 +332,8 @@ class MapLearnerNode(LifecycleNode):
 
     # ------------------------------------------------------------------ per step
     def on_features(self, f: Features):
+        if not self.stepping:            # inactive: the ring waits, the simulator resends
+            return
         dim = self.map.dim if self.map is not None else len(f.features) or -1
         if f.run_id and len(f.features) != dim:     # a malformed stray must not crash us
             self.get_logger().warning(
@@ -413,7 +419,7 @@ class MapLearnerNode(LifecycleNode):
     def on_request_snapshot(self, _req, resp):
         if self.map is None:
             resp.success, resp.message = False, "no map yet: nothing learnt"
-        elif self.features_sub is None:
+        elif not self.stepping:
             resp.success, resp.message = False, "inactive: the map is not published"
         else:
             resp.success, resp.message = True, "published " + self.publish_snapshot()
