@@ -81,15 +81,16 @@ def test_launch_file_starts_the_contract_executables():
     compile(tree, str(path), "exec")
     funcs = {n.name for n in tree.body if isinstance(n, ast.FunctionDef)}
     assert "generate_launch_description" in funcs
-    graph = next(n for n in tree.body if isinstance(n, ast.Assign)
-                 and getattr(n.targets[0], "id", "") == "GRAPH")
-    pairs = ast.literal_eval(graph.value)
+    # the launch file and the pip-only supervisor start the same executables: the launch
+    # file takes the node list from the supervisor (one place)
+    imported = {(n.module, a.name) for n in tree.body if isinstance(n, ast.ImportFrom)
+                for a in n.names}
+    assert ("tmgwr_agent.graph.supervisor", "GRAPH_NODES") in imported
+    from tmgwr_agent.graph.supervisor import GRAPH_NODES
+    pairs = GRAPH_NODES
     assert list(pairs) == [("maze_sim", "maze_sim"), ("tmgwr_agent", "sensory_preprocessor"),
                            ("tmgwr_agent", "map_learner"), ("tmgwr_agent", "motivation_estimator"),
                            ("tmgwr_agent", "action_selector")]
     assert 'executable="recorder"' in source
-    # the supervisor of the pip-only environment starts the same executables
-    from tmgwr_agent.graph.supervisor import GRAPH_NODES
-    assert tuple(pairs) == GRAPH_NODES
     for package, exe in pairs:   # and each is what `ros2 run` would find
         assert (ROOT / "install" / package / "lib" / package / exe).is_file(), (package, exe)
