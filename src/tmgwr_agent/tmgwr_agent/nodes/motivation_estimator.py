@@ -120,6 +120,8 @@ class MotivationEstimatorNode(Node):
 
     # ------------------------------------------------------------------ per step
     def on_action(self, a: Action):
+        if self.heard is not None and (a.run_id, a.step_id) < self.heard[:2]:
+            return                  # an older step answered again (a resend): not news
         self.heard = (a.run_id, a.step_id, a.walk_next)
         w = self.waiting
         if w is not None and (w.run_id, w.step_id - 1) == (a.run_id, a.step_id):
