@@ -271,6 +271,14 @@ def test_value_of_a_remembered_wall_by_hand():
     R1 = np.exp(-0.01 / (2 * 0.03 ** 2))
     rho = 0.5 * (1.0 - np.exp(-1.0))
     np.testing.assert_allclose(V, [g * rho * (R1 + g), R1 + g, 1.0], rtol=1e-9)
+    # the same wall re-tested in vain: closed since step 4, last bump at 7 (e = 3 steps
+    # known closed), so it is doubted over T + e = 6 steps: rho = 1/2 (1 - exp(-3 / 6))
+    st = mo.state_dict()
+    st["closed_t"][0, RIGHT] = 4
+    mo.load_state_dict(st)
+    V = mo.update(m)
+    rho = 0.5 * (1.0 - np.exp(-3.0 / 6.0))
+    np.testing.assert_allclose(V[0], g * rho * (R1 + g), rtol=1e-9)
 
 
 def test_eq6_picks_link_with_highest_E_times_V_and_breaks_ties_by_rng():

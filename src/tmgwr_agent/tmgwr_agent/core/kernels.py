@@ -322,12 +322,14 @@ def node_at(grid, origin, L, w, x):
 
 
 @njit(cache=True)
-def option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, succ, clock,
-               horizon, rho_max, stuck, grid, origin, U, rho, osucc, onb):
+def option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t, succ,
+               clock, horizon, rho_max, stuck, grid, origin, U, rho, osucc, onb):
     """The options of the value of the unknown (motivation.py, Eq. 5') of node i, per
     primitive a: ``rho[i, a]`` = 1 for a primitive never taken from i, or whose move's
     link (to ``succ[i, a]``) the map has since deleted; ``rho_max (1 - exp(-tau /
-    horizon))`` for one whose last outcome was a bump ``tau`` steps ago; 0 otherwise
+    (horizon + e)))`` for one whose last outcome was a bump ``tau`` steps ago and that had
+    been known closed for ``e`` steps before it (``bump_t - closed_t``: failed re-tests
+    stretch the horizon); 0 otherwise
     (known: no option). The option's successor: ``osucc[i, a]``, a known node (where the
     move once led, else a node at the predicted position ``w_i + delta_a``), whose V the
     sweep reads; -1 when none, and then ``U[i, a] = v_star gamma^h``, ``h = |w_i +
@@ -343,7 +345,9 @@ def option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, succ, cl
         if not tried[i, a]:
             r = 1.0
         elif 0 <= bump_t[i, a] < clock and horizon > 0.0:
-            r = rho_max * (1.0 - np.exp(-(clock - bump_t[i, a]) / horizon))
+            tau = clock - bump_t[i, a]
+            e = bump_t[i, a] - closed_t[i, a] if stuck and closed_t[i, a] >= 0 else 0
+            r = rho_max * (1.0 - np.exp(-tau / (horizon + e)))
             j = succ[i, a]
             wall = j < 0
         elif bump_t[i, a] < 0 and succ[i, a] >= 0 and not _linked(out, i, succ[i, a]):
@@ -394,7 +398,8 @@ def _linked(out, i, j):
 
 @njit(cache=True)
 def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, bump_t,
-                  succ, clock, horizon, rho_max, stuck, grid, origin, U, rho, osucc, onb):
+                  closed_t, succ, clock, horizon, rho_max, stuck, grid, origin, U, rho, osucc,
+                  onb):
     """:func:`option_row` of the nodes ``rows`` (none for dead slots)."""
     for i in rows:
         if i >= n:
@@ -405,30 +410,36 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
                 U[i, a] = 0.0
                 osucc[i, a] = -1
             continue
-        option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, succ, clock,
-                   horizon, rho_max, stuck, grid, origin, U, rho, osucc, onb)
+        option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t, succ,
+                   clock, horizon, rho_max, stuck, grid, origin, U, rho, osucc, onb)
 
 
 @njit(cache=True)
-def record_outcome(tried, bump_t, succ, delta, moves, w, node, winner, inserted, a, bumped,
-                   clock):
+def record_outcome(tried, bump_t, closed_t, succ, delta, moves, w, node, winner, inserted,
+                   a, bumped, clock):
     """The outcome memory of Eq. 5' after primitive a taken from ``node`` (motivation.py):
     a new winner starts untried; the pair (node, a) is tried, with the step of a bump or
-    -1 after a move, whose successor ``succ`` is remembered; a move updates the mean
-    displacement ``delta[a]``. Returns whether the pair's option changed."""
+    -1 after a move (``closed_t``: the step of the first bump of the current run of
+    bumps, since when the pair is known closed), whose successor ``succ`` is remembered;
+    a move updates the mean displacement ``delta[a]``. Returns whether the pair's option
+    changed."""
     if inserted and winner >= 0:
         for b in range(tried.shape[1]):
             tried[winner, b] = False
             bump_t[winner, b] = -1
+            closed_t[winner, b] = -1
             succ[winner, b] = -1
     if node < 0:
         return False
     changed = (not tried[node, a]) or bumped or bump_t[node, a] >= 0 or succ[node, a] != winner
     tried[node, a] = True
     if bumped:
+        if bump_t[node, a] < 0:          # closed since this bump (the first of a run)
+            closed_t[node, a] = clock
         bump_t[node, a] = clock
         return changed
     bump_t[node, a] = -1
+    closed_t[node, a] = -1
     succ[node, a] = winner
     if winner >= 0 and winner != node:
         moves[a] += 1
