@@ -166,7 +166,7 @@ def test_node_where_an_episode_ended_short_of_the_goal_is_absorbing(tmp_path):
     assert mo.update(m)[1] == pytest.approx(R1 + 0.97, rel=1e-3)   # (weights adapted)
 
 
-def test_agent_marks_episode_ends_short_of_the_goal_only():
+def test_agent_marks_episode_ends_and_the_current_goal_is_not_absorbing():
     maze = Maze.from_text("#######\n#S.1.G#\n#######\n")
     world = GridWorld(maze, "1")
 
@@ -181,14 +181,21 @@ def test_agent_marks_episode_ends_short_of_the_goal_only():
 
     ag = TMGWRAgent(maze, np.random.default_rng(0))
     ag.set_goal(world.goal, world.goal_observation())
-    assert walk_right(ag).reached_goal                  # ends at the goal: no flag
-    assert not ag.map.terminal[: ag.map.n].any()
+    assert walk_right(ag).reached_goal                  # ends at the goal: flagged ...
+    goal_node = ag.winner
+    assert list(np.flatnonzero(ag.map.terminal[: ag.map.n])) == [goal_node]
+    assert tuple(np.round(ag.map.w[goal_node] / 0.1).astype(int)) == (1, 3)
+    ag.motivation.update(ag.map)                        # ... but the goal is not absorbing
+    assert not ag.motivation._absorbing(ag.map, ag.map.n).any()
     world.set_goal("G", keep_previous=True)             # goal 1 still ends episodes
     ag.set_goal(world.goal, world.goal_observation())
+    ag.motivation.update(ag.map)                        # known to end episodes at once
+    assert list(np.flatnonzero(ag.motivation._absorbing(ag.map, ag.map.n))) == [goal_node]
     inf = walk_right(ag)
-    assert inf.reached_previous_goal and not inf.reached_goal
-    assert list(np.flatnonzero(ag.map.terminal[: ag.map.n])) == [ag.winner]
-    assert tuple(np.round(ag.map.w[ag.winner] / 0.1).astype(int)) == (1, 3)
+    assert inf.reached_previous_goal and not inf.reached_goal and ag.winner == goal_node
+    world.set_goal("G")                                 # goal 1 an ordinary cell again:
+    walk_right(ag)                                      # walked on from, the flag goes
+    assert not ag.map.terminal[goal_node]
 
 
 def test_value_iteration_without_a_path_gives_no_motivation():
@@ -353,11 +360,11 @@ def test_eq6_ranks_options_as_virtual_self_links():
 
 
 def test_outcome_terminal_rule():
-    """One rule for 'the episode ended here short of the goal' (absorbing in Eq. 5)."""
-    assert Outcome(action=UP, episode_over=True).ended_short_of_goal
-    assert not Outcome(action=UP, episode_over=True, goal_reached=True).ended_short_of_goal
-    assert not Outcome(action=UP, episode_over=True, truncated=True).ended_short_of_goal
-    assert not Outcome(action=UP).ended_short_of_goal
+    """One rule for 'the task ended the episode here' (absorbing in Eq. 5)."""
+    assert Outcome(action=UP, episode_over=True).ends_episode
+    assert Outcome(action=UP, episode_over=True, goal_reached=True).ends_episode
+    assert not Outcome(action=UP, episode_over=True, truncated=True).ends_episode
+    assert not Outcome(action=UP).ends_episode
     assert EPISODE_START.episode_start and not Outcome(action=0).episode_start
 
 

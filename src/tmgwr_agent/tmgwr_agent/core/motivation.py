@@ -94,15 +94,18 @@ stuck state changes, else only on the rows whose outcome memory changed; the rea
 pass and the option loop are a few linear passes over the map.
 
 Terminal nodes (``absorbing_terminals``, our addition, on by default; off = Eq. 5 on every
-node). The agent notices when an episode ends short of its goal: it is moved back to the
-start instead of walking on, and it did not sense the goal. The map flags the node it stood
-on (:meth:`~tmgwr_agent.core.sensorimotor_map.SensorimotorMap.mark_terminal`) until it
-walks on from it, and value iteration treats a flagged node as a terminal state, as any MDP
-solver would: ``V(i) = R_i``, no successor, no option. Without this a route through a cell
-that ends the episode (the previous goal in the goal-change scenario of section 5.2.1,
-which stays a termination point) looks as good as any other, and the agent keeps being
-sent home through it. Episodes that end *at* the goal flag nothing (the goal node keeps
-Eq. 5, so a goal that moves away leaves no trace), nor do episodes cut by a step limit.
+node). The agent notices when an episode ends: it is moved back to the start instead of
+walking on. The map flags the node it stood on
+(:meth:`~tmgwr_agent.core.sensorimotor_map.SensorimotorMap.mark_terminal`) until it walks
+on from it, and value iteration treats a flagged node as a terminal state, as any MDP
+solver would: ``V(i) = R_i``, no successor, no option; except the nodes of the current goal
+(``R_i >= 1/2``), which keep Eq. 5. Without this a route through a cell that ends the
+episode (the previous goal in the goal-change scenario of section 5.2.1, which stays a
+termination point) looks as good as any other, and the agent keeps being sent home through
+it. The goal's own cell is flagged too, while it is the goal, so that when the goal moves
+the old goal is known to end episodes from the first episode on (the agent cannot tell a
+goal cell from a terminal cell; if the old goal became an ordinary cell, the flag goes the
+first time the agent walks on from it). Episodes cut by a step limit flag nothing.
 
 The outcome memory (primitives tried per node, step of the last bump and since when a pair
 is known closed, where each move led, the step clock, the forward model ``delta``) is plain
@@ -124,6 +127,9 @@ from tmgwr_common.params import Config, param
 
 #: Potentials below this are 0: gamma**d for d > 10,000 steps.
 V_FLOOR = 1e-150
+#: A node with R_i = sim(i, g) at least this represents the goal (a source of the
+#: reachability test; never absorbing).
+GOAL_R = 0.5
 #: Motor primitives (the action map's codebook).
 N_PRIMITIVES = len(ACTION_VECTORS)
 _PRIMITIVES = np.ascontiguousarray(ACTION_VECTORS, dtype=float)
@@ -337,7 +343,10 @@ class MotivationEstimator:
         return W
 
     def _absorbing(self, m: SensorimotorMap, n: int) -> np.ndarray:
-        return m.terminal[:n] if self.absorbing_terminals else np.zeros(n, dtype=bool)
+        """Flagged terminal nodes, except those of the current goal (R >= 1/2)."""
+        if not self.absorbing_terminals:
+            return np.zeros(n, dtype=bool)
+        return m.terminal[:n] & (self.R[:n] < GOAL_R)
 
     def stale_clock(self, nodes: int, stuck: bool = False) -> tuple[int, float]:
         """(clock, T) for the staleness of bumps: ``T = stale_horizon * nodes`` (stuck:
@@ -390,7 +399,7 @@ class MotivationEstimator:
             self._reach_key = key
             self._reach = np.zeros(n, dtype=bool)
             Eb = kernels.contradicted(m.out, m.E, n, self.bump_t, self.succ)
-            kernels.reaches_source(m.out, Eb, n, absorbing, m.alive, self.R >= 0.5,
+            kernels.reaches_source(m.out, Eb, n, absorbing, m.alive, self.R >= GOAL_R,
                                    self._reach)
         return not self._reach[self._winner]
 

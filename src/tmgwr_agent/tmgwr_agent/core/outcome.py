@@ -25,10 +25,11 @@ class Outcome(NamedTuple):       # a tuple: built every step, cheaply
         return self.action < 0
 
     @property
-    def ended_short_of_goal(self) -> bool:
-        """The episode ended here without the goal and not by a step limit: the node is a
-        terminal state of the task (absorbing in Eq. 5)."""
-        return self.episode_over and not (self.goal_reached or self.truncated)
+    def ends_episode(self) -> bool:
+        """The episode ended here by the task (at the goal or short of it), not by a step
+        limit: the node is a terminal state of the world (absorbing in Eq. 5 unless it
+        represents the current goal)."""
+        return self.episode_over and not self.truncated
 
     @classmethod
     def of_step(cls, info) -> Outcome:

@@ -247,20 +247,21 @@ class SensorimotorMap:
         self.prev = -1
 
     def mark_terminal(self, i: int) -> None:
-        """An episode ended on node i short of the goal (the agent is moved back to the
-        start next without having reached it).
+        """An episode ended on node i (the agent is moved back to the start next), at the
+        goal or short of it.
 
-        The flag is the map's memory that i is a terminal state of the task; it is cleared
+        The flag is the map's memory that i is a terminal state of the world; it is cleared
         as soon as the agent walks on from i within an episode (:meth:`step`), e.g. when a
         goal moved away and its old cell became an ordinary one. The motivation estimator
-        treats flagged nodes as absorbing (no successor in Eq. 5)."""
+        treats flagged nodes as absorbing (no successor in Eq. 5), except the nodes of the
+        current goal."""
         if 0 <= i < self.n:
             self.terminal[i] = True
 
     def experience(self, x: np.ndarray, outcome: Outcome, learn: bool = True) -> int:
         """The map stage of one agent step (Fig. 1a): input x, reached by the outcome's
         motor primitive (or placed at an episode start); returns the winner. A node where
-        the episode ended short of the goal is flagged terminal (:meth:`mark_terminal`).
+        the task ended the episode is flagged terminal (:meth:`mark_terminal`).
         With ``learn`` False only the winner is found (greedy rollouts)."""
         if outcome.episode_start:
             self.begin_episode()
@@ -268,7 +269,7 @@ class SensorimotorMap:
         else:
             motor = ACTION_VECTORS[outcome.action]
         winner = self.step(x, motor, learn=learn)
-        if learn and outcome.ended_short_of_goal:
+        if learn and outcome.ends_episode:
             self.mark_terminal(winner)
         return winner
 
