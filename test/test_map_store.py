@@ -261,7 +261,7 @@ def service_call(domain: int, service: str, srv_type: str, request: str) -> tupl
 
 def learner_step(domain: int, run_dir: Path) -> int:
     """The step the learner is at: save map 'probe' (rclpy client) and read its step id."""
-    [res] = call(domain, [[SAVE, "SaveMap", {"path": "probe"}]])
+    [res] = call(domain, [[SAVE, "SaveMap", {"name": "probe"}]])
     assert res["success"], res
     with np.load(run_dir / "probe.npz") as d:
         return int(d["step_id"])
@@ -296,7 +296,7 @@ def graph(tmp_path_factory):
         # the tests ask about names, not about an empty map: wait for the first learnt
         # step (a save before it is refused with "the map is empty", whatever the name)
         t0 = time.monotonic()
-        while not call(domain, [[SAVE, "SaveMap", {"path": "probe"}]])[0]["success"]:
+        while not call(domain, [[SAVE, "SaveMap", {"name": "probe"}]])[0]["success"]:
             assert time.monotonic() - t0 < 60, procs["maze_sim"].describe("no step yet")
             time.sleep(0.5)
         yield domain, run_dir, procs
@@ -325,7 +325,7 @@ def test_save_map_writes_only_named_maps_in_the_run_directory(graph):
     }
     for name, why in cases.items():
         ok, message = service_call(domain, SAVE, "tmgwr_interfaces/srv/SaveMap",
-                                   f"{{path: '{name}'}}")
+                                   f"{{name: '{name}'}}")
         assert not ok and why in message, (name, message)
     assert outside.read_text() == "precious"
     assert (run_dir / "notes.npz").read_text() == "a user's file"
@@ -333,10 +333,10 @@ def test_save_map_writes_only_named_maps_in_the_run_directory(graph):
     # the bag being recorded is never the target: its name gives another file
     size = bag.stat().st_size
     ok, message = service_call(domain, SAVE, "tmgwr_interfaces/srv/SaveMap",
-                               f"{{path: '{bag.name}'}}")
+                               f"{{name: '{bag.name}'}}")
     assert ok and message.endswith(f"{bag.name}.npz"), message
     assert bag.stat().st_size >= size and bag.read_bytes()[:5] == b"\x89MCAP"
-    ok, message = service_call(domain, SAVE, "tmgwr_interfaces/srv/SaveMap", "{path: ''}")
+    ok, message = service_call(domain, SAVE, "tmgwr_interfaces/srv/SaveMap", "{name: ''}")
     assert ok and message.endswith(str(run_dir / "map.npz")), message
     assert_running_and_stepping(graph)
 
@@ -352,7 +352,7 @@ def test_load_map_reads_only_regular_map_files_of_its_directory(graph):
                       }.items():
         t0 = time.monotonic()
         ok, message = service_call(domain, LOAD, "tmgwr_interfaces/srv/LoadMap",
-                                   f"{{path: '{name}'}}")
+                                   f"{{name: '{name}'}}")
         assert not ok and why in message, (name, message)
         assert time.monotonic() - t0 < 30
     assert_running_and_stepping(graph)
@@ -375,19 +375,19 @@ def test_load_map_validates_before_replacing_the_live_map(graph):
     write_npz(run_dir / "nan.npz", {**live, "w": nan_w})
     write_npz(run_dir / "three_d.npz", {**live, "w": np.zeros((len(live["w"]), 3)),
                                         "c": np.zeros((len(live["c"]), 3))})
-    res = call(domain, [[LOAD, "LoadMap", {"path": name}]
+    res = call(domain, [[LOAD, "LoadMap", {"name": name}]
                         for name in ("array", "out_of_range", "nan", "three_d")])
     whys = ("not an .npz archive", "link target outside", "not finite", "dimension 3/2")
     for r, why in zip(res, whys):
         assert not r["success"] and why in r["message"], (why, r)
     assert_running_and_stepping(graph)
     # the live map was never replaced: the run's own map is saved whole and valid
-    [r] = call(domain, [[SAVE, "SaveMap", {"path": ""}]])
+    [r] = call(domain, [[SAVE, "SaveMap", {"name": ""}]])
     assert r["success"], r
     m, saved_step, _ = read_map(run_dir / "map.npz")
     assert saved_step > step and m.size == int(live["alive"].sum()) > 50
     # and a valid map is loaded
-    [r] = call(domain, [[LOAD, "LoadMap", {"path": "probe"}]])
+    [r] = call(domain, [[LOAD, "LoadMap", {"name": "probe"}]])
     assert r["success"] and "probe.npz" in r["message"], r
     assert_running_and_stepping(graph)
 

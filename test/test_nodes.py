@@ -316,8 +316,8 @@ def test_detour_after_event_and_learner_restart_from_saved_map(ros_domain, tmp_p
         wait_until(lambda: len(goals_reached(sim)) >= before + 2, 90, "goal after restart",
                    procs)
         res = call(ros_domain, [
-            ["/map_learner/save_map", "SaveMap", {"path": "on_request"}],    # names, in
-            ["/map_learner/load_map", "LoadMap", {"path": "missing"}]])      # its map_dir
+            ["/map_learner/save_map", "SaveMap", {"name": "on_request"}],    # names, in
+            ["/map_learner/load_map", "LoadMap", {"name": "missing"}]])      # its map_dir
         assert res[0]["success"] and res[0]["path"] == str(tmp_path / "on_request.npz"), res
         assert not res[1]["success"] and "missing.npz" in res[1]["message"], res
         with np.load(tmp_path / "on_request.npz") as d:

@@ -496,13 +496,13 @@ class MapLearnerNode(LifecycleNode):
             raise MapStoreError(f"initial_map: {exc}") from None
 
     def on_save(self, req, resp):
-        """``req.path`` is a map NAME (the field keeps its name: interface contract)."""
+        """``req.name``: a map NAME in the map directory (empty: map_name)."""
         if self.map is None:
             resp.success, resp.message = False, "the map is empty: nothing learnt yet"
             return resp
         step = self.lockstep.last_step
         try:
-            path = self.store.save(self.map, req.path or self.p["map_name"], step,
+            path = self.store.save(self.map, req.name or self.p["map_name"], step,
                                    self.lockstep.run_id)
         except MapStoreError as exc:
             resp.success, resp.message = False, f"save_map refused: {exc}"
@@ -515,10 +515,10 @@ class MapLearnerNode(LifecycleNode):
         return resp
 
     def on_load(self, req, resp):
-        """``req.path`` is a map NAME in the map directory; the file is validated
+        """``req.name`` is a map NAME in the map directory; the file is validated
         completely before it replaces the live map."""
         try:
-            m, _, _ = self.store.load(req.path or self.p["map_name"], self.config)
+            m, _, _ = self.store.load(req.name or self.p["map_name"], self.config)
             if self.map is not None and (m.dim, m.action_dim) != (self.map.dim,
                                                                  self.map.action_dim):
                 raise MapStoreError(f"the file's map has dimension {m.dim}/{m.action_dim}, "
@@ -531,7 +531,7 @@ class MapLearnerNode(LifecycleNode):
         self.lockstep.forget(self.lockstep.last_step)   # the cached state is of the old map
         resp.success = True
         resp.message = (f"loaded {self.map.size} nodes, {self.map.link_count()} links from "
-                        f"{self.store.path(req.path or self.p['map_name'])}")
+                        f"{self.store.path(req.name or self.p['map_name'])}")
         self.get_logger().info(resp.message)
         self.publish_map()
         return resp
