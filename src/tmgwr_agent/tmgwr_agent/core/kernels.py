@@ -142,20 +142,26 @@ def reaches_source(out, E, n, absorbing, alive, source, mark):
 
 
 @njit(cache=True)
-def option_successor(V, U, osucc, onb, i, a, gamma):
-    """The value of option (i, a)'s successor: V of a known node, gamma max V of the
-    known neighbours of a remembered wall cell (-2), or the optimistic U (-1)."""
-    j = osucc[i, a]
+def successor_value(V, j, U_o, nb, k, gamma):
+    """S of Eq. 5' for an option whose successor is ``j``: V of a known node (j >= 0),
+    gamma max V of the known neighbours ``nb[k]`` of a remembered wall cell (j = -2), or
+    the optimistic U of unknown space (j = -1, ``U_o``)."""
     if j >= 0:
         return V[j]
     if j == -2:
         best = 0.0
-        for b in range(onb.shape[2]):
-            q = onb[i, a, b]
+        for b in range(nb.shape[1]):
+            q = nb[k, b]
             if q >= 0 and V[q] > best:
                 best = V[q]
         return gamma * best
-    return U[i, a]
+    return U_o
+
+
+@njit(cache=True)
+def option_successor(V, U, osucc, onb, i, a, gamma):
+    """The value of option (i, a)'s successor (:func:`successor_value`)."""
+    return successor_value(V, osucc[i, a], U[i, a], onb[i], a, gamma)
 
 
 @njit(cache=True)
@@ -215,7 +221,7 @@ def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, abso
     option for primitive a (``rho[i, a] > 0``) is a virtual successor worth
     ``rho S + (1 - rho) (R_i + gamma max_k E[i, k] V(k))`` with ``S = V(osucc[i, a])``
     for a known successor, else ``U[i, a]`` (motivation.py, Eq. 5';
-    :func:`option_successor`, here over :func:`option_lists`).
+    :func:`successor_value`, here over :func:`option_lists`).
     Nodes from which no link path leads to a source (R > 0 or an option) get exactly
     V = 0 (:func:`reaches_source`), as do dead slots. Returns the number of sweeps.
     """
@@ -248,18 +254,7 @@ def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, abso
                 stay = R[i] + gamma * best      # where a failed test leaves the agent
                 opt = 0.0
                 for c in range(first[i], first[i + 1]):   # max_a O(i, a), Eq. 5'
-                    j = o_succ[c]
-                    if j >= 0:                  # S: a known successor
-                        sv = V[j]
-                    elif j == -2:               # S: gamma max V beside a remembered wall
-                        sv = 0.0
-                        for b in range(o_nb.shape[1]):
-                            q = o_nb[c, b]
-                            if q >= 0 and V[q] > sv:
-                                sv = V[q]
-                        sv = gamma * sv
-                    else:                       # S: the optimistic U of unknown space
-                        sv = o_U[c]
+                    sv = successor_value(V, o_succ[c], o_U[c], o_nb, c, gamma)   # S
                     r = o_rho[c]
                     ov = r * sv + (1.0 - r) * stay
                     if ov > opt:
