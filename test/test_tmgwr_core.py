@@ -6,6 +6,7 @@ import pytest
 
 from maze_sim import GridWorld, Maze
 from maze_sim.maze import ACTION_VECTORS, maze_file
+from tmgwr_agent.core import kernels
 from tmgwr_agent.core.action_selector import ActionSelector, SelectorConfig
 from tmgwr_agent.core.agent import TMGWRAgent, tmgwr_config
 from tmgwr_agent.core.exploration import EpsilonSchedule, RandomWalk
@@ -92,6 +93,11 @@ def test_context_is_merge_gng_blend_of_previous_winner():
     x = np.array([1.5, 2.0])
     d = m.distances(x, C)
     assert d[0] == pytest.approx(0.5 * 0.25 + 0.5 * np.sum((C - m.c[0]) ** 2))
+    # the step computes both in kernels (their loop forms): the same context, distance
+    m.step(x, np.array([1.0, 0.0]), learn=False)
+    np.testing.assert_allclose(m.C_t, expected)
+    b, d_b = kernels.merge_distance_argmin(m.w, m.c, m.alive, m.n, x, C, m.alpha_c)
+    assert (b, d_b) == (0, pytest.approx(d[0]))
 
 
 def test_insertion_needs_low_activity_and_habituated_winner():

@@ -162,7 +162,7 @@ class SensorimotorMap:
         self.prev: int = -1        # previous winner (-1: start of an episode)
         self.winner: int = -1
         self.inserted = False      # whether the last update inserted a node
-        self._C = np.zeros(dim)    # the context of the last input (step)
+        self.C_t = np.zeros(dim)   # Merge-GNG context of the last input (kernels.match)
 
     # ------------------------------------------------------------------ storage
     def _alloc(self, cap: int, degree: int) -> None:
@@ -215,7 +215,9 @@ class SensorimotorMap:
 
     # ------------------------------------------------------------------ matching
     def context(self) -> np.ndarray | None:
-        """Merge-GNG context C_t of the current input (None at an episode start)."""
+        """Merge-GNG context C_t of the current input (None at an episode start); the step
+        computes it in :func:`kernels.match`, the loop form of this and of
+        :meth:`distances`."""
         if self.prev < 0:
             return None
         return (1.0 - self.beta_c) * self.w[self.prev] + self.beta_c * self.c[self.prev]
@@ -230,12 +232,6 @@ class SensorimotorMap:
             d += self.alpha_c * np.einsum("ij,ij->i", dc, dc)
         d[~self.alive[:n]] = np.inf
         return d
-
-    def winner_of(self, x: np.ndarray, C: np.ndarray) -> tuple[int, float]:
-        """(b, d_b): the node minimising d_n (``distances``), -1 when the map is empty."""
-        b, d = kernels.merge_distance_argmin(self.w, self.c, self.alive, self.n, x, C,
-                                             self.alpha_c)
-        return int(b), float(d)
 
     def nearest_by_weight(self, x: np.ndarray) -> int:
         """The node whose sensory weight is nearest x (Algorithm 1, line 2: SM.Map(x_g))."""
@@ -279,7 +275,7 @@ class SensorimotorMap:
         With ``learn`` False only the winner is found (greedy rollouts).
         """
         x = np.asarray(x, dtype=float)
-        C = self._C     # the context C_t (context(); x at an episode start: neutral)
+        C = self.C_t    # written by match: context(), x at an episode start (neutral)
         self.inserted = False
         # winner, GWR test, adaptation of the winner and its neighbours
         b, insert = kernels.match(self.w, self.c, self.h, self.alive, self.out, self.n,
