@@ -107,8 +107,9 @@ def test_maze_sim_restarted_alone_is_followed_by_the_ring(ros_domain, tmp_path):
             procs[name].wait_for_line(RESTARTED.format(old=old, new=new), timeout=10)
     finally:
         stop_graph(procs)
+    # How fast it resumes (2 s is the aim) is a speed, reported here and never asserted on a
+    # shared machine; that it resumes at all (300 steps, every node told) is asserted above.
     print(f"ring resumed {seconds:.2f} s after the restarted maze_sim was ready")
-    assert seconds < 5.0, sim.output     # 2 s is the aim; a loaded 2-core CI machine gets slack
 
 
 @pytest.mark.timeout(150)

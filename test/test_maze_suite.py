@@ -4,7 +4,6 @@ events checked independently of the generator (path counting over the old layout
 hand-made bad mazes."""
 
 import dataclasses
-import time
 
 import numpy as np
 import pytest
@@ -73,13 +72,10 @@ def test_suite_spec_and_first_index():
             parse_spec(bad)
 
 
-def test_all_3_generates_quickly():
-    t = time.perf_counter()
+def test_all_3_generates_every_family_once_per_index():
     ms = suite("all:3", seed=0)
-    elapsed = time.perf_counter() - t
     assert len(ms) == 3 * len(FAMILIES)
     assert len({m.name for m in ms}) == len(ms)
-    assert elapsed < 10.0, f"suite('all:3') took {elapsed:.1f} s"
 
 
 # ---------------------------------------------------------------------------- validity
