@@ -28,7 +28,6 @@ running.
 
 from __future__ import annotations
 
-import errno
 import io
 import os
 import re
@@ -41,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap
+from tmgwr_common import safe_files
 from tmgwr_common.checkpoint import graph_dir
 
 FORMAT_VERSION = 1
@@ -97,49 +97,12 @@ def default_map_dir(domain_id: int | str | None = None, namespace: str = "/") ->
 
 
 # ----------------------------------------------------------------------------- reading
-def _open_regular(path: str, dir_fd: int | None = None) -> tuple[int, os.stat_result]:
-    """An fd of ``path``, which must be a regular file (no final symbolic link, no FIFO,
-    device, socket or directory); the open never blocks."""
-    flags = os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
+def _read_regular(path: str, dir_fd: int | None = None) -> bytes:
+    """The bytes of the map file ``path`` (:func:`safe_files.read_regular`)."""
     try:
-        fd = os.open(path, flags, dir_fd=dir_fd)
+        return safe_files.read_regular(path, dir_fd, MAX_BYTES, "map", MapStoreError)
     except FileNotFoundError:
         raise MapStoreError(f"{path}: no such map") from None
-    except OSError as exc:
-        if exc.errno == errno.ELOOP:
-            raise MapStoreError(f"{path} is a symbolic link: refused (maps are read only "
-                                "from regular files)") from None
-        raise MapStoreError(f"{path}: cannot open: {exc.strerror}") from None
-    st = os.fstat(fd)
-    if not stat.S_ISREG(st.st_mode):
-        os.close(fd)
-        raise MapStoreError(f"{path} is {_kind(st.st_mode)}, not a regular file: refused")
-    return fd, st
-
-
-def _kind(mode: int) -> str:
-    for test, what in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"),
-                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
-                       (stat.S_ISSOCK, "a socket"), (stat.S_ISLNK, "a symbolic link")):
-        if test(mode):
-            return what
-    return "not a regular file"
-
-
-def _read_fd(fd: int, st: os.stat_result, what: str) -> bytes:
-    try:
-        if st.st_size > MAX_BYTES:
-            raise MapStoreError(f"{what}: {st.st_size} bytes, more than a map may have "
-                                f"({MAX_BYTES})")
-        with os.fdopen(fd, "rb", closefd=True) as f:
-            fd = -1
-            data = f.read(MAX_BYTES + 1)
-    finally:
-        if fd >= 0:
-            os.close(fd)
-    if len(data) > MAX_BYTES:
-        raise MapStoreError(f"{what}: larger than a map may be ({MAX_BYTES} bytes)")
-    return data
 
 
 def load_arrays(data: bytes, what: str) -> dict[str, np.ndarray]:
@@ -220,8 +183,7 @@ def read_map(path: str | os.PathLike, config: MapConfig = MapConfig(),
     """(map, step_id, run_id) of the map file at ``path`` (relative to ``dir_fd`` when
     given), validated completely first; MapStoreError says why it is refused."""
     what = str(path)
-    fd, st = _open_regular(str(path), dir_fd)
-    data = _read_fd(fd, st, what)
+    data = _read_regular(what, dir_fd)
     validate_state(load_arrays(data, what), what)
     # SensorimotorMap.load reads a path: give it these very bytes, in a private directory
     tmp = tempfile.mkdtemp(prefix="tmgwr-map-")
@@ -239,8 +201,7 @@ def read_map(path: str | os.PathLike, config: MapConfig = MapConfig(),
 def is_our_map(path: str, dir_fd: int | None = None) -> bool:
     """Whether ``path`` is a regular file holding a valid map (one we may replace)."""
     try:
-        fd, st = _open_regular(path, dir_fd)
-        validate_state(load_arrays(_read_fd(fd, st, path), path), path)
+        validate_state(load_arrays(_read_regular(path, dir_fd), path), path)
     except MapStoreError:
         return False
     return True
@@ -309,7 +270,7 @@ class MapStore:
             st = None
         if st is not None:
             if not stat.S_ISREG(st.st_mode):
-                raise MapStoreError(f"{target} is {_kind(st.st_mode)}: not replaced")
+                raise MapStoreError(f"{target} is {safe_files.kind(st.st_mode)}: not replaced")
             if not is_our_map(fname, self._dir_fd):
                 raise MapStoreError(f"{target} exists and is not a tmgwr map: not replaced "
                                     "(choose another name)")

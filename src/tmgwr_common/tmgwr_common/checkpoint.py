@@ -35,7 +35,6 @@ here (``maze_sim`` may not import ``tmgwr_agent``).
 from __future__ import annotations
 
 import contextlib
-import errno
 import io
 import json
 import os
@@ -53,6 +52,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from tmgwr_common import safe_files
 from tmgwr_common.params import Param
 
 FORMAT_VERSION = 1
@@ -111,40 +111,9 @@ def file_name(node: str) -> str:
 
 
 # ----------------------------------------------------------------------------- files
-def _kind(mode: int) -> str:
-    for test, what in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"),
-                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
-                       (stat.S_ISSOCK, "a socket"), (stat.S_ISLNK, "a symbolic link")):
-        if test(mode):
-            return what
-    return "not a regular file"
-
-
 def read_regular(path: str, dir_fd: int | None = None) -> bytes:
-    """The bytes of ``path`` (relative to ``dir_fd``), which must be a regular file of at
-    most MAX_BYTES: no final symbolic link, no FIFO or device (refused at once, never
-    waited on)."""
-    flags = os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
-    try:
-        fd = os.open(path, flags, dir_fd=dir_fd)
-    except FileNotFoundError:
-        raise
-    except OSError as exc:
-        if exc.errno == errno.ELOOP:
-            raise CheckpointError(f"{path} is a symbolic link: refused") from None
-        raise CheckpointError(f"{path}: cannot open: {exc.strerror}") from None
-    with os.fdopen(fd, "rb", closefd=True) as f:
-        st = os.fstat(f.fileno())
-        if not stat.S_ISREG(st.st_mode):
-            raise CheckpointError(f"{path} is {_kind(st.st_mode)}, not a regular file: "
-                                  "refused")
-        if st.st_size > MAX_BYTES:
-            raise CheckpointError(f"{path}: {st.st_size} bytes, more than a checkpoint may "
-                                  f"have ({MAX_BYTES})")
-        data = f.read(MAX_BYTES + 1)
-    if len(data) > MAX_BYTES:
-        raise CheckpointError(f"{path}: larger than a checkpoint may be ({MAX_BYTES} bytes)")
-    return data
+    """The bytes of the checkpoint file ``path`` (:func:`safe_files.read_regular`)."""
+    return safe_files.read_regular(path, dir_fd, MAX_BYTES, "checkpoint", CheckpointError)
 
 
 def decode(data: bytes, what: str) -> tuple[dict, dict[str, np.ndarray]]:
@@ -288,7 +257,7 @@ class CheckpointStore:
         except FileNotFoundError:
             return True
         if not stat.S_ISREG(st.st_mode):
-            raise CheckpointError(f"{self.path} is {_kind(st.st_mode)}: not replaced")
+            raise CheckpointError(f"{self.path} is {safe_files.kind(st.st_mode)}: not replaced")
         if self._written == (st.st_ino, st.st_mtime_ns, st.st_size):
             return True
         try:
