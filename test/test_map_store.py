@@ -385,7 +385,10 @@ def test_load_map_validates_before_replacing_the_live_map(graph):
     [r] = call(domain, [[SAVE, "SaveMap", {"name": ""}]])
     assert r["success"], r
     m, saved_step, _ = read_map(run_dir / "map.npz")
-    assert saved_step > step and m.size == int(live["alive"].sum()) > 50
+    # (the live map learns on meanwhile, so its size may differ from the probe's: what a
+    # refused load would have left is a 3-d, NaN or out-of-range map, checked here)
+    assert saved_step > step and m.size > 50, (saved_step, step, m.size)
+    assert m.w.shape[1] == 2 and np.isfinite(m.w[: m.n][m.alive[: m.n]]).all()
     # and a valid map is loaded
     [r] = call(domain, [[LOAD, "LoadMap", {"name": "probe"}]])
     assert r["success"] and "probe.npz" in r["message"], r
