@@ -202,9 +202,11 @@ def test_agent_options_combine():
     ag = make_agent("tmgwr:literal+paper", Maze.from_text(SMALL), np.random.default_rng(0))
     assert ag.map.link_rule == "literal"
     assert not (ag.motivation.absorbing_terminals or ag.selector.goal_search
-                or ag.selector.try_untried)
+                or ag.selector.try_untried or ag.selector.config.walk_while_novel)
+    assert ag.selector.policy.hold is None
     default = make_agent("tmgwr", Maze.from_text(SMALL), np.random.default_rng(0))
     assert default.selector.try_untried and default.motivation.absorbing_terminals
+    assert default.selector.policy.hold is not None
 
 
 # ------------------------------------------------------------------ errors

@@ -152,3 +152,80 @@ def test_state_dict_continues_a_run_exactly():
     a.set_goal(wa.goal, wa.goal_observation())
     assert [run_episode(wa, a).steps for _ in range(3)] == \
         [run_episode(wb, b).steps for _ in range(3)]
+
+
+# ------------------------------------------------------------------ walk_while_novel
+def test_walk_is_held_once_the_last_n_steps_found_nothing_new():
+    """Hand-computed: with epsilon 1 the walk acts while each of the last N steps (N nodes
+    acted from) could have found a new node; after N steps over known nodes only it is held
+    (Eq. 6 acts), a new node or N held steps without one end the hold, and after the first
+    goal the paper's Eq. 7 runs (never held)."""
+    from tmgwr_agent.core.action_selector import ActionSelector, SelectorConfig
+    from tmgwr_agent.core.outcome import Outcome
+    sel = ActionSelector(np.random.default_rng(0), SelectorConfig())   # eps_start 1
+    move = Outcome(action=0)
+    for node in (0, 1, 2):                  # three new nodes: N = 3, last new at step 3
+        sel.record(node, move)
+    assert (sel.n_acted, sel.steps, sel.last_new) == (3, 3, 3)
+    assert sel.policy.explores()            # epsilon 1 and not stalled: the walk
+    for k, node in enumerate((1, 2, 1)):    # steps 4-6 from known nodes
+        assert not sel.walk_stalled(), k    # 0, 1, 2 steps without a new node
+        sel.record(node, move)
+    assert sel.walk_stalled()               # 3 = N steps found nothing new: held
+    assert not sel.policy.explores()        # the draw is made and ignored: Eq. 6 acts
+    sel.record(7, move)                     # a new node: N = 4, the walk again
+    assert not sel.walk_stalled() and sel.policy.explores()
+    for node in (0, 1, 2, 7):
+        sel.record(node, move)
+    assert sel.walk_stalled()
+    for node in (0, 1, 2, 7):               # held N = 4 steps that found nothing either:
+        sel.record(node, move)
+    assert not sel.walk_stalled()           # the walk again, until a new node
+    sel.record(9, move)
+    for node in (0, 1, 2, 7, 9):
+        sel.record(node, move)
+    assert sel.walk_stalled()               # N = 5 steps without a new node: held
+    sel.record(0, Outcome(action=0, goal_reached=True, episode_over=True))
+    assert not sel.walk_stalled()           # after the first goal: Eq. 7 as printed
+    paper = ActionSelector(np.random.default_rng(0), SelectorConfig(walk_while_novel=False))
+    for node in (0, 0, 0, 0):
+        paper.record(node, move)
+    assert paper.policy.hold is None and paper.policy.explores()
+
+
+def test_a_held_step_is_fixed_with_its_draw_made_ahead():
+    """The draw made ahead (the graph's walk_next) and its use agree even when the hold
+    changes in between (a new node recorded after the draw)."""
+    from tmgwr_agent.core.action_selector import ActionSelector, SelectorConfig
+    from tmgwr_agent.core.outcome import Outcome
+    sel = ActionSelector(np.random.default_rng(0), SelectorConfig())
+    move = Outcome(action=0)
+    for node in (0, 1, 1, 0):               # N = 2, two steps without a new node
+        sel.record(node, move)
+    assert sel.walk_stalled()
+    assert sel.policy.draw_ahead() is False     # held: the next step will not walk
+    sel.record(5, move)                         # the hold ends after the draw ...
+    assert not sel.walk_stalled()
+    assert sel.policy.explores() is False       # ... but that step keeps its draw's hold
+    assert sel.policy.explores() is True        # the next draw is not held
+
+
+def test_large_maze_first_episode_is_not_a_blind_walk():
+    """On a 116-cell braided maze whose goal the blind walk takes 4,000-28,000 steps to hit
+    (seeds 0-5), the held walk reaches it in the first episode in a third of the steps or
+    fewer, summed over four seeds (measured: 312-1348 a seed)."""
+    from maze_sim.suite import suite
+    maze = Maze.from_text(suite("braided:1", seed=3)[0].text)
+    totals = {}
+    for flag in (True, False):
+        steps = 0
+        for seed in range(4):
+            world = GridWorld(maze, "G")
+            agent = make_agent("tmgwr", maze, np.random.default_rng(seed),
+                               {"walk_while_novel": flag})
+            set_goal(world, agent, "G")
+            ep = run_episode(world, agent, max_steps=200_000)
+            assert ep.reached_goal
+            steps += ep.steps
+        totals[flag] = steps
+    assert 3 * totals[True] < totals[False], totals

@@ -25,6 +25,21 @@ Goal search (``goal_search``, off by default: superseded by Eq. 5', which has no
 until the goal is sensed; kept for the ablation). The random walk for the rest of the
 episode once the agent stood on the goal node without the episode ending.
 
+The walk while it discovers (``walk_while_novel``, our addition, on by default; off = the
+paper's first episode, a blind random walk until the goal is found). Eq. 7 starts from
+epsilon 1, so before the goal is first attained every step is the random walk; on a small
+maze it covers the maze on the way (a map of the detours the blocks later need), but a
+random walk's time to hit a goal grows faster than the maze (on the 1100-1300-cell suite
+mazes five episodes of 237,200 steps each never found it). So before the goal is first
+attained the walk acts only while it still discovers: it is held, and Eq. 6 acts over the
+options of Eq. 5' (the nearest plausible unknown towards the goal sensation), once the
+last ``N`` steps found no node the selector had not acted from before, ``N`` the nodes it
+has acted from (the time a walk needs to see the known map again, as in Eq. 5''s stale
+horizon: no constant). A new node ends the hold; so do N held steps that found none (Eq. 6
+had nowhere to lead: the walk resumes until a new node turns up). After the first goal,
+Eq. 7 runs as in the paper. Whether a step is held is fixed with its epsilon draw
+(:class:`EpsilonGreedy`), so the graph's ``walk_next`` and the selector agree.
+
 The state needed to continue a run (epsilon, the walk's direction, the search flag) is
 plain data: :meth:`ActionSelector.state_dict` / :meth:`load_state_dict`; the generator's
 state is the caller's (``rng.bit_generator.state``).
@@ -55,6 +70,10 @@ class SelectorConfig(ExplorationConfig):
     try_untried: bool = param(True, "Eq. 6 also ranks the options of Eq. 5' (untried or "
                               "stale primitives, virtual self-links of the winner; "
                               "action_selector.py; false: the paper's Eq. 6 selector)")
+    walk_while_novel: bool = param(True, "before the goal is first attained, hold the random "
+                                   "walk once the last N steps (N: nodes acted from) found "
+                                   "no new node; Eq. 6 acts instead (action_selector.py; "
+                                   "false: the paper's blind first episode)")
 
 
 class ActionSelector:
@@ -67,6 +86,23 @@ class ActionSelector:
         self.searching = False      # stood on the goal node this episode, goal not there
         self.try_untried = config.try_untried
         self.took_option = False    # the last Eq. 6 choice was an option of Eq. 5'
+        # walk_while_novel: nodes acted from, learning steps, the step that found the last
+        # new one, whether a goal was ever attained
+        self.acted = np.zeros(64, dtype=bool)
+        self.n_acted = 0
+        self.steps = 0
+        self.last_new = 0
+        self.attained = False
+        if config.walk_while_novel:
+            self.policy.hold = self.walk_stalled
+
+    def walk_stalled(self) -> bool:
+        """Before the first goal: the last N steps found no new node (N = nodes acted
+        from), so the random walk is held and Eq. 6 acts; for N steps at most: when Eq. 6
+        found nothing new either (no option leads anywhere, or the paper's Eq. 5 without
+        options), the walk acts again until a new node turns up."""
+        n = max(1, self.n_acted)
+        return not self.attained and n <= self.steps - self.last_new < 2 * n
 
     def record(self, node: int, outcome: Outcome, learn: bool = True) -> None:
         """What the last action did, taken from ``node`` (the winner it acted from): an
@@ -75,6 +111,17 @@ class ActionSelector:
         if outcome.episode_start:
             self.searching = False
             return
+        if learn and node >= 0:
+            if node >= len(self.acted):
+                self.acted = np.concatenate([self.acted, np.zeros(max(node + 1, len(
+                    self.acted)), dtype=bool)])
+            self.steps += 1
+            if not self.acted[node]:
+                self.acted[node] = True
+                self.n_acted += 1
+                self.last_new = self.steps
+        if learn and outcome.goal_reached:
+            self.attained = True
         self.policy.observe(outcome.action, outcome.bumped, outcome.goal_reached, learn)
 
     def greedy(self, links: Links, V: np.ndarray, node: int = -1) -> int | None:
@@ -119,9 +166,17 @@ class ActionSelector:
 
     # ------------------------------------------------------------------ persistence
     def state_dict(self) -> dict[str, np.ndarray | float | int]:
-        """Epsilon, the walk's state and the search flag, as plain numbers."""
-        return {**self.policy.state_dict(), "searching": int(self.searching)}
+        """Epsilon, the walk's state, the search flag and the novelty bookkeeping of
+        ``walk_while_novel``, as plain numbers and one array."""
+        return {**self.policy.state_dict(), "searching": int(self.searching),
+                "acted": self.acted.copy(), "steps": int(self.steps),
+                "last_new": int(self.last_new), "attained": int(self.attained)}
 
     def load_state_dict(self, d: dict) -> None:
         self.policy.load_state_dict(d)
         self.searching = bool(d.get("searching", 0))
+        if "acted" in d:                    # absent from older checkpoints: start afresh
+            self.acted = np.array(d["acted"], dtype=bool).reshape(-1)
+            self.n_acted = int(self.acted.sum())
+            self.steps, self.last_new = int(d["steps"]), int(d["last_new"])
+            self.attained = bool(d["attained"])

@@ -11,7 +11,10 @@
   (:meth:`EpsilonGreedy.draw_ahead`), as soon as the last action is chosen: the same
   number of the same stream when nothing else draws in between, so an agent knows before
   it plans whether the next action is the random walk (the TMGWR agent then skips Eq. 4-5:
-  work that cannot change the next action is not done).
+  work that cannot change the next action is not done). An agent may *hold* the walk
+  (:attr:`EpsilonGreedy.hold`, a callable; the TMGWR selector's ``walk_while_novel``): a
+  held step does not walk whatever the draw. Whether a step is held is fixed when its draw
+  is made, so a draw made ahead and its use agree.
 """
 
 from __future__ import annotations
@@ -91,6 +94,8 @@ class EpsilonGreedy:
         self.walk = RandomWalk(rng, config.p_turn)
         self.schedule = EpsilonSchedule(config.eps_start, config.eps_decay, config.eps_min)
         self.ahead: float | None = None     # the next step's draw, made ahead (draw_ahead)
+        self.hold: Callable[[], bool] | None = None  # the agent holds the walk (no walk)
+        self.ahead_held = False             # whether the draw made ahead was held
 
     @property
     def epsilon(self) -> float:
@@ -109,7 +114,8 @@ class EpsilonGreedy:
         """Epsilon and the random walk's state (direction, last bump), plain numbers."""
         return {"epsilon": float(self.schedule.eps), "walk_direction": int(self.walk.direction),
                 "walk_bumped": int(self.walk.bumped),
-                "draw_ahead": -1.0 if self.ahead is None else float(self.ahead)}
+                "draw_ahead": -1.0 if self.ahead is None else float(self.ahead),
+                "draw_ahead_held": int(self.ahead_held)}
 
     def load_state_dict(self, d: dict) -> None:
         self.schedule.eps = float(d["epsilon"])
@@ -117,6 +123,10 @@ class EpsilonGreedy:
         self.walk.bumped = bool(d["walk_bumped"])
         ahead = float(d.get("draw_ahead", -1.0))
         self.ahead = ahead if ahead >= 0.0 else None
+        self.ahead_held = bool(d.get("draw_ahead_held", 0))
+
+    def _held(self) -> bool:
+        return self.hold is not None and self.hold()
 
     def draw_ahead(self) -> bool:
         """Whether the next exploring step walks: its draw ``rng.random() < eps`` made now
@@ -125,15 +135,20 @@ class EpsilonGreedy:
         choice)."""
         if self.ahead is None:
             self.ahead = float(self.rng.random())
-        return self.ahead < self.schedule.eps
+            self.ahead_held = self._held()
+        return self.ahead < self.schedule.eps and not self.ahead_held
 
     def explores(self, explore: bool = True) -> bool:
         """Draw whether this step explores (always draws when ``explore``, for determinism;
         the draw made ahead if there is one)."""
         if not explore:
             return False
-        u, self.ahead = (self.rng.random() if self.ahead is None else self.ahead), None
-        return u < self.schedule.eps
+        if self.ahead is None:
+            u, held = self.rng.random(), self._held()
+        else:
+            u, held = self.ahead, self.ahead_held
+        self.ahead = None
+        return u < self.schedule.eps and not held
 
     def choose(self, greedy: Callable[[], int | None], explore: bool = True
                ) -> tuple[int, bool]:

@@ -4,7 +4,8 @@
 joined by ``+``. TMGWR options: ``literal`` / ``credit`` choose the sensorimotor-link rule
 (plain ``tmgwr`` uses the default of ``MapConfig.link_rule``); ``paper`` turns our
 additions off (``absorbing_terminals``; ``value_unknown`` and ``try_untried``, the options
-of Eq. 5' and Eq. 6; ``goal_search``: the agent of Eq. 1-7 as printed), e.g.
+of Eq. 5' and Eq. 6; ``goal_search``; ``walk_while_novel``: the agent of Eq. 1-7 as
+printed), e.g.
 ``tmgwr:literal+paper``. The baselines take no option. Options are parameter overrides,
 checked like any other (an unknown name is refused).
 """
@@ -25,7 +26,7 @@ TMGWR_OPTIONS = {
     "literal": {"link_rule": "literal"},
     "credit": {"link_rule": "credit"},
     "paper": {"absorbing_terminals": False, "value_unknown": False, "goal_search": False,
-              "try_untried": False},
+              "try_untried": False, "walk_while_novel": False},
 }
 
 
