@@ -21,6 +21,7 @@ import pytest
 from maze_sim import GridWorld, Maze
 from maze_sim.maze import maze_file
 from maze_sim.suite import generate
+from maze_sim.world import EditRefused
 from tmgwr_agent.core.agent import TMGWRAgent
 from tmgwr_agent.core.motivation import MotivationEstimator
 from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
@@ -71,18 +72,26 @@ def evolve(maze: Maze, steps: int, seed: int, goals=(), events=(), config=None,
     obs, _ = world.reset()
     agent.begin_episode(obs, world.cell)
     yield 0, agent
-    for k in range(1, steps):
+    pending = []                    # events due; one the world refuses (it would wall in
+    for k in range(1, steps):       # the agent where it stands) is fired a step later
         if k in goals:
             world.set_goal(goals[k])
             agent.set_goal(world.goal, world.goal_observation())
         if k in events:
-            world.fire_event(events[k])
+            pending.append(events[k])
+        for event in list(pending):
+            try:
+                world.fire_event(event)
+                pending.remove(event)
+            except EditRefused as exc:
+                assert "the agent" in str(exc), exc
         obs, _, terminated, truncated, info = world.step(agent.act())
         agent.observe(obs, info)
         if terminated or truncated:
             obs, _ = world.reset()
             agent.begin_episode(obs, world.cell)
         yield k, agent
+    assert not pending, f"events {pending} never applied"
 
 
 # (maze, goal changes, events, agent overrides, sensor noise)
