@@ -55,6 +55,7 @@ import numpy as np
 from maze_sim.maze import ACTION_VECTORS
 from tmgwr_agent.core import kernels
 from tmgwr_agent.core.exploration import EpsilonGreedy, ExplorationConfig
+from tmgwr_agent.core.motivation import grown
 from tmgwr_agent.core.outcome import Outcome
 from tmgwr_agent.core.sensorimotor_map import Links
 from tmgwr_common.params import param
@@ -111,11 +112,9 @@ class ActionSelector:
         if outcome.episode_start:
             self.searching = False
             return
-        if learn and node >= 0:
-            if node >= len(self.acted):
-                self.acted = np.concatenate([self.acted, np.zeros(max(node + 1, len(
-                    self.acted)), dtype=bool)])
-            self.steps += 1
+        if learn and node >= 0 and self.policy.hold is not None and not self.attained:
+            self.acted = grown(self.acted, node + 1, False)     # (the hold's bookkeeping,
+            self.steps += 1                                     # needed until the goal)
             if not self.acted[node]:
                 self.acted[node] = True
                 self.n_acted += 1

@@ -164,7 +164,7 @@ class MotivationConfig(Config):
                                  high=1e6)
 
 
-def _grown(a: np.ndarray, n: int, fill) -> np.ndarray:
+def grown(a: np.ndarray, n: int, fill) -> np.ndarray:
     """``a`` with at least n rows (doubling), new rows set to ``fill``."""
     if len(a) >= n:
         return a
@@ -253,10 +253,10 @@ class MotivationEstimator:
         self.clock += 1
         top = max(node, winner) + 1
         if top > len(self.tried):
-            self.tried = _grown(self.tried, top, False)
-            self.bump_t = _grown(self.bump_t, top, -1)
-            self.closed_t = _grown(self.closed_t, top, -1)
-            self.succ = _grown(self.succ, top, -1)
+            self.tried = grown(self.tried, top, False)
+            self.bump_t = grown(self.bump_t, top, -1)
+            self.closed_t = grown(self.closed_t, top, -1)
+            self.succ = grown(self.succ, top, -1)
         if self.delta.shape[1] != w.shape[1]:
             self.delta = np.zeros((N_PRIMITIVES, w.shape[1]))
         if inserted and winner >= 0:
@@ -311,14 +311,14 @@ class MotivationEstimator:
             self.V = self._extended(self.V, n)
             self.V0 = self._extended(self.V0, n)
         if len(self.U) < n:
-            self.tried = _grown(self.tried, n, False)
-            self.bump_t = _grown(self.bump_t, n, -1)
-            self.closed_t = _grown(self.closed_t, n, -1)
-            self.succ = _grown(self.succ, n, -1)
-            self.U = _grown(self.U, n, 0.0)
-            self.rho = _grown(self.rho, n, 0.0)
-            self.osucc = _grown(self.osucc, n, -1)
-            self.onb = _grown(self.onb, n, -1)
+            self.tried = grown(self.tried, n, False)
+            self.bump_t = grown(self.bump_t, n, -1)
+            self.closed_t = grown(self.closed_t, n, -1)
+            self.succ = grown(self.succ, n, -1)
+            self.U = grown(self.U, n, 0.0)
+            self.rho = grown(self.rho, n, 0.0)
+            self.osucc = grown(self.osucc, n, -1)
+            self.onb = grown(self.onb, n, -1)
         self.goal_node = -1
         g = m.nearest_by_weight(self.goal_x) if self.goal_x is not None and n else -1
         if g < 0:
