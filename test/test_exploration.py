@@ -59,8 +59,10 @@ def test_block_finds_the_detour_at_once(seed):
     world.fire_event("a")
     ep = run_episode(world, agent)
     # walk 7 to the block, bump, 1 back, detour of 14 from there at best: 22; the agent
-    # may bump a few times while the blocked link's E falls, and maps what it never saw
-    assert ep.reached_goal and ep.steps <= 40, ep.steps
+    # may bump a few times while the blocked link's E falls, and maps what it never saw:
+    # within twice the oracle (over seeds 0-7 the steps are 15-56, mean 35; before the
+    # stale rule of Eq. 5' counted episodes, 28-56, mean 37)
+    assert ep.reached_goal and ep.steps <= 2 * 22, ep.steps
     for _ in range(3):
         run_episode(world, agent)
     assert greedy_optimal(world, agent)
@@ -89,21 +91,25 @@ def test_goal_moved_into_unvisited_space_is_found_in_the_first_episode():
 
 
 def test_shortcut_is_found_when_the_remembered_wall_goes_stale():
-    """A remembered wall whose other side is known and closer to the goal is re-tested
-    once rho times the saving outweighs the step. With the default doubt (stale_prior
-    0.03) that takes long; with an even prior (1/2) over T = 5 N the shortcut is in the
-    greedy path within 10 episodes in most trials."""
-    found = 0
+    """A remembered wall whose other side is known and closer to the goal is trusted for
+    ``stale_horizon`` episodes, then re-tested (Eq. 5', within the re-test budget): the
+    shortcut is in the greedy path within 10 episodes in every trial (seeds 0-9: 1-6
+    episodes). With no re-test budget the wall is never re-tested."""
     for seed in range(5):
-        world, agent = trained(SHORTCUT, seed=seed, stale_prior=0.5, stale_horizon=5.0)
-        world.fire_event("a")
-        assert world.shortest_path_length() == 6
-        for _ in range(10):
-            run_episode(world, agent)
-            if greedy_optimal(world, agent):
-                found += 1
-                break
-    assert found >= 3
+        for budget, found_within in ((0.1, 10), (0.0, None)):
+            world, agent = trained(SHORTCUT, seed=seed, stale_budget=budget)
+            world.fire_event("a")
+            assert world.shortest_path_length() == 6
+            found = None
+            for n in range(1, 16):
+                run_episode(world, agent)
+                if greedy_optimal(world, agent):
+                    found = n
+                    break
+            if found_within is None:
+                assert found is None, (seed, found)
+            else:
+                assert found is not None and found <= found_within, (seed, found)
 
 
 def test_paper_agent_has_no_value_of_the_unknown():

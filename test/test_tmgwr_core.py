@@ -294,6 +294,129 @@ def test_value_of_a_remembered_wall_by_hand():
     np.testing.assert_allclose(V[0], g * rho * (R1 + g), rtol=1e-9)
 
 
+def path_map(cells, actions):
+    """A map walked once along ``cells`` (row, col; 0.1 apart in feature space) with the
+    primitives ``actions`` between them: node k is cells[k], one link per move, E = 1."""
+    m = SensorimotorMap(dim=2, config=MapConfig(a_T=0.95, h_T=0.75, alpha_c=0.0,
+                                                insert_at=1.0))
+    for k, c in enumerate(cells):
+        m.step(0.1 * np.array(c, dtype=float), ACTION_VECTORS[actions[k - 1]] if k else None)
+        m.h[m.winner] = 0.5
+    assert m.size == len(cells)
+    return m
+
+
+def known_estimator(m, moves, goal, episode, **cfg):
+    """An estimator whose outcome memory knows every pair of m's nodes: the ``moves``
+    (node, primitive, successor) led on, every other pair bumped in ``episode`` (a wall
+    trusted now), the forward model from the moves; the agent stands on node 0 at the
+    start of episode ``episode`` + 1."""
+    mo = MotivationEstimator(MotivationConfig(vi_tol=1e-12, vi_max_sweeps=100000, **cfg))
+    mo.set_goal(0.1 * np.array(goal, dtype=float))
+    st = mo.state_dict()
+    n = m.n
+    st["clock"], st["episode"] = 100, episode
+    st["tried"][:n] = True
+    st["bump_t"][:n], st["closed_t"][:n], st["bump_e"][:n] = 90, 90, episode
+    st["succ"][:n] = -1
+    for i, a, j in moves:
+        st["bump_t"][i, a] = st["closed_t"][i, a] = st["bump_e"][i, a] = -1
+        st["succ"][i, a] = j
+    st["delta"] = 0.1 * ACTION_VECTORS
+    mo.load_state_dict(st)
+    mo.record(-1, 0, False, EPISODE_START, m.w)
+    return mo
+
+
+# A U: 0 (0, 0) down 1 (1, 0) right 2 (1, 1) right 3 (1, 2) up 4 (0, 2), the goal; the
+# cell (0, 1) between nodes 0 and 4 is a wall, bumped from node 0 ('right') and node 2
+# ('up'), its known neighbours nodes 2 and 4.
+U_CELLS = [(0, 0), (1, 0), (1, 1), (1, 2), (0, 2)]
+U_MOVES = [(0, DOWN, 1), (1, RIGHT, 2), (2, RIGHT, 3), (3, UP, 4)]
+
+
+def test_stale_wall_is_trusted_for_stale_horizon_episodes_then_doubted_by_hand():
+    """Eq. 5' outside *stuck*: the wall right of node 0, bumped in episode 1, is trusted
+    (no option) until ``stale_horizon`` = 3 episodes have started since, then stale with
+    rho = ``stale_prior`` = 0.5, worth gamma V(4) (its best known neighbour) if it
+    opened: V(0) = gamma max(V(1), rho gamma V(4) + (1 - rho) gamma V(1))."""
+    g = 0.97
+    m = path_map(U_CELLS, [a for _, a, _ in U_MOVES])
+    R3 = np.exp(-0.01 / (2 * 0.03 ** 2))                 # sigma_g = 0.3 x the link 0.1
+    V4 = 1.0                                             # the goal: no link out of it
+    V3 = R3 + g * V4
+    V1 = g * g * V3
+    for episode, stale in ((2, False), (3, True), (10, True)):   # bumped in episode 1
+        mo = known_estimator(m, U_MOVES, (0, 2), episode, stale_horizon=3.0,
+                             stale_prior=0.5)
+        st = mo.state_dict()
+        st["bump_t"][0, RIGHT], st["bump_e"][0, RIGHT] = 10, 1
+        mo.load_state_dict(st)
+        V = mo.update(m)
+        assert mo.episode == episode + 1 and mo.goal_node == 4 and not mo.stuck(m, m.n)
+        rho = 0.5 if stale else 0.0
+        assert mo.rho[0, RIGHT] == rho
+        V0 = g * max(V1, rho * g * V4 + (1 - rho) * g * V1)
+        np.testing.assert_allclose(V, [V0, V1, g * V3, V3, V4], rtol=1e-9)
+        # the known route from the start, read off Eq. 5 without options: 4 steps
+        assert mo.route == pytest.approx(np.log(V1 * g / V4) / np.log(g))
+        # what Eq. 6 ranks at node 0: the option 'right' as a virtual link to itself
+        links = mo.links_of(m, 0)
+        K = m.out.shape[1]
+        assert links.E[K + RIGHT] * V[0] == pytest.approx(
+            rho * g * V4 + (1 - rho) * g * V1 if stale else 0.0)
+
+
+def test_stale_walls_wait_when_the_episode_re_test_budget_is_used_up():
+    """Both sides of the wall (0, 1) are stale; the budget is max(1, 0.1 x route 4) = 1
+    re-test an episode: once node 2's 'up' has been re-tested (a bump, not stuck), node
+    0's 'right' has no option until the next episode starts; with ``stale_budget`` 0 no
+    stale wall has one at all."""
+    m = path_map(U_CELLS, [a for _, a, _ in U_MOVES])
+    mo = known_estimator(m, U_MOVES, (0, 2), 5, stale_horizon=3.0)
+    st = mo.state_dict()
+    for i, a in ((0, RIGHT), (2, UP)):
+        st["bump_t"][i, a], st["bump_e"][i, a] = 10, 1
+    mo.load_state_dict(st)
+    mo.update(m)
+    assert mo.rho[0, RIGHT] == 1.0 and mo.rho[2, UP] == 1.0      # stale_prior 1
+    mo.record(2, 2, False, Outcome(action=UP, bumped=True), m.w)  # the re-test fails
+    assert mo.retests == 1
+    mo.update(m)
+    assert mo.rho[0, RIGHT] == 0.0 and mo.rho[2, UP] == 0.0
+    mo.record(-1, 0, False, EPISODE_START, m.w)                   # a new episode
+    mo.update(m)
+    assert mo.retests == 0 and mo.rho[0, RIGHT] == 1.0
+    assert mo.rho[2, UP] == 0.0                  # bumped this episode: trusted again
+    none = known_estimator(m, U_MOVES, (0, 2), 5, stale_horizon=3.0, stale_budget=0.0)
+    st = none.state_dict()
+    st["bump_t"][0, RIGHT], st["bump_e"][0, RIGHT] = 10, 1
+    none.load_state_dict(st)
+    none.update(m)
+    assert none.rho[0, RIGHT] == 0.0
+
+
+def test_thick_stale_wall_leads_straight_on_to_the_first_known_cell_by_hand():
+    """A wall two cells thick, (0, 1) and (0, 2), between node 0 (0, 0) and the goal
+    node (0, 3), the way round below: no known cell is next to (0, 1), so if it opened
+    the move would lead straight on through (0, 2) to the goal node, m = 3 steps from
+    node 0: S = gamma^(m - 2) gamma V(g); O(0, right) = S (stale_prior 1)."""
+    g = 0.97
+    cells = [(0, 0), (1, 0), (2, 0), (2, 1), (2, 2), (2, 3), (1, 3), (0, 3)]
+    acts = [DOWN, DOWN, RIGHT, RIGHT, RIGHT, UP, UP]
+    moves = [(k, a, k + 1) for k, a in enumerate(acts)]
+    m = path_map(cells, acts)
+    mo = known_estimator(m, moves, (0, 3), 5, stale_horizon=3.0)
+    st = mo.state_dict()
+    st["bump_t"][0, RIGHT], st["bump_e"][0, RIGHT] = 10, 1
+    mo.load_state_dict(st)
+    V = mo.update(m)
+    assert mo.goal_node == 7 and mo.osucc[0, RIGHT] == -2
+    assert mo.U[0, RIGHT] == pytest.approx(g)            # one unknown cell on the way
+    assert V[0] == pytest.approx(g * max(g * V[1], g * g * V[7]))
+    assert V[0] == pytest.approx(g ** 3 * V[7])          # the wall, if open, is shorter
+
+
 def test_eq6_picks_link_with_highest_E_times_V_and_breaks_ties_by_rng():
     m = SensorimotorMap(dim=2, config=MapConfig(alpha_c=0.0, insert_at=1.0))
     m.step(np.array([0.0, 0.0]), None)

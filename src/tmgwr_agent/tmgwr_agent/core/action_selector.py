@@ -63,7 +63,14 @@ from tmgwr_common.params import param
 
 @dataclass(frozen=True)
 class SelectorConfig(ExplorationConfig):
-    """The shared exploration parameters plus our additions to Eq. 6."""
+    """The shared exploration parameters plus our additions to Eq. 6. The floor of Eq. 7
+    is 0 here (the paper's 0.1 with ``+paper``): after the goal is found the value of the
+    unknown (Eq. 5') explores with purpose, and a random step at the floor costs steps
+    and can end an episode at a terminal cell (action_selector.py)."""
+
+    eps_min: float = param(0.0, "Eq. 7: floor of epsilon (0: the random walk gives way "
+                           "to Eq. 5' once the goal is found; the paper's 0.1 with +paper)",
+                           low=0.0, high=1.0)
 
     goal_search: bool = param(False, "random walk for the rest of an episode once the agent "
                               "stood on the goal node without reaching the goal (superseded "

@@ -144,8 +144,9 @@ def reaches_source(out, E, n, absorbing, alive, source, mark):
 @njit(cache=True)
 def successor_value(V, j, U_o, nb, k, gamma):
     """S of Eq. 5' for an option whose successor is ``j``: V of a known node (j >= 0),
-    gamma max V of the known neighbours ``nb[k]`` of a remembered wall cell (j = -2), or
-    the optimistic U of unknown space (j = -1, ``U_o``)."""
+    ``U_o`` gamma max V of the known nodes ``nb[k]`` beyond a remembered wall cell (j =
+    -2; ``U_o`` discounts the unknown cells between, 1 for a wall one cell thick), or the
+    optimistic U of unknown space (j = -1, ``U_o``)."""
     if j >= 0:
         return V[j]
     if j == -2:
@@ -154,7 +155,7 @@ def successor_value(V, j, U_o, nb, k, gamma):
             q = nb[k, b]
             if q >= 0 and V[q] > best:
                 best = V[q]
-        return gamma * best
+        return U_o * gamma * best
     return U_o
 
 
@@ -302,6 +303,14 @@ def cell_grid(w, alive, n, L):
 
 
 @njit(cache=True)
+def in_grid(grid, origin, L, x):
+    """Whether position x falls inside the table of :func:`cell_grid`."""
+    r = int(np.floor((x[0] - origin[0]) / L + 0.5))
+    c = int(np.floor((x[1] - origin[1]) / L + 0.5))
+    return 0 <= r < grid.shape[0] and 0 <= c < grid.shape[1]
+
+
+@njit(cache=True)
 def node_at(grid, origin, L, w, x):
     """The node within L / 2 of position x (-1 if none), from :func:`cell_grid`."""
     if grid.shape[0] == 0:
@@ -317,21 +326,26 @@ def node_at(grid, origin, L, w, x):
 
 
 @njit(cache=True)
-def option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t, succ,
-               clock, horizon, rho_max, stuck, grid, origin, U, rho, osucc, onb):
+def option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t, bump_e,
+               succ, clock, horizon, episode, trust, rho_max, stuck, grid, origin, U, rho,
+               osucc, onb):
     """The options of the value of the unknown (motivation.py, Eq. 5') of node i, per
     primitive a: ``rho[i, a]`` = 1 for a primitive never taken from i, or whose move's
-    link (to ``succ[i, a]``) the map has since deleted; ``rho_max (1 - exp(-tau /
-    (horizon + e)))`` for one whose last outcome was a bump ``tau`` steps ago and that had
-    been known closed for ``e`` steps before it (``bump_t - closed_t``: failed re-tests
-    stretch the horizon); 0 otherwise
-    (known: no option). The option's successor: ``osucc[i, a]``, a known node (where the
-    move once led, else a node at the predicted position ``w_i + delta_a``), whose V the
-    sweep reads; -1 when none, and then ``U[i, a] = v_star gamma^h``, ``h = |w_i +
-    delta_a - x_g|_1 / L`` (the fewest steps from the predicted successor to the goal
-    sensation); -2 for a remembered wall cell, whose value if it opened is gamma times the
-    best V of the known nodes next to it (``onb[i, a]``; no such node: no option), unless
-    ``stuck`` (then U, as for unknown space)."""
+    link (to ``succ[i, a]``) the map has since deleted; for one whose last outcome was a
+    bump (a remembered wall): when ``stuck``, ``rho_max (1 - exp(-tau / (horizon + e)))``,
+    ``tau`` the steps since the bump and ``e`` those it had been known closed before it
+    (``bump_t - closed_t``: failed re-tests stretch the horizon); else ``rho_max`` once
+    ``trust`` episodes (``trust`` > 0) have started since its bump (``bump_e``), 0 before;
+    0 otherwise (known: no option). The option's successor ``osucc[i, a]``: a known node
+    (where the move once led, else a node at the predicted position ``w_i + delta_a``),
+    whose V the sweep reads; -1 when none, and then ``U[i, a] = v_star gamma^h``, ``h =
+    |w_i + delta_a - x_g|_1 / L`` (the fewest steps from the predicted successor to the
+    goal sensation); -2 for a remembered wall cell (not ``stuck``), whose value if it
+    opened is gamma times the best V of the known nodes next to it (``onb[i, a]``), or,
+    with none, of the first known node straight on, ``m`` steps from i, through the
+    unknown cells between (``U[i, a] = gamma^(m - 2)``, 1 next to it: a wall that opens
+    opens along its run); no such node: no option. ``stuck``: the optimistic U, as for
+    unknown space."""
     x = np.empty(w.shape[1])
     y = np.empty(w.shape[1])
     for a in range(U.shape[1]):
@@ -339,10 +353,13 @@ def option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t
         wall = False
         if not tried[i, a]:
             r = 1.0
-        elif 0 <= bump_t[i, a] < clock and horizon > 0.0:
+        elif stuck and 0 <= bump_t[i, a] < clock and horizon > 0.0:
             tau = clock - bump_t[i, a]
-            e = bump_t[i, a] - closed_t[i, a] if stuck and closed_t[i, a] >= 0 else 0
+            e = bump_t[i, a] - closed_t[i, a] if closed_t[i, a] >= 0 else 0
             r = rho_max * (1.0 - np.exp(-tau / (horizon + e)))
+            j = succ[i, a]
+        elif not stuck and bump_e[i, a] >= 0 and trust > 0 and episode - bump_e[i, a] >= trust:
+            r = rho_max
             j = succ[i, a]
             wall = j < 0
         elif bump_t[i, a] < 0 and succ[i, a] >= 0 and not _linked(out, i, succ[i, a]):
@@ -356,11 +373,12 @@ def option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t
             d += abs(x[k] - goal[k])
         for b in range(U.shape[1]):
             onb[i, a, b] = -1
-        if r > 0.0 and wall and not stuck:
+        u = v_star * gamma ** (d / L)
+        if r > 0.0 and wall:
             # a remembered wall: if it opened, the cell leads on to its known
-            # neighbours (other than i); with none there is nothing to gain (stuck:
-            # the optimistic U, as for unknown space)
+            # neighbours (other than i), or straight on to the first known cell
             j = -2
+            u = 1.0
             found = False
             for b in range(U.shape[1]):
                 for k in range(w.shape[1]):
@@ -369,6 +387,19 @@ def option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t
                 if q >= 0 and q != i:
                     onb[i, a, b] = q
                     found = True
+            m = 2
+            while not found and grid.shape[0] > 0:
+                for k in range(w.shape[1]):
+                    y[k] = w[i, k] + m * delta[a, k]
+                if not in_grid(grid, origin, L, y):
+                    break
+                q = node_at(grid, origin, L, w, y)
+                if q >= 0:
+                    onb[i, a, 0] = q
+                    found = True
+                else:
+                    u *= gamma                   # one more unknown cell on the way
+                    m += 1
             if not found:
                 r = 0.0
         elif r > 0.0 and j < 0:
@@ -379,7 +410,7 @@ def option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t
             osucc[i, a] = -1
             continue
         rho[i, a] = r
-        U[i, a] = v_star * gamma ** (d / L)
+        U[i, a] = u
         osucc[i, a] = j if j != i else -1
 
 
@@ -393,8 +424,8 @@ def _linked(out, i, j):
 
 @njit(cache=True)
 def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, bump_t,
-                  closed_t, succ, clock, horizon, rho_max, stuck, grid, origin, U, rho, osucc,
-                  onb):
+                  closed_t, bump_e, succ, clock, horizon, episode, trust, rho_max, stuck, grid,
+                  origin, U, rho, osucc, onb):
     """:func:`option_row` of the nodes ``rows`` (none for dead slots)."""
     for i in rows:
         if i >= n:
@@ -405,24 +436,26 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
                 U[i, a] = 0.0
                 osucc[i, a] = -1
             continue
-        option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t, succ,
-                   clock, horizon, rho_max, stuck, grid, origin, U, rho, osucc, onb)
+        option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t, bump_e,
+                   succ, clock, horizon, episode, trust, rho_max, stuck, grid, origin, U, rho,
+                   osucc, onb)
 
 
 @njit(cache=True)
-def record_outcome(tried, bump_t, closed_t, succ, delta, moves, w, node, winner, inserted,
-                   a, bumped, clock):
+def record_outcome(tried, bump_t, closed_t, bump_e, succ, delta, moves, w, node, winner,
+                   inserted, a, bumped, clock, episode):
     """The outcome memory of Eq. 5' after primitive a taken from ``node`` (motivation.py):
-    a new winner starts untried; the pair (node, a) is tried, with the step of a bump or
-    -1 after a move (``closed_t``: the step of the first bump of the current run of
-    bumps, since when the pair is known closed), whose successor ``succ`` is remembered;
-    a move updates the mean displacement ``delta[a]``. Returns whether the pair's option
-    changed."""
+    a new winner starts untried; the pair (node, a) is tried, with the step and the
+    episode of a bump or -1 after a move (``closed_t``: the step of the first bump of the
+    current run of bumps, since when the pair is known closed), whose successor ``succ``
+    is remembered; a move updates the mean displacement ``delta[a]``. Returns whether the
+    pair's option changed."""
     if inserted and winner >= 0:
         for b in range(tried.shape[1]):
             tried[winner, b] = False
             bump_t[winner, b] = -1
             closed_t[winner, b] = -1
+            bump_e[winner, b] = -1
             succ[winner, b] = -1
     if node < 0:
         return False
@@ -432,9 +465,11 @@ def record_outcome(tried, bump_t, closed_t, succ, delta, moves, w, node, winner,
         if bump_t[node, a] < 0:          # closed since this bump (the first of a run)
             closed_t[node, a] = clock
         bump_t[node, a] = clock
+        bump_e[node, a] = episode
         return changed
     bump_t[node, a] = -1
     closed_t[node, a] = -1
+    bump_e[node, a] = -1
     succ[node, a] = winner
     if winner >= 0 and winner != node:
         moves[a] += 1

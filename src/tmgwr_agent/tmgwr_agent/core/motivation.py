@@ -44,19 +44,37 @@ successor, an *option*, in the max of Eq. 5::
 
 * ``rho`` is the probability that the option leads on: 1 for a primitive never taken from
   i, and for a move whose link the map has since deleted (GWR ageing: a forgotten piece
-  of a route is walked again when it may be worth it); for a pair whose last outcome was
-  a bump ``tau`` steps ago, ``rho = stale_prior (1 - exp(-tau / T))``, a wall that may
-  have opened since, ``T = stale_horizon * N`` (N nodes: the time a walk needs to see the
-  whole map again). A failed test leaves the agent where it was after one step, hence the
-  ``(1 - rho)`` term: re-testing a wall is worth it once ``rho`` times the saving exceeds
-  the way there and the step. ``rho`` changes at ticks of T / 8 only (warm starts).
+  of a route is walked again when it may be worth it). A pair whose last outcome was a
+  bump is a remembered wall, *trusted* for ``T = stale_horizon`` episodes after the bump
+  (``rho = 0``: no option) and *stale* after that: ``rho = stale_prior`` (1: as unknown as
+  a move never tried, R-max's known threshold with forgetting). A wall can only be seen
+  to have opened by re-testing it (the agent senses its position and its touch sensor,
+  nothing at a distance), and a shortcut is news only if the agent goes and looks; the
+  clock is the episode, the unit of the task, so a wall is re-tested every ``T``
+  episodes or so whatever the size of the maze. A failed test leaves the agent where it
+  was after one step, hence the ``(1 - rho)`` term: re-testing a wall is worth it once
+  ``rho`` times the saving exceeds the way there and the step.
+* The *re-test budget*: the walls bumped in the same early episodes all go stale in the
+  same episode, and a re-test costs a step and often a detour, so an episode re-tests at
+  most ``stale_budget`` times ``d`` stale walls (at least one; ``stale_budget`` 0.1, the
+  share of steps the paper's agent spends on its random walk at Eq. 7's floor), ``d``
+  the steps of the known route from the episode's start, read off the potentials of
+  Eq. 5 without options there (``V0(start) = gamma^d V0(g)``; before a route is known,
+  the number of nodes). Once used up the stale walls have ``rho = 0`` until the next
+  episode; the queue of stale walls is worked through a few a time, the most valuable
+  first (Eq. 5' ranks them), so a cheap one next to the route does not starve a better
+  one further off more than ``T`` episodes. A re-test is an action at a pair known
+  closed while not *stuck* (below).
 * ``S`` is what the successor is worth. A known node when there is one: where the move
   once led, else the node at the predicted position ``w_i + delta_a`` (``delta_a``: the
   mean sensed displacement of primitive a over the agent's moves, its own forward model;
   a node lookup by position, :func:`kernels.cell_grid`); so an untried move between two
   known places is worth what the place is, not more. A remembered wall cell: ``gamma``
   times the best V of the known nodes next to it (it pays to re-test only a wall whose
-  other side is known and nearer the goal; with none, no option). Unknown space:
+  other side is known and nearer the goal), or, with none next to it, ``gamma^(m - 1)``
+  times the V of the first known node straight on, ``m`` steps from i (a wall that
+  opens opens along its run: a corridor cut through a block); with neither, no option.
+  Unknown space:
   ``U = V* gamma^h``, ``h = |w_i + delta_a - x_g|_1 / L``, the fewest steps of length L
   from the predicted successor to the goal sensation ``x_g`` (the four primitives move
   along the axes, hence L1: it never overestimates, so no shorter route is missed, the
@@ -76,7 +94,8 @@ successor, an *option*, in the max of Eq. 5::
   is evidence the wall stays, so the re-tests back off and the agent goes farther afield.
   Without it the nearest wall on the lost route (the block itself) was re-tested every
   few dozen steps and the agent never got far from it (one held-out suite trial: 5318
-  steps, 130 x the oracle). Outside *stuck* a bump's horizon stays ``T``.
+  steps, 130 x the oracle). While stuck the clock is the step (the task is impossible
+  now, not in a few episodes) and the re-test budget does not apply.
 * The goal node exists only once the map represents the goal (a node within ``L / 2`` of
   the goal sensation, i.e. the goal has been sensed): before that ``R = 0`` everywhere and
   the options alone lead the agent, by the nearest plausible unknown, towards the goal
@@ -89,9 +108,11 @@ successor, an *option*, in the max of Eq. 5::
   policy: it climbs the potentials of Eq. 5 without options (:meth:`exploit`), as
   Dyna-Q+'s probe reads its bonus-free twin.
 
-Costs: the options are recomputed in full when the map's structure, the stale tick or the
-stuck state changes, else only on the rows whose outcome memory changed; the reachability
-pass and the option loop are a few linear passes over the map.
+Costs: the options are recomputed in full when the map's structure, the episode (when
+stuck, a tick of the step clock), the stuck state or the re-test budget changes, else only
+on the rows whose outcome memory changed; the reachability pass and the option loop are a
+few linear passes over the map. Reading the route costs one solve of Eq. 5 without
+options per episode.
 
 Terminal nodes (``absorbing_terminals``, our addition, on by default; off = Eq. 5 on every
 node). The agent notices when an episode ends: it is moved back to the start instead of
@@ -107,9 +128,10 @@ the old goal is known to end episodes from the first episode on (the agent canno
 goal cell from a terminal cell; if the old goal became an ordinary cell, the flag goes the
 first time the agent walks on from it). Episodes cut by a step limit flag nothing.
 
-The outcome memory (primitives tried per node, step of the last bump and since when a pair
-is known closed, where each move led, the step clock, the forward model ``delta``) is plain
-data: :meth:`state_dict` / :meth:`load_state_dict`.
+The outcome memory (primitives tried per node, step and episode of the last bump and since
+when a pair is known closed, where each move led, the step and episode clocks, the known
+route and this episode's re-tests, the forward model ``delta``) is plain data:
+:meth:`state_dict` / :meth:`load_state_dict`.
 """
 
 from __future__ import annotations
@@ -157,11 +179,14 @@ class MotivationConfig(Config):
                                 "are options worth the unknown; the goal node exists once "
                                 "the goal is sensed (motivation.py; false: the paper's "
                                 "Eq. 5)")
-    stale_prior: float = param(0.03, "Eq. 5': probability that a remembered wall has opened "
-                               "after a long time (rho's limit)", low=0.0, high=1.0)
-    stale_horizon: float = param(10.0, "Eq. 5': a bump goes stale over T = stale_horizon x "
-                                 "nodes steps (0: bumps never go stale)", low=0.0,
-                                 high=1e6)
+    stale_prior: float = param(1.0, "Eq. 5': rho of a remembered wall once it is stale (1: "
+                               "as unknown as a move never tried)", low=0.0, high=1.0)
+    stale_horizon: float = param(6.0, "Eq. 5': episodes a remembered wall is trusted before "
+                                 "it goes stale (0: walls never go stale unless stuck)",
+                                 low=0.0, high=1e6)
+    stale_budget: float = param(0.1, "Eq. 5': re-tests of stale walls per episode, at most "
+                                "this share of the known route's steps (at least 1; 0: none)",
+                                low=0.0, high=1.0)
 
 
 def grown(a: np.ndarray, n: int, fill) -> np.ndarray:
@@ -186,6 +211,7 @@ class MotivationEstimator:
         self.absorbing_terminals = config.absorbing_terminals
         self.value_unknown = config.value_unknown
         self.stale_prior, self.stale_horizon = config.stale_prior, config.stale_horizon
+        self.stale_budget = config.stale_budget
         self.v_star = 1.0 / (1.0 - self.gamma ** 2)
         self.goal_x: np.ndarray | None = None
         self.goal_node = -1
@@ -198,8 +224,15 @@ class MotivationEstimator:
         self.tried = np.zeros((64, N_PRIMITIVES), dtype=bool)
         self.bump_t = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)
         self.closed_t = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)  # first bump of a run
+        self.bump_e = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)    # episode of a bump
         self.succ = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)   # where a move led
         self.clock = 0                # learning steps recorded
+        self.episode = 0              # episodes started
+        self.route = 0.0              # steps of the known route from this episode's start
+        self.retests = 0              # stale walls re-tested this episode (not stuck)
+        self._ep_start = -1           # the clock when this episode started
+        self._route_due = False       # the route is read off V0 at the episode's first solve
+        self._stuck = False           # stuck when the last update solved Eq. 5'
         self.delta = np.zeros((N_PRIMITIVES, 2))     # mean sensed displacement per primitive
         self.moves = np.zeros(N_PRIMITIVES, dtype=np.int64)
         self.U = np.zeros((64, N_PRIMITIVES))
@@ -224,6 +257,7 @@ class MotivationEstimator:
         """A new goal state: the potentials restart from 0 (Algorithm 1, line 5)."""
         self.goal_x = np.asarray(goal_x, dtype=float)
         self._options_key = ()
+        self.route = 0.0                  # the route to the new goal is not known yet
         self.V[:] = 0.0
         self.V0[:] = 0.0
         self._v0_fresh = False
@@ -246,9 +280,15 @@ class MotivationEstimator:
         known (a bump remembers its step, for staleness), a new node starts with every
         primitive untried, and a move updates the forward model ``delta`` (the mean of
         ``w[winner] - w[node]`` over the moves made with the primitive; ``w``: the map's
-        weights)."""
+        weights). An episode start starts the episode clock and its budget for stale
+        walls; an action at a pair known closed, when the agent was not stuck, is a
+        re-test of a stale wall."""
         self._winner = winner
         if outcome.episode_start:
+            self._route_due = True
+            self.episode += 1
+            self._ep_start = self.clock
+            self.retests = 0
             return
         self.clock += 1
         top = max(node, winner) + 1
@@ -256,14 +296,18 @@ class MotivationEstimator:
             self.tried = grown(self.tried, top, False)
             self.bump_t = grown(self.bump_t, top, -1)
             self.closed_t = grown(self.closed_t, top, -1)
+            self.bump_e = grown(self.bump_e, top, -1)
             self.succ = grown(self.succ, top, -1)
         if self.delta.shape[1] != w.shape[1]:
             self.delta = np.zeros((N_PRIMITIVES, w.shape[1]))
         if inserted and winner >= 0:
             self._dirty.add(winner)
-        if kernels.record_outcome(self.tried, self.bump_t, self.closed_t, self.succ,
-                                  self.delta, self.moves, w, node, winner, inserted,
-                                  outcome.action, outcome.bumped, self.clock):
+        if not self._stuck and 0 <= node and self.bump_t[node, outcome.action] >= 0:
+            self.retests += 1
+        if kernels.record_outcome(self.tried, self.bump_t, self.closed_t, self.bump_e,
+                                  self.succ, self.delta, self.moves, w, node, winner,
+                                  inserted, outcome.action, outcome.bumped, self.clock,
+                                  self.episode):
             self._dirty.add(node)
             self._bumps += 1
 
@@ -271,10 +315,12 @@ class MotivationEstimator:
         """The outcome memory, as plain arrays and numbers (node rows ``[0, n)`` of the
         map it belongs to)."""
         return {"tried": self.tried.copy(), "bump_t": self.bump_t.copy(),
-                "closed_t": self.closed_t.copy(),
+                "closed_t": self.closed_t.copy(), "bump_e": self.bump_e.copy(),
                 "succ": self.succ.copy(),
                 "clock": int(self.clock), "delta": self.delta.copy(),
-                "moves": self.moves.copy()}
+                "moves": self.moves.copy(), "episode": int(self.episode),
+                "route": float(self.route), "retests": int(self.retests),
+                "episode_start": int(self._ep_start), "route_due": int(self._route_due)}
 
     def load_state_dict(self, d: dict) -> None:
         self.tried = np.array(d["tried"], dtype=bool)
@@ -283,6 +329,15 @@ class MotivationEstimator:
         self.closed_t = np.array(d.get("closed_t", d["bump_t"]), dtype=np.int64)
         self.succ = np.array(d["succ"], dtype=np.int64)
         self.clock = int(d["clock"])
+        # absent from older checkpoints: the episode counters start afresh and every
+        # remembered wall is trusted from now on
+        self.episode = int(d.get("episode", 0))
+        self.bump_e = np.array(d["bump_e"], dtype=np.int64) if "bump_e" in d else \
+            np.where(self.bump_t >= 0, self.episode, -1)
+        self.route = float(d.get("route", 0.0))
+        self.retests = int(d.get("retests", 0))
+        self._ep_start = int(d.get("episode_start", -1))
+        self._route_due = bool(d.get("route_due", 0))
         self.delta = np.array(d["delta"], dtype=float)
         self.moves = np.array(d["moves"], dtype=np.int64)
         self._options_key = ()
@@ -314,6 +369,7 @@ class MotivationEstimator:
             self.tried = grown(self.tried, n, False)
             self.bump_t = grown(self.bump_t, n, -1)
             self.closed_t = grown(self.closed_t, n, -1)
+            self.bump_e = grown(self.bump_e, n, -1)
             self.succ = grown(self.succ, n, -1)
             self.U = grown(self.U, n, 0.0)
             self.rho = grown(self.rho, n, 0.0)
@@ -348,26 +404,44 @@ class MotivationEstimator:
             return np.zeros(n, dtype=bool)
         return m.terminal[:n] & (self.R[:n] < GOAL_R)
 
-    def stale_clock(self, nodes: int, stuck: bool = False) -> tuple[int, float]:
-        """(clock, T) for the staleness of bumps: ``T = stale_horizon * nodes`` (stuck:
-        ``T = nodes``, a bump older than a walk over the map is as doubtful as any); the
-        clock advances in steps of T / 8 (rho changes at those ticks only, so the
-        warm-started value iteration is not re-solved for a drift of every option each
-        step)."""
-        T = (1.0 if stuck and self.stale_horizon > 0 else self.stale_horizon) * nodes
-        tick = max(1, int(T / 8))
-        return self.clock - self.clock % tick, T
+    def stuck_clock(self, nodes: int) -> tuple[int, float]:
+        """(clock, T) for the doubt of walls while stuck: ``T = nodes`` steps (a bump older
+        than a walk over the map is as doubtful as any); the clock advances in steps of
+        T / 8 (rho changes at those ticks only, so the warm-started value iteration is not
+        re-solved for a drift of every option each step)."""
+        tick = max(1, nodes // 8)
+        return self.clock - self.clock % tick, float(nodes)
+
+    def budget_spent(self, n: int) -> bool:
+        """This episode's re-tests of stale walls are used up: at most ``stale_budget``
+        times the steps of the known route from the episode's start (the number of nodes
+        before a route is known), and at least one, unless ``stale_budget`` is 0."""
+        return self.stale_budget <= 0.0 or \
+            self.retests >= max(1.0, self.stale_budget * (self.route or n))
+
+    def _read_route(self, m: SensorimotorMap, n: int) -> None:
+        """At an episode's first solve: the steps ``d`` of the known route from where it
+        starts, read off the potentials of Eq. 5 without options, ``V0(start) = gamma^d
+        V0(g)``."""
+        self._route_due = False
+        V0 = self.exploit(m)
+        v, vg = (V0[self._winner] if 0 <= self._winner < n else 0.0), V0[self.goal_node]
+        if 0.0 < v <= vg:
+            self.route = max(1.0, math.log(v / vg) / math.log(self.gamma))
 
     def _options(self, m: SensorimotorMap, n: int) -> None:
         """U and rho of every option (:func:`kernels.option_values`), recomputed in full
-        when the map's structure, the goal, the node count or the stale clock's tick
+        when the map's structure, the goal, the node count, the stuck state, the stale
+        clock (episodes; when stuck, ticks of the step clock) or the re-test budget
         changed, else only on the rows whose outcome memory :meth:`record` changed
         (weights drift a little between full passes; a pow per pair and step would
         dominate the step time). Absorbing nodes keep theirs unused (Eq. 5' gives them
         no successor)."""
-        stuck = self.stuck(m, n)
-        clock, T = self.stale_clock(self.nodes_alive(m, n), stuck)
-        key = (m.version, clock, n, stuck)
+        stuck = self._stuck = self.stuck(m, n)
+        nodes = self.nodes_alive(m, n)
+        clock, T = self.stuck_clock(nodes)
+        spent = not stuck and self.budget_spent(nodes)
+        key = (m.version, clock if stuck else self.episode, n, stuck, spent)
         if key != self._options_key:
             if self._options_key[:1] != key[:1]:
                 self._grid, self._origin = kernels.cell_grid(m.w, m.alive, n, self._scale)
@@ -378,11 +452,12 @@ class MotivationEstimator:
         else:
             return
         self._dirty.clear()
+        rho_max = 0.5 if stuck else 0.0 if spent else self.stale_prior
         kernels.option_values(m.w, m.out, m.alive, n, rows, self.goal_x, self.delta,
                               self._scale, self.v_star, self.gamma, self.tried, self.bump_t,
-                              self.closed_t, self.succ, clock, T,
-                              0.5 if stuck else self.stale_prior, stuck, self._grid,
-                              self._origin, self.U, self.rho, self.osucc, self.onb)
+                              self.closed_t, self.bump_e, self.succ, clock, T, self.episode,
+                              self.stale_horizon, rho_max, stuck, self._grid, self._origin,
+                              self.U, self.rho, self.osucc, self.onb)
 
     def stuck(self, m: SensorimotorMap, n: int) -> bool:
         """The goal is represented but no link path leads from the agent's node to it
@@ -428,6 +503,8 @@ class MotivationEstimator:
             return self.V[:n]
         absorbing = self._absorbing(m, n)
         if self.value_unknown:
+            if self._route_due and self.goal_node >= 0:
+                self._read_route(m, n)
             self._options(m, n)
         self.sweeps = kernels.value_iteration(               # Eq. 4-5'
             m.out, m.E, self.R, self.V, n, self.beta, self.gamma, self.vi_tol, V_FLOOR,

@@ -26,7 +26,7 @@ TMGWR_OPTIONS = {
     "literal": {"link_rule": "literal"},
     "credit": {"link_rule": "credit"},
     "paper": {"absorbing_terminals": False, "value_unknown": False, "goal_search": False,
-              "try_untried": False, "walk_while_novel": False},
+              "try_untried": False, "walk_while_novel": False, "eps_min": 0.1},
 }
 
 
