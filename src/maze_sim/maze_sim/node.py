@@ -51,6 +51,7 @@ from std_srvs.srv import Trigger
 from maze_sim.maze import DEFAULT_MAZE, N_ACTIONS, Maze, MazeError, maze_file
 from maze_sim.world import GridWorld
 from tmgwr_common import topics
+from tmgwr_common.cdr import codec
 from tmgwr_common.checkpoint import CHECKPOINT_SPECS, Checkpoint, Checkpointer, CheckpointError
 from tmgwr_common.lockstep import WARN_PERIOD
 from tmgwr_common.node import (
@@ -60,8 +61,8 @@ from tmgwr_common.node import (
     STEP_QOS,
     CallbackTimer,
     declare_parameters,
-    f64,
     run,
+    subscribe_decoded,
 )
 from tmgwr_common.params import Param, ParamError
 from tmgwr_common.share import DataFileError
@@ -69,6 +70,7 @@ from tmgwr_interfaces.msg import Action, Observation
 from tmgwr_interfaces.srv import FireEvent, SetCell, SetGoal
 
 FRAME = "maze"
+OBSERVATION = codec(Observation)      # the per-step messages go serialized (tmgwr_common.cdr)
 WARMUP_STEPS = 200    # the SUMMARY's steady rate leaves out discovery and the first steps
 JOIN_RESEND = 0.25    # resend period while a run starts or a node joins (matching settles)
 # Who publishes each ring topic (named in the warning when nobody does).
@@ -140,7 +142,7 @@ class MazeSimNode(Node):
         self.goal_pub = self.create_publisher(PointStamped, topics.GOAL, LATCHED_QOS)
         self.pose_pub = self.create_publisher(PoseStamped, topics.AGENT_POSE, SENSOR_QOS)
         self.event_pub = self.create_publisher(String, topics.EVENTS, LATCHED_QOS)
-        self.create_subscription(Action, topics.ACTION, self.on_action, STEP_QOS)
+        subscribe_decoded(self, Action, topics.ACTION, self.on_action, STEP_QOS)
         services = MutuallyExclusiveCallbackGroup()
         self.create_service(SetGoal, topics.SIM_SET_GOAL, self.on_set_goal,
                             callback_group=services)
@@ -157,7 +159,7 @@ class MazeSimNode(Node):
         self.ring_size = 0                 # subscribers + ring publishers last counted
         self.joined_at = -math.inf         # when that count last grew (a node joined)
         self.logged_at = -math.inf         # of the last 'no action' line
-        self.current: Observation | None = None
+        self.current: bytes | None = None  # the observation awaiting its action, serialized
         self.sent_at = 0.0
         self.first_sent = 0.0              # first publication of the current step
         self.pending_goal = None           # (row, col) applied at the next observation
@@ -200,7 +202,8 @@ class MazeSimNode(Node):
         self.episode_len = 0
         self.publish_observation(obs, episode_start=True)
 
-    def on_action(self, msg: Action):
+    def on_action(self, msg):
+        """An Action (its fields, read by tmgwr_common.cdr)."""
         if msg.run_id != self.run_id:
             self.foreign_action(msg)
             return
@@ -239,27 +242,28 @@ class MazeSimNode(Node):
         if self.pending_goal is not None:   # a goal change lands on this observation
             self.apply_goal(self.pending_goal)
             self.pending_goal = None
-        m = Observation()
-        m.header.stamp = self.get_clock().now().to_msg()
+        m = OBSERVATION.new()
+        m.header.stamp.sec, m.header.stamp.nanosec = divmod(
+            self.get_clock().now().nanoseconds, 10 ** 9)       # what Time.to_msg() gives
         m.header.frame_id = FRAME
         m.run_id = self.run_id
         m.step_id = self.step_id
         m.episode = self.world.episode
-        m.sensors = f64(obs)
-        m.goal_sensors = f64(self.world.goal_observation())
+        m.sensors = obs
+        m.goal_sensors = self.world.goal_observation()
         m.episode_start = episode_start
         m.action = int(action)
-        m.motor = motor if not len(motor) else f64(np.asarray(motor))
+        m.motor = motor
         m.bumped = bool(bumped)
         m.goal_reached = bool(goal_reached)
         m.previous_goal_reached = bool(previous_goal_reached)
         m.terminal = bool(terminal)
         m.truncated = bool(truncated)
         m.row, m.col = (int(v) for v in self.world.cell)
-        self.current = m
+        self.current = OBSERVATION.encode(m)
         if self.p["trajectory_path"]:       # kept only when asked for (runs may be long)
             self.trajectory.append((self.step_id, self.world.episode, m.row, m.col))
-        self.timer.publish(self.obs_pub, m)
+        self.timer.publish(self.obs_pub, self.current)
         self.sent_at = time.monotonic()
         self.first_sent = self.sent_at
         self.checkpoints.step(self.step_id, self.run_id, self.checkpoint_state)

@@ -16,7 +16,9 @@
   the parameter's name, and so does a name that no node of the graph knows.
 * Arrays: per-step messages carry flat numeric arrays; :func:`f64` etc. build the
   ``array.array`` rclpy stores from a numpy array in one memcpy, :func:`np_f64` etc. read
-  them back without a Python loop.
+  them back without a Python loop (from rclpy's arrays or :mod:`tmgwr_common.cdr`'s).
+* Per-step messages: :func:`subscribe_decoded` takes them serialized and reads them with
+  :mod:`tmgwr_common.cdr`; the nodes publish the bytes that module writes.
 * :func:`run`: the Jazzy ``main()`` idiom (init, spin an executor (:func:`make_executor`), shutdown
   hook, destroy, try_shutdown), exiting 2 with the error when the node cannot start. SIGINT
   and SIGTERM (:class:`StopSignals`) only ask the loop to stop, so Ctrl-C ends every node
@@ -190,6 +192,17 @@ def i32(a) -> array.array:
 
 def u8(a) -> array.array:
     return array.array("B", np.ascontiguousarray(a, dtype=np.uint8).tobytes())
+
+
+def subscribe_decoded(node, msg_class, topic: str, callback: Callable[[Any], None], qos,
+                      **kwargs):
+    """Subscribe ``callback`` to ``topic`` as rclpy delivers serialized messages
+    (``raw=True``), handing it the fields read by :mod:`tmgwr_common.cdr` instead of an
+    rclpy message object (README, Benchmarks: the conversion costs more than the step)."""
+    from tmgwr_common.cdr import codec
+    decode = codec(msg_class).decode
+    return node.create_subscription(msg_class, topic, lambda data: callback(decode(data)),
+                                    qos, raw=True, **kwargs)
 
 
 def np_f64(a) -> np.ndarray:

@@ -23,6 +23,7 @@ from tmgwr_agent.core.action_selector import ActionSelector, SelectorConfig
 from tmgwr_agent.core.sensorimotor_map import Links
 from tmgwr_agent.nodes.step_messages import outcome_of
 from tmgwr_common import topics
+from tmgwr_common.cdr import codec
 from tmgwr_common.checkpoint import (
     CHECKPOINT_SPECS,
     Checkpoint,
@@ -36,13 +37,15 @@ from tmgwr_common.node import (
     NODE_OPTIONS,
     STEP_QOS,
     declare_parameters,
-    f64,
     np_f64,
     np_i64,
     run,
+    subscribe_decoded,
 )
 from tmgwr_common.params import Param
 from tmgwr_interfaces.msg import Action, MotivationField
+
+ACTION = codec(Action)                # the per-step messages go serialized (tmgwr_common.cdr)
 
 NODE_SPECS = (
     Param("seed", 0, "seed of the selector's generator (exploration and tie-breaks)",
@@ -60,8 +63,8 @@ class ActionSelectorNode(Node):
         self.prev_winner = -1               # the winner this selector last acted from
         pub = self.create_publisher(Action, topics.ACTION, STEP_QOS)
         self.lockstep = Lockstep(pub, logger=self.get_logger(), what="motivation field")
-        self.create_subscription(MotivationField, topics.MOTIVATION, self.on_motivation,
-                                 STEP_QOS)
+        subscribe_decoded(self, MotivationField, topics.MOTIVATION, self.on_motivation,
+                          STEP_QOS)
         # epsilon, the walk and the generator survive any stop (tmgwr_common.checkpoint)
         self.checkpoints = Checkpointer("action_selector", self.p, self.get_logger(),
                                         namespace=self.get_namespace())
@@ -70,13 +73,15 @@ class ActionSelectorNode(Node):
                                f"epsilon {self.core.policy.epsilon:.3f}, "
                                f"{config.as_dict()}")
 
-    def on_motivation(self, f: MotivationField):
+    def on_motivation(self, f):
+        """A MotivationField (its fields, read by tmgwr_common.cdr)."""
         self.lockstep.on_step(f.run_id, f.step_id, lambda: self.choose(f))
         self.checkpoints.step(self.lockstep.last_step, self.lockstep.run_id, self.checkpoint_state)
 
-    def choose(self, f: MotivationField) -> Action:
+    def choose(self, f) -> bytes:
+        """The Action answering field ``f``, serialized."""
         self.core.record(self.prev_winner, outcome_of(f))   # what TMGWRAgent.step does here
-        a = Action()
+        a = ACTION.new()
         a.header = f.header
         a.run_id = f.run_id
         a.step_id = f.step_id
@@ -105,10 +110,10 @@ class ActionSelectorNode(Node):
             action, a.explored = self.core.select(lambda _node: links, node, V, goal,
                                                   self.p["explore"])
             a.action = int(action)
-            a.motor = f64(ACTION_VECTORS[action])
+            a.motor = ACTION_VECTORS[action]
         self.prev_winner = int(f.winner)
         a.walk_next = bool(self.p["explore"] and self.core.policy.draw_ahead())
-        return a
+        return ACTION.encode(a)
 
     def checkpoint_state(self):
         state, arrays = split_state(self.core.state_dict())

@@ -81,6 +81,7 @@ from tmgwr_agent.map_store import (
 )
 from tmgwr_agent.nodes.step_messages import fill_change, outcome_of
 from tmgwr_common import topics
+from tmgwr_common.cdr import codec
 from tmgwr_common.checkpoint import CHECKPOINT_SPECS, Checkpoint, Checkpointer, CheckpointError
 from tmgwr_common.lifecycle import LIFECYCLE_SPECS, autostart, refuse_invalid_transitions
 from tmgwr_common.lockstep import Lockstep
@@ -93,6 +94,7 @@ from tmgwr_common.node import (
     f64,
     np_f64,
     run,
+    subscribe_decoded,
     wait_for_acknowledgments,
 )
 from tmgwr_common.params import Param
@@ -106,6 +108,9 @@ from tmgwr_interfaces.msg import (
 )
 from tmgwr_interfaces.msg import SensorimotorMap as MapMsg
 from tmgwr_interfaces.srv import LoadMap, SaveMap
+
+# the per-step state and the snapshots go serialized (tmgwr_common.cdr)
+STATE, SNAPSHOT = codec(SensorimotorState), codec(SensorimotorSnapshot)
 
 NODE_SPECS = (
     Param("map_dir", "", "directory of this learner's maps (empty = "
@@ -209,8 +214,8 @@ class MapLearnerNode(LifecycleNode):
         # subscribed from configure on, so that activate finds it matched (a subscription
         # created at activation took up to ~10 s to get the features in the composed
         # graph); features are dropped unless active (on_features)
-        self.features_sub = self.create_subscription(Features, topics.FEATURES,
-                                                     self.on_features, STEP_QOS)
+        self.features_sub = subscribe_decoded(self, Features, topics.FEATURES,
+                                              self.on_features, STEP_QOS)
         self.motivation_raw = None
         self.own_services = [self.create_service(SaveMap, topics.SAVE_MAP, self.on_save),
                          self.create_service(LoadMap, topics.LOAD_MAP, self.on_load)]
@@ -331,7 +336,8 @@ class MapLearnerNode(LifecycleNode):
         return text
 
     # ------------------------------------------------------------------ per step
-    def on_features(self, f: Features):
+    def on_features(self, f):
+        """A Features message (its fields, read by tmgwr_common.cdr)."""
         if not self.stepping:            # inactive: the ring waits, the simulator resends
             return
         dim = self.map.dim if self.map is not None else len(f.features) or -1
@@ -345,7 +351,7 @@ class MapLearnerNode(LifecycleNode):
         self.checkpoints.step(self.lockstep.last_step, self.lockstep.run_id,
                               self.checkpoint_state)
 
-    def learn(self, f: Features) -> SensorimotorState:
+    def learn(self, f) -> bytes:
         x = np_f64(f.features)
         if self.map is None:
             self.map = SensorimotorMap(dim=len(x), action_dim=ACTION_VECTORS.shape[1],
@@ -359,9 +365,10 @@ class MapLearnerNode(LifecycleNode):
             self.publish_snapshot()
         return state
 
-    def make_state(self, f: Features) -> SensorimotorState:
+    def make_state(self, f) -> bytes:
+        """The SensorimotorState of this step (Features ``f``), serialized."""
         m = self.map
-        s = SensorimotorState()
+        s = STATE.new()
         s.header = f.header
         s.run_id = f.run_id
         s.step_id = f.step_id
@@ -374,14 +381,14 @@ class MapLearnerNode(LifecycleNode):
         fill_change(s.map_change, self.changes().encode(m, f.run_id, f.step_id))
         s.action_dim = m.action_dim
         if m.winner >= 0:
-            s.winner_link_actions = f64(m.a[m.winner])
+            s.winner_link_actions = m.a[m.winner].ravel()
         s.goal_features = f.goal_features
         s.episode_start = f.episode_start
         s.action = f.action
         s.bumped = f.bumped
         s.goal_reached = f.goal_reached
         s.terminal = f.terminal
-        return s
+        return STATE.encode(s)
 
     def on_motivation(self, raw: bytes):
         self.motivation_raw = raw
@@ -408,11 +415,11 @@ class MapLearnerNode(LifecycleNode):
         if enc.sequence < 0:
             enc.encode(self.map, self.lockstep.run_id, max(self.lockstep.last_step, 0))
         c = enc.snapshot()
-        msg = SensorimotorSnapshot()
+        msg = SNAPSHOT.new()
         msg.header.stamp, msg.header.frame_id = self.get_clock().now().to_msg(), "maze"
         msg.run_id, msg.step_id, msg.map_version = c.run_id, max(c.step_id, 0), c.version
         fill_change(msg.map, c)
-        self.snapshot_pub.publish(msg)
+        self.snapshot_pub.publish(SNAPSHOT.encode(msg))
         return (f"map {c.map_id} state {c.sequence} (step {c.step_id} of run {c.run_id}): "
                 f"{c.n} slots")
 

@@ -45,6 +45,7 @@ from tmgwr_agent.core.sensorimotor_map import Links
 from tmgwr_agent.map_replica import APPLIED, GAP, Replica
 from tmgwr_agent.nodes.step_messages import change_of, outcome_of
 from tmgwr_common import topics
+from tmgwr_common.cdr import codec
 from tmgwr_common.checkpoint import (
     CHECKPOINT_SPECS,
     Checkpoint,
@@ -63,6 +64,7 @@ from tmgwr_common.node import (
     i32,
     np_f64,
     run,
+    subscribe_decoded,
 )
 from tmgwr_common.params import Param
 from tmgwr_interfaces.msg import (
@@ -73,6 +75,8 @@ from tmgwr_interfaces.msg import (
     SensorimotorState,
 )
 from tmgwr_interfaces.srv import SetGoal
+
+FIELD = codec(MotivationField)        # the per-step messages go serialized (tmgwr_common.cdr)
 
 NODE_SPECS = (
     Param("field_period", 100, "steps between two latched publications of every node's "
@@ -92,15 +96,17 @@ class MotivationEstimatorNode(Node):
         # the selector's last action (run, step, walk_next): when its draw for the next
         # action chose the random walk, Eq. 4-5 need not be solved for it
         self.heard: tuple[int, int, bool] | None = None
-        self.waiting: SensorimotorState | None = None   # a state awaiting that action
-        self.create_subscription(Action, topics.ACTION, self.on_action, STEP_QOS)
-        self.create_subscription(SensorimotorState, topics.SENSORIMOTOR_STATE, self.on_state,
-                                 STEP_QOS)
+        self.waiting = None                 # a state awaiting that action
+        # Action, SensorimotorState and SensorimotorSnapshot arrive as their fields (read by
+        # tmgwr_common.cdr from the serialized message), MotivationField leaves serialized
+        subscribe_decoded(self, Action, topics.ACTION, self.on_action, STEP_QOS)
+        subscribe_decoded(self, SensorimotorState, topics.SENSORIMOTOR_STATE, self.on_state,
+                          STEP_QOS)
         # the map of this step: a replica of the learner's, kept by its per-step changes
         self.replica = Replica()
-        self.held: SensorimotorState | None = None   # a state waiting for a whole map
-        self.create_subscription(SensorimotorSnapshot, topics.MAP_SNAPSHOT, self.on_snapshot,
-                                 LATCHED_QOS)
+        self.held = None                    # a state waiting for a whole map
+        subscribe_decoded(self, SensorimotorSnapshot, topics.MAP_SNAPSHOT, self.on_snapshot,
+                          LATCHED_QOS)
         self.snapshot_client = self.create_client(
             Trigger, topics.of_node(topics.LEARNER, topics.REQUEST_SNAPSHOT))
         self.asked = False                  # a snapshot request is under way
@@ -119,7 +125,7 @@ class MotivationEstimatorNode(Node):
         self.get_logger().info(f"motivation_estimator ready: {config.as_dict()}")
 
     # ------------------------------------------------------------------ per step
-    def on_action(self, a: Action):
+    def on_action(self, a):
         if self.heard is not None and (a.run_id, a.step_id) < self.heard[:2]:
             return                  # an older step answered again (a resend): not news
         self.heard = (a.run_id, a.step_id, a.walk_next)
@@ -128,7 +134,7 @@ class MotivationEstimatorNode(Node):
             self.waiting = None
             self.on_state(w)
 
-    def awaits_action(self, s: SensorimotorState) -> bool:
+    def awaits_action(self, s) -> bool:
         """Whether state ``s`` waits for the selector's action of the step before (this
         node computed that step, so the selector answered it: the action is on its way)."""
         if (s.run_id, s.step_id - 1) != (self.lockstep.run_id, self.lockstep.last_step) or (
@@ -144,7 +150,7 @@ class MotivationEstimatorNode(Node):
             return False
         return True
 
-    def on_state(self, s: SensorimotorState):
+    def on_state(self, s):
         resent = (s.run_id, s.step_id) == (self.lockstep.run_id, self.lockstep.last_step)
         if s.run_id and not resent and self.awaits_action(s):
             return                          # held until the previous step's action came
@@ -154,7 +160,7 @@ class MotivationEstimatorNode(Node):
         self.checkpoints.step(self.lockstep.last_step, self.lockstep.run_id,
                               lambda: split_state(self.core.state_dict()))
 
-    def follow(self, s: SensorimotorState) -> bool:
+    def follow(self, s) -> bool:
         """Bring the replica to the map of state ``s``; False (``s`` held, a whole map
         asked for) when its change does not follow the replica."""
         c = change_of(s)
@@ -176,7 +182,7 @@ class MotivationEstimatorNode(Node):
     def on_snapshot_answer(self, _future):
         self.asked = False
 
-    def on_snapshot(self, msg: SensorimotorSnapshot):
+    def on_snapshot(self, msg):
         c = change_of(msg)
         if self.replica.apply(c) == APPLIED:
             self.get_logger().info(f"map replica (re)synchronised: map {c.map_id} state "
@@ -186,7 +192,8 @@ class MotivationEstimatorNode(Node):
         if held is not None and self.replica.status(change_of(held)) != GAP:
             self.on_state(held)
 
-    def motivate(self, s: SensorimotorState) -> MotivationField:
+    def motivate(self, s) -> bytes:
+        """The MotivationField of state ``s``, serialized."""
         goal_x = np_f64(s.goal_features)
         if self.core.follow_goal(goal_x):       # a new goal: V restarts from 0 (Algorithm 1)
             self.get_logger().info(f"step {s.step_id}: goal sensation {goal_x.tolist()}")
@@ -197,7 +204,7 @@ class MotivationEstimatorNode(Node):
         heard = self.heard if self.heard and self.heard[:2] == (s.run_id, s.step_id - 1) \
             else None               # the selector's action of the step before
         V = self.core.update(m, skip=heard is not None and heard[2])
-        out = MotivationField()
+        out = FIELD.new()
         out.header = s.header
         out.run_id = s.run_id
         out.step_id = s.step_id
@@ -214,10 +221,10 @@ class MotivationEstimatorNode(Node):
                 potentials = self.core.V[links.targets]              # V[-1] = V[n] = 0
             else:                  # not solved: the next action walks
                 potentials = np.zeros(len(links.targets))
-            out.winner_link_targets = i32(links.targets)
-            out.winner_link_reliability = f64(links.E)
-            out.winner_link_potentials = f64(potentials)
-            out.winner_link_actions = f64(links.actions.ravel())
+            out.winner_link_targets = links.targets
+            out.winner_link_reliability = links.E
+            out.winner_link_potentials = potentials
+            out.winner_link_actions = links.actions.ravel()
         else:
             out.winner_link_actions = s.winner_link_actions
         out.episode_start = s.episode_start
@@ -227,9 +234,9 @@ class MotivationEstimatorNode(Node):
         out.terminal = s.terminal
         if s.step_id % self.p["field_period"] == 0 and V is not None:
             self.publish_potentials(s, V)
-        return out
+        return FIELD.encode(out)
 
-    def publish_potentials(self, s: SensorimotorState, V: np.ndarray) -> None:
+    def publish_potentials(self, s, V: np.ndarray) -> None:
         """Every node's potential, latched (for inspection: markers, report)."""
         p = Potentials()
         p.header = s.header

@@ -11,16 +11,19 @@ from rclpy.node import Node
 
 from tmgwr_agent.core.preprocessor import PreprocessorConfig, SensoryPreprocessor
 from tmgwr_common import topics
+from tmgwr_common.cdr import codec
 from tmgwr_common.lockstep import Lockstep
 from tmgwr_common.node import (
     NODE_OPTIONS,
     STEP_QOS,
     declare_parameters,
-    f64,
     np_f64,
     run,
+    subscribe_decoded,
 )
 from tmgwr_interfaces.msg import Features, Observation
+
+FEATURES = codec(Features)
 
 
 class SensoryPreprocessorNode(Node):
@@ -30,31 +33,21 @@ class SensoryPreprocessorNode(Node):
         self.core = SensoryPreprocessor(config)
         pub = self.create_publisher(Features, topics.FEATURES, STEP_QOS)
         self.lockstep = Lockstep(pub, logger=self.get_logger(), what="observation")
-        self.create_subscription(Observation, topics.OBSERVATION, self.on_observation,
-                                 STEP_QOS)
+        subscribe_decoded(self, Observation, topics.OBSERVATION, self.on_observation, STEP_QOS)
         self.get_logger().info(f"sensory_preprocessor ready: {config.as_dict()}")
 
-    def on_observation(self, m: Observation):
+    def on_observation(self, m):
         self.lockstep.on_step(m.run_id, m.step_id, lambda: self.features(m))
 
-    def features(self, m: Observation) -> Features:
+    def features(self, m) -> bytes:
+        """The Features of Observation ``m`` (fields read by tmgwr_common.cdr), serialized."""
         x = self.core(np_f64(m.sensors), episode_start=m.episode_start)
-        f = Features()
-        f.header = m.header
-        f.run_id = m.run_id
-        f.step_id = m.step_id
-        f.episode = m.episode
-        f.features = f64(x)
-        f.goal_features = f64(self.core.goal_features(np_f64(m.goal_sensors)))
-        f.gain = float(self.core.gain)
-        f.episode_start = m.episode_start
-        f.action = m.action
-        f.motor = m.motor
-        f.bumped = m.bumped
-        f.goal_reached = m.goal_reached
-        f.terminal = m.terminal
-        f.truncated = m.truncated
-        return f
+        return FEATURES.encode(FEATURES.new(
+            header=m.header, run_id=m.run_id, step_id=m.step_id, episode=m.episode,
+            features=x, goal_features=self.core.goal_features(np_f64(m.goal_sensors)),
+            gain=float(self.core.gain), episode_start=m.episode_start, action=m.action,
+            motor=m.motor, bumped=m.bumped, goal_reached=m.goal_reached,
+            terminal=m.terminal, truncated=m.truncated))
 
     def on_shutdown(self):
         print(f"sensory_preprocessor: {self.lockstep.timer.summary()}", flush=True)

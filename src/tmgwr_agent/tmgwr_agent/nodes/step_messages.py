@@ -14,7 +14,6 @@ from __future__ import annotations
 
 from tmgwr_agent.core.outcome import EPISODE_START, Outcome
 from tmgwr_agent.map_replica import MapChange
-from tmgwr_common.node import f64, i32, u8
 
 
 def outcome_of(msg) -> Outcome:
@@ -26,15 +25,17 @@ def outcome_of(msg) -> Outcome:
 
 
 def fill_change(msg, c: MapChange) -> None:
-    """Write ``c`` into a ``tmgwr_interfaces/MapChange`` message (one memcpy per array)."""
+    """Write ``c`` into the fields of a ``tmgwr_interfaces/MapChange`` (an object of
+    :mod:`tmgwr_common.cdr`, which takes numpy arrays and converts them to the wire's types
+    when it writes: slot ids and targets int32, flags uint8, rows flattened)."""
     msg.map_id, msg.base_sequence, msg.sequence = c.map_id, c.base, c.sequence
     msg.n_slots, msg.degree, msg.dim = c.n, c.degree, c.dim
-    msg.slots = i32(c.slots)
-    msg.alive = u8(c.alive)
-    msg.terminal_nodes = u8(c.terminal)
-    msg.weights = f64(c.w)
-    msg.link_targets = i32(c.out)
-    msg.link_reliability = f64(c.E)
+    msg.slots = c.slots
+    msg.alive = c.alive
+    msg.terminal_nodes = c.terminal
+    msg.weights = c.w.ravel()
+    msg.link_targets = c.out.ravel()
+    msg.link_reliability = c.E.ravel()
 
 
 def change_of(msg) -> MapChange:
