@@ -33,7 +33,15 @@ import argparse
 import sys
 from typing import Any, Callable
 
-from tmgwr_common.node import EXECUTORS, STOP, end_node, make_executor, params_files
+from tmgwr_common.node import (
+    EXECUTORS,
+    STOP,
+    end_node,
+    freeze_startup_objects,
+    make_executor,
+    params_files,
+    spin_until,
+)
 from tmgwr_common.params import ParamError, read_params_file
 
 NAME = "composed"
@@ -147,10 +155,10 @@ def run_composed(record: bool, executor_kind: str | None, args: list[str]) -> in
                  "EventsExecutor cannot run its raw subscriptions)" if aside else ""),
               flush=True)
         sim = nodes[-1][1]
+        freeze_startup_objects()
         try:
-            while rclpy.ok() and not stop.received and not any(
-                    getattr(n, "finished", False) for _, n in nodes):
-                executor.spin_once(timeout_sec=0.2)
+            finishing = [n for _, n in nodes if hasattr(n, "finished")]
+            spin_until(executor, lambda: stop.received or any(n.finished for n in finishing))
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
         finally:
