@@ -128,6 +128,7 @@ def test_the_checkpointer_writes_every_period_at_the_same_step_ids_and_resumes(t
         ck.step(step, 9, lambda s=step: (writes.append(s) or {"n": s}, {}))
     ck.step(300, 9, lambda: (writes.append(-1) or {}, {}))       # a resent step: once
     assert writes == [100, 200, 300]
+    ck.wait()                                   # period writes go to disk in the background
     again = Checkpointer("action_selector", params, log).resume()
     assert (again.step_id, again.run_id, again.state) == (300, 9, {"n": 300})
     # a refused checkpoint: the node starts fresh, says why, and never overwrites it
@@ -136,6 +137,26 @@ def test_the_checkpointer_writes_every_period_at_the_same_step_ids_and_resumes(t
     assert with_check is None and log.lines[-1][0] == "error"
     bad.step(400, 9, lambda: ({"n": 400}, {}))
     assert Checkpointer("action_selector", params, log).resume().step_id == 300
+
+
+def test_a_period_checkpoint_holds_its_step_and_reaches_the_disk_in_order(tmp_path):
+    # taken when its step is done, written in the background: the node changing its arrays
+    # right after does not change what is written, and a stop's checkpoint is the last one
+    params = {"checkpoint_dir": str(tmp_path), "checkpoint_period": 1, "resume": True}
+    ck = Checkpointer("action_selector", params, Log())
+    a = np.zeros(50_000)
+    for step in range(1, 30):
+        a[:] = step
+        ck.step(step, 9, lambda s=step: ({"n": s}, {"a": a}))
+        a[:] = -1
+    ck.wait()
+    got = Checkpointer("action_selector", params, Log()).resume()
+    assert (got.step_id, got.state["n"]) == (29, 29)
+    assert (got.arrays["a"] == 29).all()
+    ck.step(30, 9, lambda: ({"n": 30}, {"a": a}))
+    ck.stop(31, 9, lambda: ({"n": 31}, {"a": np.full(3, 31.0)}))     # waits for step 30's
+    got = Checkpointer("action_selector", params, Log()).resume()
+    assert (got.step_id, got.state["n"], got.arrays["a"].tolist()) == (31, 31, [31.0] * 3)
 
 
 def test_resume_finds_the_run_and_keeps_its_settings(tmp_path, monkeypatch):

@@ -302,8 +302,8 @@ class MapLearnerNode(LifecycleNode):
             if getattr(self, name, None) is not None:
                 self.destroy_subscription(getattr(self, name))
                 setattr(self, name, None)
-        if self.checkpoints is not None and self.checkpoints.store is not None:
-            self.checkpoints.store.close()
+        if self.checkpoints is not None:
+            self.checkpoints.close()
         if self.store is not None:
             self.store.close()
         self.map, self.store, self.checkpoints, self.lockstep = None, None, None, None
