@@ -512,6 +512,8 @@ class MazeSimNode(Node):
         self.goal_pub.publish(m)
 
     def publish_pose(self):
+        if not self.pose_pub.get_subscription_count():
+            return                          # a stream for viewers: nobody looks, nothing made
         m = PoseStamped()
         m.header.stamp = self.get_clock().now().to_msg()
         m.header.frame_id = FRAME

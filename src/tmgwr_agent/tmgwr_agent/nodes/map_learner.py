@@ -19,6 +19,9 @@ inspection and cost the map's size to build, so they take at most ``map_publish_
 the learner's wall time: after a publication that took ``t`` seconds the next one waits
 ``t / map_publish_share`` (and at least ``1 / publish_rate``). On a small map that is the
 rate; on a growing big map the inspection messages thin out instead of capping the steps.
+On the timer each of the two is built only while something subscribes to it (the
+recorder, RViz): a new subscriber gets the last one at once and a fresh one within
+``1 / publish_rate`` s. A map the learner starts from or loads is published at once.
 
 Persistence (:mod:`tmgwr_agent.map_store`; README, Maps on disk): maps live in one
 directory, ``map_dir`` (``./tmgwr up`` passes the run's directory; default
@@ -198,7 +201,7 @@ class MapLearnerNode(LifecycleNode):
         if ck is not None:
             self.map, last_step, run_id = self.map_of_checkpoint(ck), ck.step_id, ck.run_id
         self.V = np.zeros(0)
-        self.published = (-1, -1)        # (step, version) of the last latched snapshot
+        self.published = (-1, -1, ())    # (step, version, wanted) of the last /map, markers
 
         state_pub = self.create_lifecycle_publisher(SensorimotorState,
                                                     topics.SENSORIMOTOR_STATE, STEP_QOS)
@@ -234,9 +237,9 @@ class MapLearnerNode(LifecycleNode):
         super().on_activate(state)                   # the lifecycle publishers
         self.stepping = True
         self.map_timer = self.create_timer(1.0 / self.p["publish_rate"], self.publish_map)
-        self.published = (-1, -1)
+        self.published = (-1, -1, ())
         if self.map is not None:
-            self.publish_map()
+            self.publish_map(always=True)
         ls = self.lockstep
         self.get_logger().info(
             "active: stepping " + (f"on from step {ls.last_step} of run {ls.run_id}"
@@ -433,31 +436,42 @@ class MapLearnerNode(LifecycleNode):
         return resp
 
     # ------------------------------------------------------------------ latched map
-    def publish_map(self):
+    def publish_map(self, always: bool = False):
+        """The whole map on /map and /map_markers (latched). On the timer only for their
+        subscribers; ``always`` (a map started from or loaded): whoever subscribes later
+        gets it at once, before the ring moves on."""
         m = self.map
         if m is not None and self.encoder_of is not m:     # started from / loaded a map
             self.publish_snapshot()
         step = self.lockstep.last_step
-        if m is None or self.published == (step, m.version) and step >= 0:
+        # built only for a subscriber (the recorder, RViz, a test): they cost the map's
+        # size in the learner's step loop; a new subscriber gets one within 1/publish_rate s
+        wanted = (always or self.map_pub.get_subscription_count() > 0,
+                  always or self.marker_pub.get_subscription_count() > 0)
+        if m is None or not any(wanted) or self.published == (step, m.version, wanted) \
+                and step >= 0:
             return
-        if time.monotonic() < self.next_map_time:
+        if time.monotonic() < self.next_map_time and not always:
             return
         started = time.monotonic()
-        self.published = (step, m.version)
+        self.published = (step, m.version, wanted)
         stamp = self.get_clock().now().to_msg()
-        msg = MapMsg()
-        msg.header.stamp, msg.header.frame_id = stamp, "maze"
-        msg.map_version, msg.step_id = int(m.version), max(step, 0)
-        msg.run_id = self.lockstep.run_id
         ids = m.node_ids()
-        msg.nodes = [MapNode(id=int(i), weight=f64(m.w[i]), context=f64(m.c[i]),
-                             habituation=float(m.h[i]), terminal=bool(m.terminal[i]))
-                     for i in ids]
         src, tgt, act, E, age = m.links()
-        msg.links = [MapLink(source=int(s), target=int(t), action=f64(a), reliability=float(e),
-                             age=int(g)) for s, t, a, e, g in zip(src, tgt, act, E, age)]
-        self.map_pub.publish(msg)
-        self.marker_pub.publish(self.markers(stamp, ids, src, tgt, E))
+        if wanted[0]:
+            msg = MapMsg()
+            msg.header.stamp, msg.header.frame_id = stamp, "maze"
+            msg.map_version, msg.step_id = int(m.version), max(step, 0)
+            msg.run_id = self.lockstep.run_id
+            msg.nodes = [MapNode(id=int(i), weight=f64(m.w[i]), context=f64(m.c[i]),
+                                 habituation=float(m.h[i]), terminal=bool(m.terminal[i]))
+                         for i in ids]
+            msg.links = [MapLink(source=int(s), target=int(t), action=f64(a),
+                                 reliability=float(e), age=int(g))
+                         for s, t, a, e, g in zip(src, tgt, act, E, age)]
+            self.map_pub.publish(msg)
+        if wanted[1]:
+            self.marker_pub.publish(self.markers(stamp, ids, src, tgt, E))
         took = time.monotonic() - started
         self.next_map_time = started + took / self.p["map_publish_share"]
 
@@ -540,7 +554,7 @@ class MapLearnerNode(LifecycleNode):
         resp.message = (f"loaded {self.map.size} nodes, {self.map.link_count()} links from "
                         f"{self.store.path(req.name or self.p['map_name'])}")
         self.get_logger().info(resp.message)
-        self.publish_map()
+        self.publish_map(always=True)
         return resp
 
     def checkpoint_state(self):
