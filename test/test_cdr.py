@@ -130,3 +130,22 @@ def test_types_it_cannot_lay_out_are_refused_when_the_codec_is_made():
     for t in (MarkerArray, SensorimotorMap):            # sequences of messages
         with pytest.raises(TypeError, match="sequences of primitives"):
             Codec(t)
+
+
+def test_bytes_that_are_not_the_message_are_dropped_and_the_node_runs_on():
+    from tmgwr_common.node import decoded
+    got, said = [], []
+    handler = decoded(Features, got.append, said.append)
+    f = Features()
+    f.features = array.array("d", [1.0, 2.0])
+    data = serialize_message(f)
+    handler(data[:30])                          # cut short
+    handler(b"\x00\x01")                        # the encapsulation alone
+    assert got == [] and len(said) == 1 and "not a Features" in said[0]   # said once / 10 s
+    handler(b"\x00\x00" + data[2:])             # says big endian: rclpy reads it, refuses
+    assert got == []
+    handler(data)
+    assert len(got) == 1 and got[0].features.tolist() == [1.0, 2.0]
+    assert codec(Features).read(data).features.tolist() == [1.0, 2.0]
+    with pytest.raises(ValueError, match="not a Features"):
+        codec(Features).read(b"\x00\x00" + data[2:])

@@ -22,9 +22,11 @@ a message rclpy serialized reads back to the same values (``test/test_cdr.py``, 
 every type the nodes use). Padding bytes are zero here (Fast CDR leaves them as they
 were in its buffer; no reader looks at them).
 
-:meth:`Codec.decode` returns a light object (``__slots__``) with the message's field
-names: primitives as Python values, primitive sequences as read-only numpy arrays viewing
-the bytes, strings as ``str``, nested messages as such objects. :meth:`Codec.encode` takes
+:meth:`Codec.decode` (and :meth:`Codec.read`, which also takes other encapsulations
+through rclpy and refuses bytes that are not such a message) returns a light object
+(``__slots__``) with the message's field names: primitives as Python values, primitive
+sequences as read-only numpy arrays viewing the bytes, strings as ``str``, nested
+messages as such objects. :meth:`Codec.encode` takes
 any object with the field names (such an object, made by :meth:`Codec.new`, or a real
 message) and accepts numpy arrays, ``array.array`` or lists for sequences. Types this
 module cannot lay out (fixed-size arrays, bounded or wide strings, sequences of messages)
@@ -369,6 +371,22 @@ class Codec:
         #: new(**fields): an object with the message's defaults (nested objects made
         #: afresh), then ``fields``: what :meth:`encode` takes
         self.new = lay.env["new"]
+
+    def read(self, data: bytes):
+        """The fields of serialized message ``data``: :meth:`decode` for the little-endian
+        CDR that rmw_fastrtps writes on this machine; any other encapsulation (big endian,
+        XCDR2, from another host or middleware) is read by rclpy's own deserializer, whose
+        message has the same field names. Raises ValueError for bytes that do not hold
+        a message of this type."""
+        try:
+            if data[:2] == HEADER[:2]:
+                return self.decode(data)
+            from rclpy.serialization import deserialize_message
+            return deserialize_message(data, self.msg_class)
+        except (struct.error, UnicodeDecodeError, IndexError, ValueError,
+                RuntimeError) as exc:           # ValueError: numpy (an array past the
+            # end); RuntimeError: rclpy's RMWError (Fast CDR refused the bytes)
+            raise ValueError(f"not a {self.msg_class.__name__}: {exc}") from None
 
     def to_message(self, obj):
         """The rclpy message of ``obj`` (for tools and tests: costs what rclpy costs)."""

@@ -28,6 +28,7 @@
 from __future__ import annotations
 
 import array
+import math
 import sys
 import time
 from pathlib import Path
@@ -199,10 +200,31 @@ def subscribe_decoded(node, msg_class, topic: str, callback: Callable[[Any], Non
     """Subscribe ``callback`` to ``topic`` as rclpy delivers serialized messages
     (``raw=True``), handing it the fields read by :mod:`tmgwr_common.cdr` instead of an
     rclpy message object (README, Benchmarks: the conversion costs more than the step)."""
-    from tmgwr_common.cdr import codec
-    decode = codec(msg_class).decode
-    return node.create_subscription(msg_class, topic, lambda data: callback(decode(data)),
+    return node.create_subscription(msg_class, topic,
+                                    decoded(msg_class, callback, node.get_logger().warning),
                                     qos, raw=True, **kwargs)
+
+
+def decoded(msg_class, callback: Callable[[Any], None],
+            warn: Callable[[str], None]) -> Callable[[bytes], None]:
+    """The raw callback of :func:`subscribe_decoded`: ``callback(fields)`` for each
+    serialized message; bytes that are not a ``msg_class`` (a publisher of another layout
+    under the same type name) are dropped, said at most every 10 s, and the node runs on."""
+    from tmgwr_common.cdr import codec
+    read = codec(msg_class).read
+    said = [-math.inf]
+
+    def handler(data: bytes) -> None:
+        try:
+            fields = read(data)
+        except ValueError as exc:
+            now = time.monotonic()
+            if now - said[0] >= 10.0:
+                said[0] = now
+                warn(f"dropped {len(data)} bytes on a {msg_class.__name__} topic: {exc}")
+            return
+        callback(fields)
+    return handler
 
 
 def np_f64(a) -> np.ndarray:
