@@ -82,6 +82,20 @@ def test_links_age_and_stale_links_are_deleted():
     assert m.alive[1]                                    # the current winner stays
 
 
+def test_a_terminal_node_left_without_links_is_kept():
+    """The same ageing with node 2 flagged terminal (an episode ended there): its link
+    ages out as before, but the node, the map's memory that the cell ends episodes, stays
+    (node 0, an ordinary one, is removed)."""
+    m = chain_map(max_age=3)
+    m.mark_terminal(2)
+    m.begin_episode()
+    m.step(np.array([0.0, 0.1]), None)
+    for _ in range(4):
+        m.step(np.array([0.0, 0.1]), ACTION_VECTORS[UP])
+    assert not (m.out[1] >= 0).any()                     # 1 -> 2 aged out
+    assert m.alive[2] and m.terminal[2] and not m.alive[0]
+
+
 # ---------------------------------------------------------------- GWR + Merge-GNG
 def test_context_is_merge_gng_blend_of_previous_winner():
     m = SensorimotorMap(dim=2, config=MapConfig(beta_c=0.25, alpha_c=0.5))

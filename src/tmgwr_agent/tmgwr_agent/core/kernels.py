@@ -708,21 +708,21 @@ def match(w, c, h, alive, out, n, prev, x, C, alpha_c, beta_c, a_T, h_T, learn, 
 
 
 @njit(cache=True)
-def link_step(out, E, A, age, alive, n, i, j, a, alpha, sigma_a, eta_a, E_init, E_min,
-              max_age, credit, keep1, keep2):
+def link_step(out, E, A, age, alive, terminal, n, i, j, a, alpha, sigma_a, eta_a, E_init,
+              E_min, max_age, credit, keep1, keep2):
     """The link stage of one transition i -> j (sensorimotor_map.py): returns -1, having
     changed nothing, when i -> j would be a new link and row i has no free slot (the
     caller widens the rows and calls again); else :func:`update_links`, then GWR's removal
     of the end nodes of deleted links that are left without any link (never ``keep1`` or
-    ``keep2``), and returns the number of structural changes: 1 when a link was created
-    or deleted, plus one per node removed."""
+    ``keep2``, nor a node flagged ``terminal``), and returns the number of structural
+    changes: 1 when a link was created or deleted, plus one per node removed."""
     if needs_wider_rows(out, i, j):
         return -1
     created, ends = update_links(out, E, A, age, n, i, j, a, alpha, sigma_a, eta_a, E_init,
                                  E_min, max_age, credit)
     changes = 1 if created or len(ends) else 0
     for k in ends:
-        if k == keep1 or k == keep2 or not alive[k]:
+        if k == keep1 or k == keep2 or not alive[k] or terminal[k]:
             continue
         linked = False
         for s in range(out.shape[1]):

@@ -43,8 +43,14 @@ Link rules (an open question; README, Interpretation choices):
 As in GWR, every link incident to the previous winner (in or out) ages by one per step
 and the traversed link's age restarts at 0; links older than ``max_age``, and links whose
 reliability fell below ``E_min``, are deleted; nodes left with no link (in or out) are
-removed, which clears nodes that stopped winning. Neighbours for adaptation are the nodes
-linked to the winner in either direction.
+removed, which clears nodes that stopped winning; except a node flagged terminal (an
+episode ended there, :meth:`SensorimotorMap.mark_terminal`): that the cell ends episodes is
+knowledge the agent can only regain by losing an episode there, and a goal that moved away
+keeps ending them in the goal-change scenario while the agent stops visiting it, so its
+links age out (without the exception the old goal's node went, the cell looked like
+unknown space, and Eq. 5' sent the agent into it: one episode lost in 4 of 5 trials of a
+suite maze). Neighbours for adaptation are the nodes linked to the winner in either
+direction.
 
 Storage is fixed-width adjacency (``out[i, :K]`` target ids, -1 = empty slot) so that value
 iteration over the map is a few vectorised numpy operations. Node ids are slot indices; a
@@ -330,9 +336,9 @@ class SensorimotorMap:
         previous and current winner; :func:`kernels.link_step`)."""
         for _ in range(2):      # again once the rows are wider, when a new link needs it
             changes = kernels.link_step(
-                self.out, self.E, self.a, self.age, self.alive, self.n, i, j, a, self.alpha,
-                self.sigma_a, self.eta_a, self.E_init, self.E_min, self.max_age,
-                self.link_rule == "credit", self.prev, self.winner)
+                self.out, self.E, self.a, self.age, self.alive, self.terminal, self.n, i, j,
+                a, self.alpha, self.sigma_a, self.eta_a, self.E_init, self.E_min,
+                self.max_age, self.link_rule == "credit", self.prev, self.winner)
             if changes >= 0:
                 self.version += changes
                 return
