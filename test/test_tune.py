@@ -16,11 +16,13 @@ from maze_sim.suite import generate
 from tmgwr_agent.experiments.agent_factory import make_agent
 from tmgwr_agent.experiments.parallel import trial_seeds
 from tmgwr_agent.experiments.tune import (
+    OPEN_WITHIN,
     PENALTY,
     SEARCH,
     Task,
     block_run,
     load_tuned,
+    open_run,
     score,
     search_space,
     tasks,
@@ -28,7 +30,7 @@ from tmgwr_agent.experiments.tune import (
 )
 from tmgwr_common.params import ParamError, check_params_file, params_for, read_params_file
 
-SPLIT = ["--suite", "blocking:1,open:1", "--seeds", "1"]
+SPLIT = ["--suite", "blocking:1,open:1", "--open-suite", "shortcut:1", "--seeds", "1"]
 
 
 def tune(tmp_path, *args, check=True):
@@ -62,6 +64,9 @@ def test_two_workers_share_one_journal_study_and_the_file_loads(tmp_path):
     held = summary["held_out"]
     assert held["first"] == 1 and held["mazes"] == ["blocking-01", "open-01"]
     assert set(held) >= {"tuned", "defaults", "tuned_wins"}
+    assert held["open_suite"] == "shortcut:1" and held["tuned"]["open_runs"] == 1
+    assert summary["objective"]["open_suite"] == "shortcut:1"
+    assert all(h["open_found"] is not None for h in summary["history"])
 
     # the parameter file: ROS 2 layout, the baseline's own section, every searched name
     entries = read_params_file(tmp_path / "best.yaml")
@@ -131,6 +136,33 @@ def test_objective_by_hand():
     assert s["per_maze"] == {"m1": 4.0, "m2": 1.0}
     assert s["failed_runs"] == 2 and s["runs"] == 6 and s["worst_ratio"] == 50.0
     assert s["objective"] == pytest.approx(math.sqrt(4.0 * 1.0) + PENALTY * 2 / 6)
+    assert s["open_found"] is None
+    # with an opening: found within the cap in 1 of its 3 runs (one run's training failed)
+    o = Task("o1", "g", "", "b", 8, 30.0, "open")
+    opened = [{"episodes": 4, "train_episodes": 2}, {"episodes": None, "train_episodes": 2},
+              {"episodes": None, "train_episodes": None}]
+    s = score(tasks + [o], runs + [opened], open_weight=1.5)
+    assert s["per_maze"] == {"m1": 4.0, "m2": 1.0}
+    assert s["failed_runs"] == 3 and s["runs"] == 9
+    assert s["open_found"] == pytest.approx(1 / 3) and s["open_per_maze"] == {"o1": 1 / 3}
+    assert s["objective"] == pytest.approx(2.0 + PENALTY * 3 / 9 + 1.5 * 2 / 3)
+
+
+@pytest.mark.slow
+def test_opening_runs_are_the_experiment_runs(tmp_path):
+    """open_run is env_change.trial with step 4 capped at OPEN_WITHIN episodes: found
+    exactly when `experiment env-change --event open` reports the greedy path on the
+    shortcut within that many episodes."""
+    out = tmp_path / "open.json"
+    cli("experiment", "env-change", "--suite", "shortcut:2", "--event", "open", "--agents",
+        "tmgwr", "--trials", "2", "--jobs", "1", "--json", out, "--quiet")
+    mazes = json.loads(out.read_text())["suite"]["mazes"]
+    task_list, _ = tasks("shortcut:2", 0, 0, "open")
+    for task, m in zip(task_list, mazes, strict=True):
+        runs = [open_run("tmgwr", {}, task, s) for s in trial_seeds(0, 2)]
+        expected = [e if e is not None and e <= OPEN_WITHIN else None
+                    for e in m["agents"]["tmgwr"]["episodes_to_optimal"]["values"]]
+        assert [r["episodes"] for r in runs] == expected
 
 
 @pytest.mark.parametrize("args, message", [
@@ -138,6 +170,8 @@ def test_objective_by_hand():
     (["tune", "dyna_q_plus", "--space", "kapa"], "did you mean 'kappa'"),
     (["tune", "q_learning", "--space", "gamma=0.5:1.5"], "leaves its declared range"),
     (["tune", "q_learning", "--suite", "shortcut:1"], "no maze with a block event"),
+    (["tune", "q_learning", "--open-suite", "blocking:1"], "no maze with an opening"),
+    (["tune", "q_learning", "--open-weight", "-1"], "--open-weight must be >= 0"),
     (["tune", "q_learning", "--storage", "nosuchdb://x/y"], "cannot open the RDB storage"),
 ])
 def test_bad_requests_exit_2_with_a_clear_message(args, message):

@@ -119,8 +119,10 @@ def register(subparsers) -> None:
         description="Optuna TPE over the parameters tune.SEARCH lists for AGENT (--list "
                     "shows them), minimising the geometric mean over the training mazes of "
                     "steps / oracle of the first episode after the block, plus a penalty "
-                    "for failed runs (README, Tuning). Writes the best parameters as a ROS 2 "
-                    "parameter file and a JSON summary.")
+                    "for failed runs, plus --open-weight x the share of openings whose "
+                    "shortcut the greedy path does not use within 10 episodes (README, "
+                    "Tuning). Writes the best parameters as a ROS 2 parameter file and a "
+                    "JSON summary.")
     t.add_argument("agent", metavar="AGENT",
                    help="tmgwr (with options, e.g. tmgwr:credit), q_learning, model_based "
                         "or dyna_q_plus")
@@ -136,6 +138,13 @@ def register(subparsers) -> None:
     t.add_argument("--suite", default=None, metavar="SPEC",
                    help="training split (default: tune.TRAIN_SUITE, small mazes of the "
                         "families with a block)")
+    t.add_argument("--open-suite", default=None, metavar="SPEC",
+                   help="the openings of the training split (default: "
+                        "tune.TRAIN_OPEN_SUITE, the same indices of the families with an "
+                        "opening)")
+    t.add_argument("--open-weight", type=float, default=1.0,
+                   help="weight of the share of openings missed (default 1; 0: blocks "
+                        "only)")
     t.add_argument("--suite-seed", type=int, default=0, help="seed of the mazes (default 0)")
     t.add_argument("--suite-first", type=int, default=0,
                    help="first maze index of each family (default 0)")
@@ -157,6 +166,8 @@ def register(subparsers) -> None:
                    help="then run the tuned values and the defaults on a held-out split")
     t.add_argument("--eval-suite", default=None, metavar="SPEC",
                    help="held-out families (default: those of --suite)")
+    t.add_argument("--eval-open-suite", default=None, metavar="SPEC",
+                   help="held-out openings (default: the families of --open-suite)")
     t.add_argument("--eval-first", type=int, default=None,
                    help="first held-out index of each family (default: after the "
                         "training mazes)")
@@ -247,8 +258,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 def cmd_tune(args: argparse.Namespace) -> int:
     from tmgwr_agent.experiments.scenarios import UsageError
-    from tmgwr_agent.experiments.tune import TRAIN_SUITE, run
+    from tmgwr_agent.experiments.tune import TRAIN_OPEN_SUITE, TRAIN_SUITE, run
     args.suite = args.suite or TRAIN_SUITE
+    args.open_suite = args.open_suite or TRAIN_OPEN_SUITE
     try:
         return run(args)
     except UsageError as exc:

@@ -100,9 +100,11 @@ def oracle_steps(maze: Maze, event: str, goal: str = "G") -> int:
 
 def trial(spec: str, t: int, seed: np.random.SeedSequence, maze: str | Maze, event: str,
           goal: str, overrides: Mapping[str, Any] | None = None, *,
-          to_optimal: bool = True) -> dict:
+          to_optimal: bool = True, within: int | None = None) -> dict:
     """Steps 1-4 for one agent and trial (``maze``: a file or a Maze); ``to_optimal``
-    False stops after step 3 (``episodes_to_optimal`` is then ``None``)."""
+    False stops after step 3 (``episodes_to_optimal`` is then ``None``); ``within`` caps
+    step 4 at that many episodes (``None`` beyond them; default the caps of
+    :class:`.runner.Caps`)."""
     maze = maze if isinstance(maze, Maze) else Maze.from_file(maze)
     caps = Caps.for_maze(maze)
     world = make_world(maze, goal, caps)
@@ -120,7 +122,8 @@ def trial(spec: str, t: int, seed: np.random.SeedSequence, maze: str | Maze, eve
             if greedy_optimal(world, agent, d_new):
                 episodes = n
                 break
-            if n >= caps.max_episodes or used >= caps.budget_steps:
+            if n >= min(caps.max_episodes, within or caps.max_episodes) \
+                    or used >= caps.budget_steps:
                 break
             e = run_episode(world, agent)
             n += 1

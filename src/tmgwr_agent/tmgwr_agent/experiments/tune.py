@@ -9,22 +9,31 @@ Objective (minimised), on a *training split* of the generated suite
 (:func:`maze_sim.suite.suite`, ``--suite SPEC --suite-seed K --suite-first I``; default
 :data:`TRAIN_SUITE`, the families with a block event and small mazes): for every maze and
 each of ``--seeds`` trial seeds (``SeedSequence(--seed).spawn``, the same for every
-Optuna trial: common random numbers), one *run* is steps 1-3 of the env-change protocol
-(:func:`.env_change.trial` itself, ``to_optimal=False``): train to convergence on G, fire
-the maze's block event, count the steps of the first episode until G. A run's ratio is
-steps / ``oracle_steps``; a run *fails* when training did not converge within the caps
-or the episode hit its step cap (:class:`.runner.Caps`); a failed episode's ratio is the
-cap's (``episode_steps / oracle_steps``). Then::
+Optuna trial: common random numbers), one *block run* is steps 1-3 of the env-change
+protocol (:func:`.env_change.trial` itself, ``to_optimal=False``): train to convergence
+on G, fire the maze's block event, count the steps of the first episode until G. A run's
+ratio is steps / ``oracle_steps``; a run *fails* when training did not converge within the
+caps or the episode hit its step cap (:class:`.runner.Caps`); a failed episode's ratio is
+the cap's (``episode_steps / oracle_steps``). The *openings* of ``--open-suite`` (default
+:data:`TRAIN_OPEN_SUITE`, the same indices of the families with an opening) add one
+*opening run* per maze and seed: the same trial with the maze's opening, step 4 capped at
+:data:`OPEN_WITHIN` episodes (``env_change.trial(..., within=10)``); it is *missed* when the
+greedy path does not use the shortcut by then. Then::
 
-    objective = geometric mean over mazes (median over seeds of the ratio)
+    objective = geometric mean over block mazes (median over seeds of the ratio)
                 + PENALTY * (failed runs / runs)
+                + open_weight * (missed opening runs / opening runs)
 
 The median over seeds is robust to one odd run. Over mazes the geometric mean, not the
 median: every maze counts (a median of 16 mazes ignores what happens on the hardest
 half, where the agents differ most), yet a maze 100 x the oracle weighs log(100), not
 100. The penalty (:data:`PENALTY` = 10 oracle ratios spread over the runs) makes a setting
-that fails anywhere worse than one that does not. The summary also reports the median
-over mazes.
+that fails anywhere worse than one that does not. ``--open-weight`` (default 1: every
+tenth of the openings missed weighs as much as a tenth of the oracle on every block; 0:
+blocks only, the objective before openings were scored) prices the two events against
+each other: finding a shortcut costs re-tests, and a re-test costs steps in every
+episode, the block's too. The summary also reports the median over mazes and the
+fraction of openings found.
 
 Search space, one place per fact: *which* parameters an agent tunes and the interval
 searched are :data:`SEARCH` (a parameter's default, type and valid range stay its
@@ -100,6 +109,11 @@ from tmgwr_common.params import (
 GOAL = "G"
 #: Training split: the families with a block event, small mazes (``large`` costs minutes).
 TRAIN_SUITE = "braided:4,rooms:4,open:4,blocking:4"
+#: ... and the families with an opening (``--open-suite``).
+TRAIN_OPEN_SUITE = "shortcut:4,braided:4,rooms:4,open:4"
+#: An opening run counts as found when the greedy path uses the shortcut within this many
+#: episodes after it opened (issue 9's measure).
+OPEN_WITHIN = 10
 #: Weight of the fraction of failed runs in the objective (in oracle-ratio units).
 PENALTY = 10.0
 #: Where results go by default (``results/`` is not committed).
@@ -269,7 +283,8 @@ def describe_space(agent: str, space: Mapping[str, Interval] | None = None) -> s
 # ------------------------------------------------------------------------- the runs
 @dataclass(frozen=True)
 class Task:
-    """One maze of a split and its block event."""
+    """One maze of a split and its event: a block (``oracle``: its oracle steps) or an
+    opening (``kind`` "open"; ``oracle``: the new shortest path)."""
 
     name: str
     family: str
@@ -277,25 +292,36 @@ class Task:
     event: str
     oracle: int
     cap_ratio: float           # a failed episode's ratio: episode_steps / oracle
+    kind: str = "block"
 
     @classmethod
-    def of(cls, sm) -> "Task":
+    def of(cls, sm, kind: str = "block") -> "Task":
         maze = sm.maze()
+        if kind == "open":
+            d = maze.shortest_path_length(maze.start, maze.goal_cell(GOAL),
+                                          walls=maze.walls_after([sm.open_event]))
+            return cls(sm.name, sm.family, sm.text, sm.open_event, d,
+                       Caps.for_maze(maze).episode_steps / d, kind)
         oracle = oracle_steps(maze, sm.block_event, GOAL)
         return cls(sm.name, sm.family, sm.text, sm.block_event, oracle,
                    Caps.for_maze(maze).episode_steps / oracle)
 
 
-def tasks(spec: str, suite_seed: int, first: int) -> tuple[list[Task], list[str]]:
-    """The mazes of a split with a block event, and the names of those without one."""
+def tasks(spec: str, suite_seed: int, first: int, kind: str = "block"
+          ) -> tuple[list[Task], list[str]]:
+    """The mazes of a split with a block event (``kind`` "open": an opening), and the
+    names of those without one."""
     try:
         mazes = suite(spec, suite_seed, first)
     except SuiteError as exc:
         raise UsageError(str(exc)) from exc
-    todo = [Task.of(sm) for sm in mazes if sm.block_event]
-    skipped = [sm.name for sm in mazes if not sm.block_event]
+    event = (lambda sm: sm.open_event) if kind == "open" else (lambda sm: sm.block_event)
+    todo = [Task.of(sm, kind) for sm in mazes if event(sm)]
+    skipped = [sm.name for sm in mazes if not event(sm)]
     if not todo:
-        raise UsageError(f"suite {spec!r} has no maze with a block event "
+        raise UsageError(f"suite {spec!r} has no maze with an opening (blocking mazes "
+                         "have none)" if kind == "open" else
+                         f"suite {spec!r} has no maze with a block event "
                          "(shortcut mazes have none)")
     return todo, skipped
 
@@ -310,10 +336,40 @@ def block_run(agent: str, overrides: Mapping[str, Any], task: Task,
     return {"steps": r["steps"], "train_episodes": r["train_episodes"]}
 
 
-def score(task_list: Sequence[Task], runs: Sequence[Sequence[dict]]) -> dict:
-    """The objective of runs[m][s] (maze m, seed s), with what it is made of."""
+def open_run(agent: str, overrides: Mapping[str, Any], task: Task,
+             seed: np.random.SeedSequence) -> dict:
+    """The env-change protocol with the maze's opening, step 4 capped at
+    :data:`OPEN_WITHIN` episodes: the episodes until the greedy path uses the shortcut
+    (``None``: not within the cap)."""
+    maze = Maze.from_text(task.text, source=task.name)
+    r = env_change.trial(agent, 0, seed, maze, task.event, GOAL, overrides,
+                         within=OPEN_WITHIN)
+    return {"episodes": r["episodes_to_optimal"], "train_episodes": r["train_episodes"]}
+
+
+def run_task(agent: str, overrides: Mapping[str, Any], task: Task,
+             seed: np.random.SeedSequence) -> dict:
+    """:func:`block_run` or :func:`open_run`, by the task's kind."""
+    return (open_run if task.kind == "open" else block_run)(agent, overrides, task, seed)
+
+
+def score(task_list: Sequence[Task], runs: Sequence[Sequence[dict]],
+          open_weight: float = 0.0) -> dict:
+    """The objective of runs[m][s] (maze m, seed s; block and opening tasks in any order),
+    with what it is made of."""
     per_maze, failed, total, worst = [], 0, 0, 0.0
+    found, opened, open_per_maze = 0, 0, {}
+    blocks = [(t, rs) for t, rs in zip(task_list, runs) if t.kind == "block"]
     for task, rs in zip(task_list, runs):
+        if task.kind != "open":
+            continue
+        hits = [r["episodes"] is not None for r in rs]
+        found += sum(hits)
+        opened += len(hits)
+        failed += sum(r["train_episodes"] is None for r in rs)
+        total += len(rs)
+        open_per_maze[task.name] = sum(hits) / len(hits)
+    for task, rs in blocks:
         ratios = []
         for r in rs:
             ok = r["steps"] is not None
@@ -324,22 +380,26 @@ def score(task_list: Sequence[Task], runs: Sequence[Sequence[dict]]) -> dict:
             worst = max(worst, ratio)
         per_maze.append(statistics.median(ratios))
     geo = math.exp(statistics.fmean(math.log(m) for m in per_maze))
-    return {"objective": geo + PENALTY * failed / total, "geo_mean_ratio": geo,
-            "median_ratio": statistics.median(per_maze), "failed_runs": failed,
-            "runs": total, "worst_ratio": worst,
-            "per_maze": {t.name: m for t, m in zip(task_list, per_maze)}}
+    missed = (opened - found) / opened if opened else 0.0
+    return {"objective": geo + PENALTY * failed / total + open_weight * missed,
+            "geo_mean_ratio": geo, "median_ratio": statistics.median(per_maze),
+            "failed_runs": failed, "runs": total, "worst_ratio": worst,
+            "per_maze": {t.name: m for (t, _), m in zip(blocks, per_maze)},
+            "open_found": found / opened if opened else None, "open_runs": opened,
+            "open_per_maze": open_per_maze}
 
 
 def evaluate(agent: str, overrides: Mapping[str, Any], task_list: Sequence[Task],
              seeds: Sequence[np.random.SeedSequence], jobs: int = 1,
-             progress: bool = False, desc: str = "runs") -> dict:
+             progress: bool = False, desc: str = "runs", open_weight: float = 0.0) -> dict:
     """:func:`score` of ``agent`` with ``overrides`` on every task and seed (``jobs`` > 1:
     the experiments' process pool, :func:`.parallel.run_items`)."""
     items = [(agent, dict(overrides), t, s) for t in task_list for s in seeds]
-    flat = (run_items(block_run, items, jobs, desc, progress) if jobs > 1 else
-            [block_run(*item) for item in items])
+    flat = (run_items(run_task, items, jobs, desc, progress) if jobs > 1 else
+            [run_task(*item) for item in items])
     n = len(seeds)
-    return score(task_list, [flat[i * n:(i + 1) * n] for i in range(len(task_list))])
+    return score(task_list, [flat[i * n:(i + 1) * n] for i in range(len(task_list))],
+                 open_weight)
 
 
 # ------------------------------------------------------------------------- storage
@@ -380,6 +440,15 @@ class Setup:
     seed: int
     penalty: float
     space: tuple[tuple, ...]      # (name, low, high, log, integer) per searched parameter
+    open_suite: str = ""          # the openings' split ("": none)
+    open_weight: float = 0.0
+
+    def task_list(self) -> list[Task]:
+        """The block tasks, then the opening tasks, of the training split."""
+        todo, _ = tasks(self.suite, self.suite_seed, self.suite_first)
+        if self.open_suite:
+            todo += tasks(self.open_suite, self.suite_seed, self.suite_first, "open")[0]
+        return todo
 
     def dims(self) -> list[Dim]:
         declared = {p.name: p for p in agent_specs(self.agent)}
@@ -397,8 +466,9 @@ def _objective(setup: Setup, task_list: list[Task], worker: str):
         # an invalid combination (ParamError) fails the trial before any run
         make_agent(setup.agent, Maze.from_text(task_list[0].text), np.random.default_rng(0),
                    params)
-        s = evaluate(setup.agent, params, task_list, seeds)
-        for key in ("geo_mean_ratio", "median_ratio", "failed_runs", "worst_ratio"):
+        s = evaluate(setup.agent, params, task_list, seeds, open_weight=setup.open_weight)
+        for key in ("geo_mean_ratio", "median_ratio", "failed_runs", "worst_ratio",
+                    "open_found"):
             trial.set_user_attr(key, s[key])
         return s["objective"]
 
@@ -414,7 +484,7 @@ def _worker(storage: str, study_name: str, setup: Setup, n_trials: int, budget: 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     if parse_agent(setup.agent)[0] == "tmgwr":
         warm_up()
-    task_list, _ = tasks(setup.suite, setup.suite_seed, setup.suite_first)
+    task_list = setup.task_list()
     seed = int(np.random.SeedSequence([setup.seed, index]).generate_state(1)[0])
     study = optuna.load_study(study_name=study_name, storage=open_storage(storage),
                               sampler=optuna.samplers.TPESampler(seed=seed))
@@ -604,7 +674,8 @@ def _trial_row(t) -> dict:
             "params": t.params, "worker": t.user_attrs.get("worker"),
             "defaults": bool(t.user_attrs.get("defaults")),
             **{k: t.user_attrs.get(k) for k in ("geo_mean_ratio", "median_ratio",
-                                                "failed_runs", "worst_ratio")}}
+                                                "failed_runs", "worst_ratio",
+                                                "open_found")}}
 
 
 def _table(held: dict) -> str:
@@ -617,27 +688,35 @@ def _table(held: dict) -> str:
         lines.append(f"  {m:<14} {held['oracle'][m]:>6} {t['per_maze'][m]:>8.2f} "
                      f"{d['per_maze'][m]:>8.2f}")
     for label, s in (("tuned", t), ("defaults", d)):
+        found = ("" if s["open_found"] is None else
+                 f", openings found within {OPEN_WITHIN} episodes {s['open_found']:.0%}")
         lines.append(f"  {label}: geometric mean ratio {s['geo_mean_ratio']:.2f}, median "
                      f"{s['median_ratio']:.2f}, objective "
                      f"{s['objective']:.2f}, failed runs {s['failed_runs']}/{s['runs']}, "
-                     f"worst {s['worst_ratio']:.1f}")
+                     f"worst {s['worst_ratio']:.1f}{found}")
     lines.append(f"  tuned better on {held['tuned_wins']:.0%} of the mazes, worse on "
                  f"{held['tuned_losses']:.0%}")
     return "\n".join(lines)
 
 
 def held_out(agent: str, params: Mapping[str, Any], spec: str, suite_seed: int,
-             first: int, trials: int, seed: int, jobs: int, progress: bool) -> dict:
-    """The tuned parameters and the defaults on a held-out split (same runs as tuning)."""
+             first: int, trials: int, seed: int, jobs: int, progress: bool,
+             open_spec: str = "", open_weight: float = 0.0) -> dict:
+    """The tuned parameters and the defaults on a held-out split (same runs as tuning;
+    ``open_spec``: its openings)."""
     task_list, skipped = tasks(spec, suite_seed, first)
-    seeds = trial_seeds(seed, trials)
-    res = {label: evaluate(agent, p, task_list, seeds, jobs, progress, f"held-out {label}")
-           for label, p in (("tuned", params), ("defaults", {}))}
     names = [t.name for t in task_list]
+    if open_spec:
+        task_list += tasks(open_spec, suite_seed, first, "open")[0]
+    seeds = trial_seeds(seed, trials)
+    res = {label: evaluate(agent, p, task_list, seeds, jobs, progress, f"held-out {label}",
+                           open_weight)
+           for label, p in (("tuned", params), ("defaults", {}))}
     t, d = res["tuned"]["per_maze"], res["defaults"]["per_maze"]
-    return {"suite": spec, "suite_seed": suite_seed, "first": first, "trials": trials,
+    return {"suite": spec, "open_suite": open_spec, "suite_seed": suite_seed,
+            "first": first, "trials": trials,
             "seed": seed, "mazes": names, "skipped": skipped,
-            "oracle": {x.name: x.oracle for x in task_list}, **res,
+            "oracle": {x.name: x.oracle for x in task_list if x.kind == "block"}, **res,
             "tuned_wins": sum(t[m] < d[m] for m in names) / len(names),
             "tuned_losses": sum(t[m] > d[m] for m in names) / len(names)}
 
@@ -663,14 +742,20 @@ def run(args) -> int:
         raise UsageError("--suite-seed and --suite-first must be >= 0")
     study_name = args.study or args.agent.replace(":", "-").replace("+", "-")
     storage = args.storage or str(RESULTS / "optuna.journal")
-    task_list, skipped = tasks(args.suite, args.suite_seed, args.suite_first)
+    if args.open_weight < 0:
+        raise UsageError("--open-weight must be >= 0")
+    open_suite = args.open_suite if args.open_weight > 0 else ""
     setup = Setup(args.agent, args.suite, args.suite_seed, args.suite_first, args.seeds,
                   args.seed, PENALTY,
-                  tuple((d.name, d.low, d.high, d.log, d.integer) for d in dims))
+                  tuple((d.name, d.low, d.high, d.log, d.integer) for d in dims),
+                  open_suite, args.open_weight if open_suite else 0.0)
+    _, skipped = tasks(args.suite, args.suite_seed, args.suite_first)
+    task_list = setup.task_list()
     study = _create(storage, study_name, setup)
     if not args.quiet:
         print(f"tune {args.agent}: study {study_name!r} in {storage}, {args.trials} trials, "
-              f"{args.workers} worker(s), {len(task_list)} mazes x {args.seeds} seeds",
+              f"{args.workers} worker(s), {len(task_list)} runs of mazes x {args.seeds} "
+              "seeds",
               file=sys.stderr)
     run_workers(storage, study_name, setup, args.trials, args.workers, args.quiet)
 
@@ -688,7 +773,8 @@ def run(args) -> int:
               f"best of {len(counted)} trials\n"
               f"objective {best.value:.4f} (defaults "
               f"{'-' if d_value is None else format(d_value, '.4f')}) "
-              f"on --suite {args.suite} --suite-seed {args.suite_seed} "
+              f"on --suite {args.suite} --open-suite {open_suite or '-'} --open-weight "
+              f"{setup.open_weight:g} --suite-seed {args.suite_seed} "
               f"--suite-first {args.suite_first}, {args.seeds} seeds")
     write_params(out_params, args.agent, params, header)
     load_tuned(out_params, args.agent)          # what we wrote reads back
@@ -700,8 +786,12 @@ def run(args) -> int:
         "agent": args.agent, "study": study_name, "storage": storage,
         "objective": {"definition": "geometric mean over mazes of the median over seeds of "
                                     "steps / oracle_steps of the first episode after the "
-                                    f"block, + {PENALTY:g} x failed runs / runs",
-                      "suite": args.suite, "suite_seed": args.suite_seed,
+                                    f"block, + {PENALTY:g} x failed runs / runs, + "
+                                    f"{setup.open_weight:g} x openings missed (greedy path "
+                                    f"not on the shortcut within {OPEN_WITHIN} episodes) "
+                                    "/ opening runs",
+                      "suite": args.suite, "open_suite": open_suite,
+                      "open_weight": setup.open_weight, "suite_seed": args.suite_seed,
                       "suite_first": args.suite_first, "mazes": [t.name for t in task_list],
                       "skipped": skipped, "seeds": args.seeds, "seed": args.seed},
         "space": [{"name": d.name, "low": d.low, "high": d.high, "log": d.log,
@@ -721,9 +811,10 @@ def run(args) -> int:
         first = (args.eval_first if args.eval_first is not None
                  else _default_eval_first(args.suite, args.suite_first))
         spec = args.eval_suite or args.suite
+        open_spec = (args.eval_open_suite or open_suite) if open_suite else ""
         summary["held_out"] = held_out(args.agent, params, spec, args.suite_seed, first,
                                        args.eval_trials, args.seed, args.workers,
-                                       not args.quiet)
+                                       not args.quiet, open_spec, setup.open_weight)
     out_json = Path(args.json or RESULTS / f"{study_name}.json")
     out_json.parent.mkdir(parents=True, exist_ok=True)
     out_json.write_text(json.dumps(summary, indent=1, default=_json_default) + "\n")
