@@ -103,6 +103,9 @@ def test_fire_event_refuses_to_wall_in_the_agent():
     for a in (RIGHT, RIGHT):                             # the agent on a, (1, 3)
         w.step(a)
     refused(w, w.fire_event, "a", match=r"event 'a' refused: it would wall in the agent")
+    w.end_episode()                    # an experimenter cut the episode: the cell is free
+    w.fire_event("a")
+    assert w.walls[1, 3]
 
 
 def test_a_requested_goal_is_kept_free_until_it_applies():

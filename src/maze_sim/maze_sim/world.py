@@ -116,6 +116,12 @@ class GridWorld:
         self.in_episode = True
         return self.sense(), {"cell": self.cell, "episode": self.episode}
 
+    def end_episode(self) -> None:
+        """The episode was cut from outside (an experimenter's step limit, not the world's
+        cap): the agent is no longer in one, so edits need not keep its cell reachable
+        (the next :meth:`reset` moves it to the start)."""
+        self.in_episode = False
+
     def step(self, action: int):
         if not 0 <= int(action) < N_ACTIONS:
             raise ValueError(f"action must be in 0..{N_ACTIONS - 1}, got {action}")

@@ -116,6 +116,7 @@ def run_episode(world: GridWorld, agent: Agent, learn: bool = True, explore: boo
         if terminated:
             return Episode(steps, info.reached_goal, info.reached_previous_goal)
         if truncated or (cap is not None and steps >= cap):
+            world.end_episode()          # cut here: an event may now wall the cell in
             return Episode(steps, False, False)
 
 
