@@ -153,6 +153,10 @@ SEARCH: dict[str, dict[str, Interval]] = {
         "a_T": Interval(0.8, 0.99),                  # GWR insertion threshold
         "max_age": Interval(20, 1000, log=True),     # link ageing
         "E_min": Interval(1e-3, 0.3, log=True),      # link deletion
+        "sigma_a": Interval(0.2, 0.6),               # Eq. 2 width
+        "stale_horizon": Interval(1.0, 20.0, log=True),   # Eq. 5': episodes a wall is trusted
+        "stale_prior": Interval(0.1, None),          # Eq. 5': rho of a stale wall
+        "stale_budget": Interval(0.0, 0.3),          # Eq. 5': re-tests per route step
         **_EXPLORATION,
     },
     "q_learning": {
