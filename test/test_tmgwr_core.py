@@ -1,6 +1,9 @@
 """The TMGWR core against hand-computed cases of its equations, and its behaviour on small
 mazes (learn a path, adapt to a goal change at once, find a detour after a block)."""
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -429,6 +432,40 @@ def test_thick_stale_wall_leads_straight_on_to_the_first_known_cell_by_hand():
     assert mo.U[0, RIGHT] == pytest.approx(g)            # one unknown cell on the way
     assert V[0] == pytest.approx(g * max(g * V[1], g * g * V[7]))
     assert V[0] == pytest.approx(g ** 3 * V[7])          # the wall, if open, is shorter
+
+
+NEVER_MADE = """
+import numpy as np
+from tmgwr_agent.core import kernels
+UP, DOWN, LEFT, RIGHT = range(4)
+w = np.array([[0.1, 0.1], [0.2, 0.1]])
+grid, origin = kernels.cell_grid(w, np.ones(2, dtype=bool), 2, 0.1)
+grid[:] = -1                                      # no node where its weight rounds to
+out = np.full((2, 4), -1)
+out[0, DOWN] = 1
+tried = np.ones((2, 4), dtype=bool)
+bump_t, closed_t, bump_e, succ = (np.full((2, 4), -1) for _ in range(4))
+bump_t[0, RIGHT] = closed_t[0, RIGHT] = 1
+bump_e[0, RIGHT] = 0                              # stale: 9 episodes since, trust 3
+U, rho = np.zeros((2, 4)), np.zeros((2, 4))
+osucc, onb = np.full((2, 4), -1), np.full((2, 4, 4), -1)
+kernels.option_row(w, out, 0, np.array([0.5, 0.5]), np.zeros((4, 2)), 0.1, 10.0, 0.97,
+                   tried, bump_t, closed_t, bump_e, succ, 10, 2.0, 9, 3.0, 1.0, False,
+                   grid, origin, U, rho, osucc, onb)
+print(rho[0, RIGHT], osucc[0, RIGHT])
+"""
+
+
+def test_stale_wall_of_a_move_never_made_has_no_option_and_returns():
+    """Straight on from a stale wall needs the primitive's displacement: with none known
+    (delta 0, the primitive never moved the agent) the search stops at once, no option.
+    It looped for ever when the node's own cell did not hold it in the lookup table,
+    freezing a composed graph's executor; numba's loop holds the GIL, so the kernel runs
+    in a process of its own, which the test can time out."""
+    proc = subprocess.run([sys.executable, "-c", NEVER_MADE], capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["0.0", "-1"]
 
 
 def test_eq6_picks_link_with_highest_E_times_V_and_breaks_ties_by_rng():

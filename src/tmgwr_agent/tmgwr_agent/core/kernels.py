@@ -387,19 +387,24 @@ def option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t
                 if q >= 0 and q != i:
                     onb[i, a, b] = q
                     found = True
-            m = 2
-            while not found and grid.shape[0] > 0:
+            step2 = 0.0
+            for k in range(w.shape[1]):
+                step2 += delta[a, k] * delta[a, k]
+            # straight on, while the move is known to go somewhere (|delta_a| > L / 2)
+            # and inside the map's table: at most its rows + columns cells
+            for m in range(2, grid.shape[0] + grid.shape[1] + 2):
+                if found or step2 <= 0.25 * L * L:
+                    break
                 for k in range(w.shape[1]):
                     y[k] = w[i, k] + m * delta[a, k]
                 if not in_grid(grid, origin, L, y):
                     break
                 q = node_at(grid, origin, L, w, y)
-                if q >= 0:
+                if q >= 0 and q != i:
                     onb[i, a, 0] = q
                     found = True
                 else:
                     u *= gamma                   # one more unknown cell on the way
-                    m += 1
             if not found:
                 r = 0.0
         elif r > 0.0 and j < 0:
