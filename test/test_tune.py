@@ -21,6 +21,7 @@ from tmgwr_agent.experiments.tune import (
     SEARCH,
     Task,
     block_run,
+    interleaved,
     load_tuned,
     open_run,
     score,
@@ -146,6 +147,9 @@ def test_objective_by_hand():
     assert s["failed_runs"] == 3 and s["runs"] == 9
     assert s["open_found"] == pytest.approx(1 / 3) and s["open_per_maze"] == {"o1": 1 / 3}
     assert s["objective"] == pytest.approx(2.0 + PENALTY * 3 / 9 + 1.5 * 2 / 3)
+    # a trial runs them alternately (what the pruner compares mixes both kinds)
+    o2 = Task("o2", "g", "", "b", 8, 30.0, "open")
+    assert [t.name for t in interleaved(tasks + [o, o2])] == ["m1", "o1", "m2", "o2"]
 
 
 @pytest.mark.slow

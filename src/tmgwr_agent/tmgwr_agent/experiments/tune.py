@@ -28,7 +28,10 @@ The median over seeds is robust to one odd run. Over mazes the geometric mean, n
 median: every maze counts (a median of 16 mazes ignores what happens on the hardest
 half, where the agents differ most), yet a maze 100 x the oracle weighs log(100), not
 100. The penalty (:data:`PENALTY` = 10 oracle ratios spread over the runs) makes a setting
-that fails anywhere worse than one that does not. ``--open-weight`` (default 1: every
+that fails anywhere worse than one that does not. A trial runs the tasks block and
+opening alternately and is stopped early by Optuna's median rule (:func:`pruner`) when
+its objective so far is worse than the earlier trials' median: the same for every agent,
+it spends the budget's time on settings that can win. ``--open-weight`` (default 1: every
 tenth of the openings missed weighs as much as a tenth of the oracle on every block; 0:
 blocks only, the objective before openings were scored) prices the two events against
 each other: finding a shortcut costs re-tests, and a re-test costs steps in every
@@ -114,6 +117,9 @@ TRAIN_OPEN_SUITE = "shortcut:4,braided:4,rooms:4,open:4"
 #: An opening run counts as found when the greedy path uses the shortcut within this many
 #: episodes after it opened (issue 9's measure).
 OPEN_WITHIN = 10
+#: The median pruner (:func:`pruner`): complete trials before any is pruned, the first
+#: task index it may prune at, and how often a trial reports.
+PRUNE_STARTUP, PRUNE_WARMUP, PRUNE_EVERY = 10, 7, 4
 #: Weight of the fraction of failed runs in the objective (in oracle-ratio units).
 PENALTY = 10.0
 #: Where results go by default (``results/`` is not committed).
@@ -460,9 +466,23 @@ class Setup:
                 for n, lo, hi, lg, it in self.space]
 
 
+def interleaved(task_list: Sequence[Task]) -> list[Task]:
+    """The tasks in the order a trial runs them: block and opening tasks alternating (as
+    long as both last), so that the objective of the first k tasks, which the pruner
+    compares, is made of both."""
+    blocks = [t for t in task_list if t.kind == "block"]
+    opens = [t for t in task_list if t.kind != "block"]
+    out = []
+    for k in range(max(len(blocks), len(opens))):
+        out += blocks[k:k + 1] + opens[k:k + 1]
+    return out
+
+
 def _objective(setup: Setup, task_list: list[Task], worker: str):
+    import optuna
     seeds = trial_seeds(setup.seed, setup.seeds)
     dims = setup.dims()
+    order = interleaved(task_list)
 
     def objective(trial) -> float:
         trial.set_user_attr("worker", worker)
@@ -470,13 +490,31 @@ def _objective(setup: Setup, task_list: list[Task], worker: str):
         # an invalid combination (ParamError) fails the trial before any run
         make_agent(setup.agent, Maze.from_text(task_list[0].text), np.random.default_rng(0),
                    params)
-        s = evaluate(setup.agent, params, task_list, seeds, open_weight=setup.open_weight)
+        runs = []
+        for k, task in enumerate(order):
+            runs.append([run_task(setup.agent, params, task, sd) for sd in seeds])
+            if k % PRUNE_EVERY == PRUNE_EVERY - 1 and k < len(order) - 1:
+                trial.report(score(order[:k + 1], runs, setup.open_weight)["objective"], k)
+                if trial.should_prune():
+                    raise optuna.TrialPruned()
+        s = score(order, runs, setup.open_weight)
         for key in ("geo_mean_ratio", "median_ratio", "failed_runs", "worst_ratio",
                     "open_found"):
             trial.set_user_attr(key, s[key])
         return s["objective"]
 
     return objective
+
+
+def pruner():
+    """Optuna's median rule, the same for every agent: after :data:`PRUNE_STARTUP`
+    trials ran to the end, a trial whose objective over its first k tasks (every
+    :data:`PRUNE_EVERY`, from the :data:`PRUNE_WARMUP`-th on) is worse than the median of
+    the earlier trials at k stops there (PRUNED: it counts in the budget, and is never
+    the best). A setting that fails its first mazes costs their caps, not the split's."""
+    import optuna
+    return optuna.pruners.MedianPruner(n_startup_trials=PRUNE_STARTUP,
+                                       n_warmup_steps=PRUNE_WARMUP)
 
 
 def _worker(storage: str, study_name: str, setup: Setup, n_trials: int, budget: int,
@@ -491,13 +529,15 @@ def _worker(storage: str, study_name: str, setup: Setup, n_trials: int, budget: 
     task_list = setup.task_list()
     seed = int(np.random.SeedSequence([setup.seed, index]).generate_state(1)[0])
     study = optuna.load_study(study_name=study_name, storage=open_storage(storage),
-                              sampler=optuna.samplers.TPESampler(seed=seed))
+                              sampler=optuna.samplers.TPESampler(seed=seed),
+                              pruner=pruner())
     worker = f"{socket.gethostname()}:{os.getpid()}:{index}"
     done = (TrialState.COMPLETE, TrialState.FAIL, TrialState.PRUNED)
 
     def say(study, trial) -> None:
         if not quiet:
-            value = "failed" if trial.value is None else f"{trial.value:.3f}"
+            value = (trial.state.name.lower() if trial.value is None else
+                     f"{trial.value:.3f}")
             print(f"tune {study_name}: trial {trial.number} ({worker}): {value}",
                   file=sys.stderr, flush=True)
 
@@ -804,6 +844,7 @@ def run(args) -> int:
         "trials": {"counted": len(counted),
                    "complete": sum(t.state.name == "COMPLETE" for t in counted),
                    "failed": sum(t.state.name == "FAIL" for t in counted),
+                   "pruned": sum(t.state.name == "PRUNED" for t in counted),
                    "beyond_budget": max(0, len(study.trials) - args.trials),
                    "by_worker": workers},
         "best": _trial_row(best),
