@@ -156,7 +156,10 @@ SEARCH: dict[str, dict[str, Interval]] = {
         "alpha": Interval(0.05, None),               # Eq. 1 rate (Table 2: 0.52)
         "gamma": Interval(0.8, 0.999),               # Eq. 5 (Table 2: 0.97)
         "beta": Interval(0.1, None),                 # Eq. 4 (Table 2: 0.80)
-        "a_T": Interval(0.8, 0.99),                  # GWR insertion threshold
+        # GWR insertion threshold: above exp(-feature_scale) = exp(-0.1) = 0.905, the
+        # activity of a neighbouring cell, so that every cell gets its own node (below it
+        # cells merge, training fails to its caps and a trial costs minutes)
+        "a_T": Interval(0.91, 0.99),
         "max_age": Interval(20, 1000, log=True),     # link ageing
         "E_min": Interval(1e-3, 0.3, log=True),      # link deletion
         "sigma_a": Interval(0.2, 0.6),               # Eq. 2 width
