@@ -20,6 +20,15 @@ drives it through its ``~/change_state`` and ``~/get_state`` services.
 * :func:`end`: the node's end once spinning stopped (Ctrl-C, SIGTERM, the graph finished):
   the ``shutdown`` transition from whichever primary state it is in, so its
   ``on_shutdown`` runs (the learner saves its map); nothing when already finalized.
+
+Only public rclpy API is used. rclpy 7.1.6 (the Jazzy wheels) gives ``LifecycleNode`` the
+``trigger_*`` methods but no getter of the current state (rclcpp has
+``get_current_state()``; rclpy's own ``trigger_shutdown`` reads the private
+``_state_machine``), and no way to keep ``change_state`` from raising. Both go through the
+node's own lifecycle services instead, which are public: :attr:`rclpy.node.Node.services`
+holds them (``LifecycleNodeMixin`` adds them there), and a :class:`rclpy.service.Service`'s
+``callback`` is a public attribute that the executors call. :func:`state_of` asks the
+``~/get_state`` handler (what ``ros2 lifecycle get`` gets), in process.
 """
 
 from __future__ import annotations
@@ -35,10 +44,23 @@ LIFECYCLE_SPECS = (
 PRIMARY = ("unconfigured", "inactive", "active", "finalized")
 
 
+def lifecycle_service(node, name: str):
+    """The node's own lifecycle service ``~/NAME`` (``change_state``, ``get_state``, ...),
+    found among :attr:`Node.services` by its fully qualified name."""
+    full = f"{node.get_fully_qualified_name().rstrip('/')}/{name}"
+    for service in node.services:
+        if service.srv_name == full:
+            return service
+    raise LookupError(f"{node.get_fully_qualified_name()} has no lifecycle service {full}")
+
+
 def state_of(node) -> str:
-    """The label of ``node``'s current lifecycle state (``active``, ``inactive``, ...).
-    rclpy 7 (Jazzy) has no public getter; its own ``trigger_shutdown`` reads the same."""
-    return node._state_machine.current_state[1]
+    """The label of ``node``'s current lifecycle state (``active``, ``inactive``, ...): the
+    answer of its ``~/get_state`` service, asked in process (rclpy 7.1.6 has no public
+    getter; module docstring)."""
+    from lifecycle_msgs.srv import GetState
+    service = lifecycle_service(node, "get_state")
+    return service.callback(GetState.Request(), GetState.Response()).current_state.label
 
 
 def _ok(result) -> bool:
@@ -59,8 +81,13 @@ def autostart(node, why: str = "") -> None:
 
 def refuse_invalid_transitions(node) -> None:
     """Wrap ``node``'s ``~/change_state`` service: a transition the current state does not
-    have is answered ``success: false`` (and logged) instead of raising in the executor."""
-    service = node._service_change_state
+    have is answered ``success: false`` (and logged) instead of raising in the executor.
+
+    rclpy 7.1.6 raises out of its handler (RCLError from ``trigger_transition_by_id``) for
+    a transition id the current state lacks, which ends the node: ros2/rclpy#1209, fixed
+    upstream by ros2/rclpy#1319 (catching it in ``__change_state``), not in Jazzy's 7.1.6.
+    A transition *label* the state lacks was already answered ``success: false``."""
+    service = lifecycle_service(node, "change_state")
     serve = service.callback
 
     def guarded(req, resp):
