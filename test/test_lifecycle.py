@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 import pytest
-from ros_helpers import RosProcess, require_ros2, ros2_cli, ros2_run
+from ros_helpers import RosProcess, require_ros2, ros2_cli, ros2_run, spawn_python
 from test_nodes import goals_reached
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -194,3 +194,57 @@ def test_composed_graph_deactivate_activate_resumes_at_once(ros_domain, tmp_path
     assert graph.proc.returncode == 0, graph.describe("exit")
     assert saved_map(tmp_path / "map.npz")[0] > n
     assert "Traceback" not in graph.output, graph.output
+
+
+# The composed graph's nodes on an EventsExecutor, the learner's map timer at 100 Hz; the
+# learner is deactivated and cleaned up without spinning in between (as an in-process
+# lifecycle manager may do), the executor then spins (a timer event queued before the
+# timer was destroyed runs now), publish_map is called as such an event does, and the
+# learner is configured and activated again; 20 times.
+TIMER_AFTER_CLEANUP = r"""
+import sys, time
+import rclpy
+from rclpy.experimental import EventsExecutor
+from tmgwr_agent.nodes.composed import node_factories
+from tmgwr_common.node import end_node
+rclpy.init(args=["composed", "--ros-args", "-p", "map_learner:map_dir:=" + sys.argv[1],
+                 "-p", "map_learner:publish_rate:=100.0"])
+nodes = [(name, make()) for name, make in node_factories(False)]
+ex = EventsExecutor()
+for _, node in nodes:
+    ex.add_node(node)
+learner, sim = dict(nodes)["map_learner"], dict(nodes)["maze_sim"]
+def spin(cond, limit):
+    end = time.monotonic() + limit
+    while not cond() and time.monotonic() < end:
+        ex.spin_once(timeout_sec=0.05)
+for cycle in range(20):
+    step = sim.step_id
+    spin(lambda: sim.step_id >= step + 30, 60)
+    assert sim.step_id >= step + 30, f"cycle {cycle}: the ring did not step"
+    learner.trigger_deactivate()
+    learner.trigger_cleanup()
+    spin(lambda: False, 0.3)
+    learner.publish_map()
+    learner.trigger_configure()
+    learner.trigger_activate()
+print("CYCLES", cycle + 1, flush=True)
+ex.shutdown()
+for _, node in reversed(nodes):
+    end_node(node)
+    node.destroy_node()
+rclpy.try_shutdown()
+"""
+
+
+@pytest.mark.timeout(240)
+def test_map_timer_event_after_cleanup_is_harmless(ros_domain, tmp_path):
+    """rclpy 7.1.6's EventsExecutor may still run a timer event queued before the timer was
+    destroyed: the learner's map timer, destroyed at deactivate, then ran after a cleanup
+    had released the map and raised out of spin (AttributeError on the released lockstep),
+    ending the composed process."""
+    proc = spawn_python(TIMER_AFTER_CLEANUP, str(tmp_path), domain=ros_domain,
+                        name="composed_cleanup")
+    with proc:
+        out = proc.wait(timeout=200)
+    assert "CYCLES 20" in out and "Traceback" not in out, proc.describe("cycles")

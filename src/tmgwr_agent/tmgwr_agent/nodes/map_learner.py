@@ -441,15 +441,19 @@ class MapLearnerNode(LifecycleNode):
         subscribers; ``always`` (a map started from or loaded): whoever subscribes later
         gets it at once, before the ring moves on."""
         m = self.map
-        if m is not None and self.encoder_of is not m:     # started from / loaded a map
+        if m is None or self.lockstep is None:
+            # nothing to publish; also a map_timer event that rclpy 7.1.6's EventsExecutor
+            # had queued before stop_stepping destroyed the timer, run after a cleanup
+            # released the map (a deactivate and a cleanup without spinning in between)
+            return
+        if self.encoder_of is not m:                          # started from / loaded a map
             self.publish_snapshot()
         step = self.lockstep.last_step
         # built only for a subscriber (the recorder, RViz, a test): they cost the map's
         # size in the learner's step loop; a new subscriber gets one within 1/publish_rate s
         wanted = (always or self.map_pub.get_subscription_count() > 0,
                   always or self.marker_pub.get_subscription_count() > 0)
-        if m is None or not any(wanted) or self.published == (step, m.version, wanted) \
-                and step >= 0:
+        if not any(wanted) or self.published == (step, m.version, wanted) and step >= 0:
             return
         if time.monotonic() < self.next_map_time and not always:
             return
