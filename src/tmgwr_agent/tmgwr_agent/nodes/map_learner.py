@@ -43,9 +43,10 @@ Lifecycle (a managed node, ``rclpy.lifecycle.LifecycleNode`` as in ros2/demos
 * ``configure``: hold the map directory, load the map (``initial_map``, else the checkpoint
   with ``resume``, else none until the first features), create the publishers (lifecycle
   publishers: silent unless active) and the services (they answer while configured);
-* ``activate``: join the lockstep (learn and answer ``/features``, subscribed since
-  configure; the simulator resends the step the ring waits for, within ``resend_period``)
-  and publish the map;
+* ``activate``: join the lockstep (learn and answer ``/features``, to which the node
+  subscribes once, when it is built, and which it drops unless active: see
+  :meth:`MapLearnerNode.__init__`; the simulator resends the step the ring waits for,
+  within ``resend_period``) and publish the map;
 * ``deactivate``: stop stepping (the ring waits, nothing is lost) and save the map and the
   checkpoint; ``activate`` goes on from the same map and step;
 * ``cleanup``: drop the map, the publishers and services, release the directory;
@@ -154,6 +155,22 @@ class MapLearnerNode(LifecycleNode):
         self.checkpoints: Checkpointer | None = None
         self.lockstep: Lockstep | None = None
         self.stepping = False              # active: features are learnt and answered
+        # /features: subscribed here, once, for the node's life, and dropped unless active
+        # (on_features), never made again at configure or activate. Why: with Fast DDS 2.14
+        # (rmw_fastrtps, Jazzy), a reliable volatile reader created in a process where the
+        # topic's writer has already written more samples than the reader's max_samples
+        # (Fast DDS's default resource limit: 5000) gets no sample until the writer has
+        # written about `depth` more (STEP_QOS: 10). It has not had the writer's heartbeat
+        # yet, so it counts every earlier sequence number as a change still to come and
+        # refuses each sample while that count is >= max_samples
+        # (DataReaderHistory::can_change_be_added_nts). That happens through intraprocess
+        # delivery, i.e. in the composed graph (one participant), once the preprocessor's
+        # writer is past 5000 samples; while the ring waits it writes one sample per
+        # resend_period (1 s): a subscription made at activate waited ~10 s. Separate
+        # processes are not affected. README, The map learner's lifecycle;
+        # test/repro_late_reader.py reproduces it with std_msgs alone.
+        self.features_sub = subscribe_decoded(self, Features, topics.FEATURES,
+                                              self.on_features, STEP_QOS)
         self.map_timer = None
         self.refusal = ""                  # why the last transition failed ("" = none)
         self.exit_code = 0
@@ -214,11 +231,6 @@ class MapLearnerNode(LifecycleNode):
         # stalls its publisher), kept serialized and decoded only when markers are drawn.
         self.potentials_sub = self.create_subscription(
             Potentials, topics.POTENTIALS, self.on_motivation, SENSOR_QOS, raw=True)
-        # subscribed from configure on, so that activate finds it matched (a subscription
-        # created at activation took up to ~10 s to get the features in the composed
-        # graph); features are dropped unless active (on_features)
-        self.features_sub = subscribe_decoded(self, Features, topics.FEATURES,
-                                              self.on_features, STEP_QOS)
         self.motivation_raw = None
         self.own_services = [self.create_service(SaveMap, topics.SAVE_MAP, self.on_save),
                          self.create_service(LoadMap, topics.LOAD_MAP, self.on_load)]
@@ -278,7 +290,7 @@ class MapLearnerNode(LifecycleNode):
                 print(f"map_learner: {self.refusal}", flush=True)
                 ok = False
         wait_for_acknowledgments(self)       # subscribers get our last messages first
-        self.release()
+        self.release(final=True)
         return TransitionCallbackReturn.SUCCESS if ok else TransitionCallbackReturn.FAILURE
 
     def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -293,15 +305,16 @@ class MapLearnerNode(LifecycleNode):
             self.destroy_timer(self.map_timer)
             self.map_timer = None
 
-    def release(self) -> None:
-        """Undo configure: publishers, services, the map, the directory lock."""
+    def release(self, final: bool = False) -> None:
+        """Undo configure: publishers, services, the map, the directory lock; ``final``
+        (shutdown): the /features subscription too."""
         self.stop_stepping()
         for pub in [p for p in self.publishers if isinstance(p, LifecyclePublisher)]:
             self.destroy_lifecycle_publisher(pub)
         for srv in getattr(self, "own_services", []):
             self.destroy_service(srv)
         self.own_services = []
-        for name in ("potentials_sub", "features_sub"):
+        for name in ("potentials_sub", "features_sub") if final else ("potentials_sub",):
             if getattr(self, name, None) is not None:
                 self.destroy_subscription(getattr(self, name))
                 setattr(self, name, None)
