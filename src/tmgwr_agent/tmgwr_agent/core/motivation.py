@@ -230,7 +230,6 @@ class MotivationEstimator:
         self.episode = 0              # episodes started
         self.route = 0.0              # steps of the known route from this episode's start
         self.retests = 0              # stale walls re-tested this episode (not stuck)
-        self._ep_start = -1           # the clock when this episode started
         self._route_due = False       # the route is read off V0 at the episode's first solve
         self._stuck = False           # stuck when the last update solved Eq. 5'
         self.delta = np.zeros((N_PRIMITIVES, 2))     # mean sensed displacement per primitive
@@ -287,7 +286,6 @@ class MotivationEstimator:
         if outcome.episode_start:
             self._route_due = True
             self.episode += 1
-            self._ep_start = self.clock
             self.retests = 0
             return
         self.clock += 1
@@ -320,7 +318,7 @@ class MotivationEstimator:
                 "clock": int(self.clock), "delta": self.delta.copy(),
                 "moves": self.moves.copy(), "episode": int(self.episode),
                 "route": float(self.route), "retests": int(self.retests),
-                "episode_start": int(self._ep_start), "route_due": int(self._route_due)}
+                "route_due": int(self._route_due)}
 
     def load_state_dict(self, d: dict) -> None:
         self.tried = np.array(d["tried"], dtype=bool)
@@ -336,7 +334,6 @@ class MotivationEstimator:
             np.where(self.bump_t >= 0, self.episode, -1)
         self.route = float(d.get("route", 0.0))
         self.retests = int(d.get("retests", 0))
-        self._ep_start = int(d.get("episode_start", -1))
         self._route_due = bool(d.get("route_due", 0))
         self.delta = np.array(d["delta"], dtype=float)
         self.moves = np.array(d["moves"], dtype=np.int64)
