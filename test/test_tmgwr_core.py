@@ -294,6 +294,7 @@ def test_value_of_a_remembered_wall_by_hand():
     st["bump_t"][:3] = -1
     st["succ"][0, RIGHT], st["succ"][1, RIGHT] = 1, 2
     st["bump_t"][0, RIGHT] = 7
+    st["delta"] = 0.1 * ACTION_VECTORS                  # the forward model: 0.1 a cell
     mo.load_state_dict(st)
     mo.record(-1, 0, False, EPISODE_START, m.w)          # the agent stands on node 0
     V = mo.update(m)
@@ -434,6 +435,32 @@ def test_thick_stale_wall_leads_straight_on_to_the_first_known_cell_by_hand():
     assert V[0] == pytest.approx(g ** 3 * V[7])          # the wall, if open, is shorter
 
 
+def test_forgotten_move_to_a_removed_node_is_valued_as_unknown_space_by_hand():
+    """A line 0 -> 1 -> 2 -> 3 (right), the goal at node 3. Node 1 is then removed with
+    its links (GWR's isolated-node removal), so 'right' from node 0 is a forgotten move
+    (rho = 1) whose remembered successor no longer exists: its option looks up the
+    predicted cell w_0 + delta_right, which no node holds, and is worth the unknown
+    space's U = v* gamma^h, h = 2 cells to the goal (Eq. 5'). Read as the dead node's
+    V = 0 it was worth nothing, and a forgotten region gave Eq. 6 no direction. A slot
+    reused elsewhere (node 1 alive but far from the cell) is looked up the same way."""
+    g = 0.97
+    cells, acts = [(0, 0), (0, 1), (0, 2), (0, 3)], [RIGHT] * 3
+    for how in ("removed", "reused"):
+        m = path_map(cells, acts)
+        mo = known_estimator(m, [(k, RIGHT, k + 1) for k in range(3)], (0, 3), 5)
+        for i, j in ((0, 1), (1, 2)):
+            m.out[i, m.out[i] == j], m.E[i, m.out[i] == j] = -1, 0.0
+        if how == "removed":
+            m.alive[1] = False
+        else:
+            m.w[1] = [0.9, 0.9]
+        m.version += 1
+        V = mo.update(m)
+        assert mo.goal_node == 3 and mo.osucc[0, RIGHT] == -1, how
+        assert mo.U[0, RIGHT] == pytest.approx(mo.v_star * g ** 2), how
+        assert V[0] == pytest.approx(g * mo.U[0, RIGHT]), how
+
+
 NEVER_MADE = """
 import numpy as np
 from tmgwr_agent.core import kernels
@@ -449,9 +476,9 @@ bump_t[0, RIGHT] = closed_t[0, RIGHT] = 1
 bump_e[0, RIGHT] = 0                              # stale: 9 episodes since, trust 3
 U, rho = np.zeros((2, 4)), np.zeros((2, 4))
 osucc, onb = np.full((2, 4), -1), np.full((2, 4, 4), -1)
-kernels.option_row(w, out, 0, np.array([0.5, 0.5]), np.zeros((4, 2)), 0.1, 10.0, 0.97,
-                   tried, bump_t, closed_t, bump_e, succ, 10, 2.0, 9, 3.0, 1.0, False,
-                   grid, origin, U, rho, osucc, onb)
+kernels.option_row(w, out, np.ones(2, dtype=bool), 0, np.array([0.5, 0.5]),
+                   np.zeros((4, 2)), 0.1, 10.0, 0.97, tried, bump_t, closed_t, bump_e,
+                   succ, 10, 2.0, 9, 3.0, 1.0, False, grid, origin, U, rho, osucc, onb)
 print(rho[0, RIGHT], osucc[0, RIGHT])
 """
 

@@ -326,9 +326,9 @@ def node_at(grid, origin, L, w, x):
 
 
 @njit(cache=True)
-def option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t, bump_e,
-               succ, clock, horizon, episode, trust, rho_max, stuck, grid, origin, U, rho,
-               osucc, onb):
+def option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t,
+               bump_e, succ, clock, horizon, episode, trust, rho_max, stuck, grid, origin, U,
+               rho, osucc, onb):
     """The options of the value of the unknown (motivation.py, Eq. 5') of node i, per
     primitive a: ``rho[i, a]`` = 1 for a primitive never taken from i, or whose move's
     link (to ``succ[i, a]``) the map has since deleted; for one whose last outcome was a
@@ -337,7 +337,8 @@ def option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t
     (``bump_t - closed_t``: failed re-tests stretch the horizon); else ``rho_max`` once
     ``trust`` episodes (``trust`` > 0) have started since its bump (``bump_e``), 0 before;
     0 otherwise (known: no option). The option's successor ``osucc[i, a]``: a known node
-    (where the move once led, else a node at the predicted position ``w_i + delta_a``),
+    (where the move once led, if that node is still alive and there, else a node at the
+    predicted position ``w_i + delta_a``),
     whose V the sweep reads; -1 when none, and then ``U[i, a] = v_star gamma^h``, ``h =
     |w_i + delta_a - x_g|_1 / L`` (the fewest steps from the predicted successor to the
     goal sensation); -2 for a remembered wall cell (not ``stuck``), whose value if it
@@ -368,9 +369,15 @@ def option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t
         else:
             r = 0.0
         d = 0.0
+        gap = 0.0
         for k in range(w.shape[1]):
             x[k] = w[i, k] + delta[a, k]
             d += abs(x[k] - goal[k])
+            if j >= 0:
+                gap += (w[j, k] - x[k]) ** 2
+        if j >= 0 and (not alive[j] or gap > 0.25 * L * L):
+            j = -1          # where the move led, a node since removed (its slot maybe
+            #                 reused elsewhere): the cell is looked up as for any move
         for b in range(U.shape[1]):
             onb[i, a, b] = -1
         u = v_star * gamma ** (d / L)
@@ -441,9 +448,9 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
                 U[i, a] = 0.0
                 osucc[i, a] = -1
             continue
-        option_row(w, out, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t, bump_e,
-                   succ, clock, horizon, episode, trust, rho_max, stuck, grid, origin, U, rho,
-                   osucc, onb)
+        option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t,
+                   bump_e, succ, clock, horizon, episode, trust, rho_max, stuck, grid, origin,
+                   U, rho, osucc, onb)
 
 
 @njit(cache=True)
