@@ -250,11 +250,13 @@ def test_no_route_to_the_goal_gives_exactly_zero_at_once():
 
 def test_value_of_the_unknown_by_hand():
     """Eq. 5' on the chain 0 -> 1 -> 2 (links 'right', 0.1 apart), the goal sensation at
-    (0, 0.5), never sensed: no goal node, R = 0, the options alone give potentials."""
+    (0, 0.5), never sensed: no goal node, R = 0, the options alone give potentials
+    (untried primitives at their optimistic rho = 1)."""
     g, vs = 0.97, 1.0 / (1.0 - 0.97 ** 2)                 # V* = 1 / (1 - gamma^2)
     m = chain_map()
     mo = MotivationEstimator(MotivationConfig(vi_tol=1e-12, vi_max_sweeps=100000,
-                                              stale_prior=0.5, stale_horizon=1.0))
+                                              stale_prior=0.5, stale_horizon=1.0,
+                                              untried_rho=1.0))
     mo.set_goal(np.array([0.0, 0.5]))
     for i in (0, 1):                                     # the two moves the map was built from
         mo.record(i, i + 1, i == 1, Outcome(action=RIGHT), m.w)
@@ -461,6 +463,27 @@ def test_forgotten_move_to_a_removed_node_is_valued_as_unknown_space_by_hand():
         assert V[0] == pytest.approx(g * mo.U[0, RIGHT]), how
 
 
+def test_rho_of_an_untried_primitive_is_the_share_of_tries_that_moved_by_hand():
+    """Eq. 5': a primitive never tried opens with the chance the agent's own outcomes
+    give, (k + 1) / (t + 2) over its t tried pairs of which k moved it: a line of 4
+    nodes, 3 moves and 12 bumps known, 'up' from node 3 untried: rho = 4 / 17, and its
+    option is worth rho U + (1 - rho)(R_3 + gamma V(3) without it). ``untried_rho`` = 1
+    is the optimistic bound (the option then worth U)."""
+    g = 0.97
+    cells, acts = [(1, 0), (1, 1), (1, 2), (1, 3)], [RIGHT] * 3
+    for prior, want in ((-1.0, 4.0 / 17.0), (1.0, 1.0)):
+        m = path_map(cells, acts)
+        mo = known_estimator(m, [(k, RIGHT, k + 1) for k in range(3)], (0, 6), 5,
+                             untried_rho=prior)
+        st = mo.state_dict()
+        st["tried"][3, UP], st["bump_t"][3, UP], st["bump_e"][3, UP] = False, -1, -1
+        st["closed_t"][3, UP] = -1
+        mo.load_state_dict(st)
+        mo.update(m)
+        assert mo.rho[3, UP] == pytest.approx(want), prior
+        assert mo.osucc[3, UP] == -1 and mo.U[3, UP] == pytest.approx(mo.v_star * g ** 3)
+
+
 NEVER_MADE = """
 import numpy as np
 from tmgwr_agent.core import kernels
@@ -478,7 +501,7 @@ U, rho = np.zeros((2, 4)), np.zeros((2, 4))
 osucc, onb = np.full((2, 4), -1), np.full((2, 4, 4), -1)
 kernels.option_row(w, out, np.ones(2, dtype=bool), 0, np.array([0.5, 0.5]),
                    np.zeros((4, 2)), 0.1, 10.0, 0.97, tried, bump_t, closed_t, bump_e,
-                   succ, 10, 2.0, 9, 3.0, 1.0, False, grid, origin, U, rho, osucc, onb)
+                   succ, 10, 2.0, 9, 3.0, 1.0, 1.0, False, grid, origin, U, rho, osucc, onb)
 print(rho[0, RIGHT], osucc[0, RIGHT])
 """
 

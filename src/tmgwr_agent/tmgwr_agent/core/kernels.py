@@ -327,10 +327,11 @@ def node_at(grid, origin, L, w, x):
 
 @njit(cache=True)
 def option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t,
-               bump_e, succ, clock, horizon, episode, trust, rho_max, stuck, grid, origin, U,
-               rho, osucc, onb):
+               bump_e, succ, clock, horizon, episode, trust, rho_max, rho_new, stuck, grid,
+               origin, U, rho, osucc, onb):
     """The options of the value of the unknown (motivation.py, Eq. 5') of node i, per
-    primitive a: ``rho[i, a]`` = 1 for a primitive never taken from i, or whose move's
+    primitive a: ``rho[i, a]`` = ``rho_new`` for a primitive never taken from i (the
+    chance a move opens, ``MotivationEstimator.open_prior``); 1 for one whose move's
     link (to ``succ[i, a]``) the map has since deleted; for one whose last outcome was a
     bump (a remembered wall): when ``stuck``, ``rho_max (1 - exp(-tau / (horizon + e)))``,
     ``tau`` the steps since the bump and ``e`` those it had been known closed before it
@@ -353,7 +354,7 @@ def option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, c
         j = -1
         wall = False
         if not tried[i, a]:
-            r = 1.0
+            r = rho_new
         elif stuck and 0 <= bump_t[i, a] < clock and horizon > 0.0:
             tau = clock - bump_t[i, a]
             e = bump_t[i, a] - closed_t[i, a] if closed_t[i, a] >= 0 else 0
@@ -436,8 +437,8 @@ def _linked(out, i, j):
 
 @njit(cache=True)
 def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, bump_t,
-                  closed_t, bump_e, succ, clock, horizon, episode, trust, rho_max, stuck, grid,
-                  origin, U, rho, osucc, onb):
+                  closed_t, bump_e, succ, clock, horizon, episode, trust, rho_max, rho_new,
+                  stuck, grid, origin, U, rho, osucc, onb):
     """:func:`option_row` of the nodes ``rows`` (none for dead slots)."""
     for i in rows:
         if i >= n:
@@ -449,8 +450,8 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
                 osucc[i, a] = -1
             continue
         option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t,
-                   bump_e, succ, clock, horizon, episode, trust, rho_max, stuck, grid, origin,
-                   U, rho, osucc, onb)
+                   bump_e, succ, clock, horizon, episode, trust, rho_max, rho_new, stuck, grid,
+                   origin, U, rho, osucc, onb)
 
 
 @njit(cache=True)

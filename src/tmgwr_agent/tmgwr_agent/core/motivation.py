@@ -42,9 +42,21 @@ successor, an *option*, in the max of Eq. 5::
     Delta_V(i) = R_i + gamma max( max_k E[i, k] V(k), max_a O(i, a) ) - V(i)     (Eq. 5')
     O(i, a)    = rho(i, a) S(i, a) + (1 - rho(i, a)) (R_i + gamma max_k E[i, k] V(k))
 
-* ``rho`` is the probability that the option leads on: 1 for a primitive never taken from
-  i, and for a move whose link the map has since deleted (GWR ageing: a forgotten piece
-  of a route is walked again when it may be worth it). A pair whose last outcome was a
+* ``rho`` is the probability that the option leads on. For a primitive never taken from
+  i it is the chance the agent's own experience gives that a move opens: of its tried
+  (node, primitive) pairs of live nodes, the share ``k / t`` whose last try moved it,
+  smoothed by Laplace's rule, ``(k + 1) / (t + 2)`` (1/2 before any try; re-estimated
+  with the options, at least once an episode; ``untried_rho``, negative by default, fixes
+  it instead: 1 is R-max's optimistic bound). In a maze of corridors about half the
+  moves bump, in an open field few do, and the agent learns which world it is in: an
+  untried move beside a good route is tried only when ``rho`` times its saving beats the
+  bump's step. With the bound (``rho = 1``) the agent tried almost every untried pair
+  whose L1 heuristic beat the route (default maze b: 85.6 steps against 80.5; held-out
+  suite seed 1, blocks median 1.33 x the oracle against 1.18, worst trial 6.8 x against
+  4.5). 1 also for a move whose link the map has since deleted (GWR ageing: a forgotten
+  piece of a route is walked again when it may be worth it); when the node it led to is
+  gone, or no longer within ``L / 2`` of the predicted cell (its slot reused), the cell
+  is looked up as for any move. A pair whose last outcome was a
   bump is a remembered wall, *trusted* for ``T = stale_horizon`` episodes after the bump
   (``rho = 0``: no option) and *stale* after that: ``rho = stale_prior`` (1: as unknown as
   a move never tried, R-max's known threshold with forgetting). A wall can only be seen
@@ -187,6 +199,10 @@ class MotivationConfig(Config):
     stale_budget: float = param(0.1, "Eq. 5': re-tests of stale walls per episode, at most "
                                 "this share of the known route's steps (at least 1; 0: none)",
                                 low=0.0, high=1.0)
+    untried_rho: float = param(-1.0, "Eq. 5': rho of a primitive never tried (1: the "
+                               "optimistic bound; negative: the share of the agent's tried "
+                               "moves that opened, re-estimated with the options)",
+                               low=-1.0, high=1.0)
 
 
 def grown(a: np.ndarray, n: int, fill) -> np.ndarray:
@@ -212,6 +228,8 @@ class MotivationEstimator:
         self.value_unknown = config.value_unknown
         self.stale_prior, self.stale_horizon = config.stale_prior, config.stale_horizon
         self.stale_budget = config.stale_budget
+        self.untried_rho = config.untried_rho
+        self.rho_new = 1.0            # rho of an untried primitive (open_prior)
         self.v_star = 1.0 / (1.0 - self.gamma ** 2)
         self.goal_x: np.ndarray | None = None
         self.goal_node = -1
@@ -443,6 +461,7 @@ class MotivationEstimator:
             if self._options_key[:1] != key[:1]:
                 self._grid, self._origin = kernels.cell_grid(m.w, m.alive, n, self._scale)
             self._options_key = key
+            self.rho_new = self.open_prior(m, n)
             rows = np.arange(n)
         elif self._dirty:
             rows = np.fromiter(self._dirty, dtype=np.int64)
@@ -453,8 +472,22 @@ class MotivationEstimator:
         kernels.option_values(m.w, m.out, m.alive, n, rows, self.goal_x, self.delta,
                               self._scale, self.v_star, self.gamma, self.tried, self.bump_t,
                               self.closed_t, self.bump_e, self.succ, clock, T, self.episode,
-                              self.stale_horizon, rho_max, stuck, self._grid, self._origin,
+                              self.stale_horizon, rho_max, self.rho_new, stuck, self._grid,
+                              self._origin,
                               self.U, self.rho, self.osucc, self.onb)
+
+    def open_prior(self, m: SensorimotorMap, n: int) -> float:
+        """rho of a primitive never tried (Eq. 5'): ``untried_rho``, or when that is
+        negative the chance that a move opens, estimated from the agent's own outcomes as
+        the share of its tried pairs (of live nodes) whose last try moved it, (k + 1) /
+        (t + 2) (Laplace's rule: 1/2 before any try)."""
+        if self.untried_rho >= 0.0:
+            return self.untried_rho
+        k = min(n, len(self.tried))
+        tried = self.tried[:k] & m.alive[:k, None]
+        t = int(np.count_nonzero(tried))
+        opened = int(np.count_nonzero(tried & (self.bump_t[:k] < 0)))
+        return (opened + 1.0) / (t + 2.0)
 
     def stuck(self, m: SensorimotorMap, n: int) -> bool:
         """The goal is represented but no link path leads from the agent's node to it
