@@ -15,6 +15,9 @@ that finds it empty says so (:func:`announce_compilation`) before compiling (ten
 
 from __future__ import annotations
 
+import contextlib
+import glob
+import os
 import sys
 
 import numpy as np
@@ -775,6 +778,17 @@ def _cached(dispatcher) -> bool:
         return bool(dispatcher._cache._cache_file._load_index())
     except Exception:
         return True     # cannot tell: say nothing rather than something wrong
+
+
+def clear_cache() -> None:
+    """Remove every cached kernel of this module. A warm-up after the source changed
+    starts from here: a kernel called only from other kernels is compiled, and cached,
+    only while a caller compiles, so a caller cached by an earlier process left its
+    callees stale for ever and the warm-up could not tell the cache complete."""
+    d = cache_dir()
+    for f in glob.glob(os.path.join(glob.escape(d), "kernels.*.nb[ic]")):
+        with contextlib.suppress(OSError):
+            os.remove(f)
 
 
 def uncached() -> list[str]:

@@ -65,6 +65,8 @@ def main(argv=None) -> int:
               f"the cache {kernels.cache_dir()}", flush=True)
     t0 = time.perf_counter()
     kernels.quiet_compilation()                # this is the announced compile
+    if todo:
+        kernels.clear_cache()                  # all afresh, callees with their callers
     left = warm_up()
     dt = time.perf_counter() - t0
     if left:
