@@ -9,7 +9,7 @@
   (ten consecutive optimal greedy paths); on the large maze (``generate_maze(51, 51)``,
   about 1300 free cells) training runs until one greedy rollout is optimal (at most 20
   episodes; the first episode, a random walk over the whole maze, takes about a minute).
-  Reported: median (the target: <= 100 us on the default maze, <= 1 ms on the large one),
+  Reported: median (the target: <= 50 us on the default maze, <= 1 ms on the large one),
   mean, p10, p90, p99, max, and the map's node count.
 * ``cpu_to_convergence``: per agent, CPU seconds (``time.process_time``) of the training
   episodes from scratch to convergence on goal G of the default maze, STAT over
@@ -90,7 +90,7 @@ def bench_default(seed: int, steps: int) -> dict:
     set_goal(world, agent, "G")
     conv = train_until_converged(world, agent, caps)
     out = step_stats(time_steps(world, agent, steps), agent, maze, conv.episodes)
-    out["target_median_us"] = 100.0
+    out["target_median_us"] = 50.0
     return out
 
 
