@@ -150,6 +150,33 @@ def test_up_reports_a_node_that_dies_and_stops_the_rest(ros_domain):
     assert not [n for n, pid in pids.items() if os.path.exists(f"/proc/{pid}")], out
 
 
+def test_up_saves_the_map_when_another_node_dies(ros_domain, tmp_path):
+    """Issue 10: after a node death under ``up`` the map was not saved. The action
+    selector is SIGKILLed mid-run; ``up`` stops the others cleanly and the learner saves
+    its map in the run's directory (and says so), beside its checkpoint."""
+    run = tmp_path / "run"
+    proc = spawn_module("tmgwr_agent.cli", "up", "--record-dir", str(run),
+                        domain=ros_domain, name="tmgwr up")
+    with proc:
+        line = proc.wait_for_line(r"^graph up in ROS_DOMAIN_ID=", timeout=120)
+        pids = {name: int(pid) for name, pid in re.findall(r"(\w+) \(pid (\d+)\)", line)}
+        proc.wait_for_line(r"^episode 1: \d+ steps", timeout=120)
+        os.kill(pids["action_selector"], signal.SIGKILL)
+        proc.proc.wait(timeout=60)
+        proc._reader.join(timeout=5)
+    out = proc.output
+    assert proc.proc.returncode == 1, out
+    assert re.search(r"node 'action_selector' died \(exit code -9\)", out), out
+    saved = re.search(r"map_learner: saved (\d+) nodes, \d+ links \(step (\d+)\) to (\S+)",
+                      out)
+    assert saved, out
+    assert int(saved.group(1)) > 0 and int(saved.group(2)) > 0, out
+    path = saved.group(3).rstrip(".")
+    assert os.path.isfile(path) and os.path.dirname(os.path.realpath(path)).startswith(
+        os.path.realpath(run)), (path, out)
+    assert (run / "map_learner.ckpt.npz").is_file(), out
+
+
 def test_up_refuses_a_bad_params_file_before_starting_nodes(ros_domain, tmp_path):
     """``up --params-file``: a malformed file (file:line), an old-layout file (how to
     convert it) and an unknown name (the nearest known one) are refused up front, exit 2."""

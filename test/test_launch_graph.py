@@ -124,6 +124,29 @@ def test_ros2_launch_ends_non_zero_saying_which_node_exited_and_why(ros_domain, 
 
 
 @pytest.mark.timeout(150)
+@pytest.mark.parametrize("text, reason", [
+    ("/**:\n  ros__parameters:\n    gamma: [0.9\n", ":4:1: malformed parameter file (YAML)"),
+    ("action_selector:\n  ros__parameters:\n    eps_mn: 0.2\n",
+     "unknown parameter 'eps_mn' (set in {path}) (did you mean 'eps_min'?)"),
+])
+def test_ros2_launch_with_a_bad_params_file_ends_non_zero_naming_it(ros_domain, tmp_path,
+                                                                   text, reason):
+    """Issue 10: a malformed parameter YAML gave an rclpy traceback. Through ``ros2
+    launch params_file:=``, the node that reads it refuses it naming the file (and line, or
+    the nearest known name), and the launch ends non-zero."""
+    path = tmp_path / "params.yaml"
+    path.write_text(text)
+    p = launch(ros_domain, f"params_file:={path}", env={"ROS_HOME": str(tmp_path)})
+    with p:
+        out = p.wait(timeout=120, check=False)
+    assert p.proc.returncode not in (0, None), p.describe("the launch did not fail")
+    line = next((ln for ln in out.splitlines() if "exited with code 2" in ln), None)
+    assert line and "cannot start" in line and str(path) in line, out
+    assert reason.format(path=path) in out, out
+    assert "Traceback (most recent call last)" not in out, out
+
+
+@pytest.mark.timeout(150)
 def test_ros2_launch_ends_non_zero_when_a_running_node_dies(ros_domain, tmp_path):
     p = launch(ros_domain, env={"ROS_HOME": str(tmp_path)})
     with p:
