@@ -126,7 +126,8 @@ class _Layout:
         return key
 
     def align(self, a: int) -> int | None:
-        """Pad to ``a``: the static padding, or None after emitting a runtime alignment."""
+        """Pad to ``a``: the static padding, or None when the caller must emit a runtime
+        alignment (the offset is then known modulo ``a``)."""
         if a <= 1:
             return 0
         if a <= self.modulus:
@@ -135,6 +136,16 @@ class _Layout:
             return pad
         self.modulus, self.residue = a, 0
         return None
+
+    def pad(self, a: int, runtime: str, static: str) -> None:
+        """Emit the padding to ``a`` before variable-length data: line ``runtime`` when the
+        offset is not known statically, else ``static`` formatted with the constant
+        padding (none when it is 0)."""
+        pad = self.align(a)
+        if pad is None:
+            self.lines.append(runtime)
+        elif pad:
+            self.lines.append(static.format(pad=pad))
 
     def advance(self, n: int) -> None:
         self.residue = (self.residue + n) % self.modulus
@@ -216,11 +227,7 @@ def _gen_decode(cls, lay: _Layout, target: str, classes: dict, depth: int = 0) -
             _gen_decode(sub, lay, obj, classes, depth + 1)
             lay.lines.append(f"{ind}{target}.{name} = {obj}")
         elif isinstance(t, d.UnboundedString):
-            pad = lay.align(4)
-            if pad is None:
-                lay.lines.append(f"{ind}o = (o + 3) & -4")
-            elif pad:
-                lay.lines.append(f"{ind}o += {pad}")
+            lay.pad(4, f"{ind}o = (o + 3) & -4", f"{ind}o += {{pad}}")
             lay.lines.append(f"{ind}n, = _U32.unpack_from(b, o + 4)")
             lay.lines.append(f"{ind}{target}.{name} = b[o + 8: o + 7 + n].decode() "
                              f"if n > 1 else ''")
@@ -228,11 +235,7 @@ def _gen_decode(cls, lay: _Layout, target: str, classes: dict, depth: int = 0) -
             lay.unknown()
         else:                                    # UnboundedSequence of a basic type
             code, size, dtype = _BASIC[t.value_type.typename]
-            pad = lay.align(4)
-            if pad is None:
-                lay.lines.append(f"{ind}o = (o + 3) & -4")
-            elif pad:
-                lay.lines.append(f"{ind}o += {pad}")
+            lay.pad(4, f"{ind}o = (o + 3) & -4", f"{ind}o += {{pad}}")
             dt = lay.name("D", np.dtype(dtype))
             lay.lines.append(f"{ind}n, = _U32.unpack_from(b, o + 4)")
             lay.lines.append(f"{ind}o += 4")
@@ -284,11 +287,8 @@ def _gen_encode(cls, lay: _Layout, source: str, depth: int = 0) -> None:
             lay.lines.append(f"{ind}{obj} = {source}.{name}")
             _gen_encode(_message_class(t), lay, obj, depth + 1)
         elif isinstance(t, d.UnboundedString):
-            pad = lay.align(4)
-            if pad is None:
-                lay.lines.append(f"{ind}out += _ZEROS[: -(len(out) - 4) % 4]")
-            elif pad:
-                lay.lines.append(f"{ind}out += _ZEROS[:{pad}]")
+            lay.pad(4, f"{ind}out += _ZEROS[: -(len(out) - 4) % 4]",
+                    f"{ind}out += _ZEROS[:{{pad}}]")
             lay.lines.append(f"{ind}t = {source}.{name}.encode()")
             lay.lines.append(f"{ind}out += _U32.pack(len(t) + 1)")
             lay.lines.append(f"{ind}out += t")
@@ -296,11 +296,8 @@ def _gen_encode(cls, lay: _Layout, source: str, depth: int = 0) -> None:
             lay.unknown()
         else:
             code, size, dtype = _BASIC[t.value_type.typename]
-            pad = lay.align(4)
-            if pad is None:
-                lay.lines.append(f"{ind}out += _ZEROS[: -(len(out) - 4) % 4]")
-            elif pad:
-                lay.lines.append(f"{ind}out += _ZEROS[:{pad}]")
+            lay.pad(4, f"{ind}out += _ZEROS[: -(len(out) - 4) % 4]",
+                    f"{ind}out += _ZEROS[:{{pad}}]")
             dt = lay.name("D", np.dtype(dtype))
             lay.lines.append(f"{ind}v = _seq({source}.{name}, {dt})")
             lay.lines.append(f"{ind}out += _U32.pack(len(v))")
