@@ -264,6 +264,13 @@ def stop_all(processes: Iterable[RosProcess]) -> None:
         p.stop()
 
 
+def graph_up_pids(up: RosProcess, timeout: float = 120.0) -> dict[str, int]:
+    """The pid of each process ``./tmgwr up`` started, from its ``graph up in
+    ROS_DOMAIN_ID=...`` line (waited for)."""
+    line = up.wait_for_line(r"^graph up in ROS_DOMAIN_ID=", timeout=timeout)
+    return {name: int(pid) for name, pid in re.findall(r"(\w+) \(pid (\d+)\)", line)}
+
+
 def parse_json_line(output: str, prefix: str):
     """The JSON value after ``prefix`` on the last output line starting with it."""
     for line in reversed(output.splitlines()):

@@ -23,7 +23,7 @@ import time
 
 import pytest
 import yaml
-from ros_helpers import ROOT, RosProcess, ros_env
+from ros_helpers import ROOT, RosProcess, graph_up_pids, ros_env
 from test_recorder import foxglove_decoder, mcap_files, tmgwr_cli  # noqa: F401, F811 (fixtures)
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -182,8 +182,7 @@ def test_a_paused_recorder_says_exactly_what_it_lost(ros_domain, tmp_path):
                      "--seed", "1", "--record-dir", str(bag), "--domain-id", str(ros_domain)],
                     ros_env(ros_domain), name="up")
     with up:
-        line = up.wait_for_line(r"^graph up in ROS_DOMAIN_ID", timeout=90)
-        pid = int(re.search(r"recorder \(pid (\d+)\)", line)[1])
+        pid = graph_up_pids(up, timeout=90)["recorder"]
         up.wait_for_line(r"\[maze_sim\].*goal \(\d+, \d+\) reached", timeout=90)
         os.kill(pid, signal.SIGSTOP)
         time.sleep(10.0)

@@ -13,7 +13,7 @@ import signal
 import time
 
 import pytest
-from ros_helpers import allocate_domain, release_domain, spawn_module
+from ros_helpers import allocate_domain, graph_up_pids, release_domain, spawn_module
 
 pytestmark = pytest.mark.ros
 
@@ -24,8 +24,7 @@ def graph():
     proc = spawn_module("tmgwr_agent.cli", "up", "--no-record", "--seed", "1",
                         domain=domain, name="tmgwr up")
     try:
-        line = proc.wait_for_line(r"^graph up in ROS_DOMAIN_ID=", timeout=120)
-        pids = {name: int(pid) for name, pid in re.findall(r"(\w+) \(pid (\d+)\)", line)}
+        pids = graph_up_pids(proc)
         yield proc, domain, pids
     finally:
         proc.stop()
@@ -133,8 +132,7 @@ def test_up_reports_a_node_that_dies_and_stops_the_rest(ros_domain):
     proc = spawn_module("tmgwr_agent.cli", "up", "--no-record", "--quiet", domain=ros_domain,
                         name="tmgwr up")
     with proc:
-        line = proc.wait_for_line(r"^graph up in ROS_DOMAIN_ID=", timeout=120)
-        pids = {name: int(pid) for name, pid in re.findall(r"(\w+) \(pid (\d+)\)", line)}
+        pids = graph_up_pids(proc)
         os.kill(pids["map_learner"], signal.SIGKILL)
         proc.proc.wait(timeout=60)
         proc._reader.join(timeout=5)
@@ -158,8 +156,7 @@ def test_up_saves_the_map_when_another_node_dies(ros_domain, tmp_path):
     proc = spawn_module("tmgwr_agent.cli", "up", "--record-dir", str(run),
                         domain=ros_domain, name="tmgwr up")
     with proc:
-        line = proc.wait_for_line(r"^graph up in ROS_DOMAIN_ID=", timeout=120)
-        pids = {name: int(pid) for name, pid in re.findall(r"(\w+) \(pid (\d+)\)", line)}
+        pids = graph_up_pids(proc)
         proc.wait_for_line(r"^episode 1: \d+ steps", timeout=120)
         os.kill(pids["action_selector"], signal.SIGKILL)
         proc.proc.wait(timeout=60)

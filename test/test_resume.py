@@ -28,7 +28,7 @@ import time
 
 import numpy as np
 import pytest
-from ros_helpers import RosProcess, ros_env, spawn_module
+from ros_helpers import RosProcess, graph_up_pids, ros_env, spawn_module
 
 from tmgwr_agent.graph import resume
 from tmgwr_common.checkpoint import (
@@ -210,8 +210,7 @@ def wait_episodes(proc: RosProcess, n: int) -> list[tuple[int, int]]:
 def kill_9_everything(up: RosProcess) -> dict[str, int]:
     """SIGKILL every node of the graph at once, then ``up`` itself: nothing shuts down
     cleanly (no on_shutdown, no last checkpoint, the recorder's file left open)."""
-    line = up.wait_for_line(r"^graph up in ROS_DOMAIN_ID")
-    pids = {name: int(pid) for name, pid in re.findall(r"(\w+) \(pid (\d+)\)", line)}
+    pids = graph_up_pids(up, timeout=30.0)
     for pid in pids.values():             # each node leads its own process group
         os.killpg(pid, signal.SIGKILL)
     os.killpg(up.proc.pid, signal.SIGKILL)
