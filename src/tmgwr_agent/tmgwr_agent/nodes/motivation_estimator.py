@@ -18,7 +18,10 @@ When the selector's epsilon draw for its next action, made ahead, chose the rand
 step, as :meth:`TMGWRAgent.step` does in-process: this node hears the selector's
 ``Action`` of the previous step and holds a state until that action has arrived (the
 simulator made the state after it, so it was sent first; a resent state with the action
-still missing is solved in full, with a warning). The first state of a run has no action
+still missing is solved in full, with a warning, and provisionally: the core as it was
+before the solve is kept, and when the late action arrives and says the draw chose the
+walk, the core goes back to it and skips the solve as the in-process agent did, so the
+warm start of the next solve is the same either way). The first state of a run has no action
 before it: solved, as the in-process agent solves its first step. A field not solved
 carries the winner's links without options, potentials 0, goal node -1 and 0 sweeps, and
 no ``/potentials`` goes out for it.
@@ -33,6 +36,7 @@ request.
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -97,6 +101,8 @@ class MotivationEstimatorNode(Node):
         # action chose the random walk, Eq. 4-5 need not be solved for it
         self.heard: tuple[int, int, bool] | None = None
         self.waiting = None                 # a state awaiting that action
+        # a state solved without that action: ((run, step), the core before the solve)
+        self.provisional: tuple[tuple[int, int], MotivationEstimator] | None = None
         # Action, SensorimotorState and SensorimotorSnapshot arrive as their fields (read by
         # tmgwr_common.cdr from the serialized message), MotivationField leaves serialized
         subscribe_decoded(self, Action, topics.ACTION, self.on_action, STEP_QOS)
@@ -129,10 +135,23 @@ class MotivationEstimatorNode(Node):
         if self.heard is not None and (a.run_id, a.step_id) < self.heard[:2]:
             return                  # an older step answered again (a resend): not news
         self.heard = (a.run_id, a.step_id, a.walk_next)
+        self.settle(a)
         w = self.waiting
         if w is not None and (w.run_id, w.step_id - 1) == (a.run_id, a.step_id):
             self.waiting = None
             self.on_state(w)
+
+    def settle(self, a) -> None:
+        """The late action ``a`` of a step solved without it: when its draw chose the walk,
+        undo the solve (the in-process agent skipped it) and skip it."""
+        p, self.provisional = self.provisional, None
+        if p is None or p[0] != (a.run_id, a.step_id + 1):
+            return
+        if a.walk_next:
+            self.core = p[1]
+            self.core.update(self.replica.snapshot(), skip=True)
+            self.get_logger().info(f"step {a.step_id + 1} (run {a.run_id}): the late action "
+                                   "chose the walk: the solve made without it undone")
 
     def awaits_action(self, s) -> bool:
         """Whether state ``s`` waits for the selector's action of the step before (this
@@ -203,6 +222,10 @@ class MotivationEstimatorNode(Node):
         self.core.record(s.previous_winner, s.winner, s.inserted, outcome_of(s), m.w)
         heard = self.heard if self.heard and self.heard[:2] == (s.run_id, s.step_id - 1) \
             else None               # the selector's action of the step before
+        self.provisional = None
+        if heard is None:   # solved without the draw (a resend, the action missing; a
+            # run's first step; a restart): provisional until that action turns up, if ever
+            self.provisional = ((s.run_id, s.step_id), copy.deepcopy(self.core))
         V = self.core.update(m, skip=heard is not None and heard[2])
         out = FIELD.new()
         out.header = s.header
