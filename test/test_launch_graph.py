@@ -23,7 +23,15 @@ import time
 
 import pytest
 from measure_ctrl_c import NODES, one_stop
-from ros_helpers import ROOT, RosProcess, require_ros2, ros2_cli, ros2_run, ros_env
+from ros_helpers import (
+    ROOT,
+    RosProcess,
+    require_ros2,
+    ros2_cli,
+    ros2_run,
+    ros_env,
+    spawn_python,
+)
 from test_nodes import goals_reached
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -181,3 +189,35 @@ def test_the_launch_file_sets_no_dds_setting():
     assert subprocess.run(["grep", "-q", "namespace", str(ROOT / "src" / "tmgwr_agent" /
                                                           "launch" / "agent.launch.py")]
                           ).returncode == 0
+
+
+STUCK_TEARDOWN = r"""
+import time
+from rclpy.node import Node
+from tmgwr_common.node import run
+
+class Stuck(Node):
+    def __init__(self):
+        super().__init__("stuck")
+        self.finished = True                      # spinning stops at once
+
+    def on_shutdown(self):
+        print("state saved", flush=True)
+
+    def destroy_node(self):                       # a middleware teardown that never ends
+        time.sleep(60)
+
+raise SystemExit(run(Stuck, "stuck"))
+"""
+
+
+@pytest.mark.timeout(60)
+def test_a_hung_teardown_after_the_node_end_is_cut_with_its_reason(ros_domain):
+    from tmgwr_common.node import TEARDOWN_LIMIT
+    t0 = time.monotonic()
+    p = spawn_python(STUCK_TEARDOWN, domain=ros_domain, name="stuck")
+    out = p.wait(timeout=40)                      # exit code 0: the node's own code
+    took = time.monotonic() - t0
+    assert "state saved" in out and "DDS teardown did not finish" in out, out
+    assert "destroy_node" in out, out             # where it hung
+    assert took < TEARDOWN_LIMIT + 30, took

@@ -28,8 +28,11 @@
 from __future__ import annotations
 
 import array
+import faulthandler
 import math
+import os
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
@@ -374,6 +377,39 @@ def wait_for_acknowledgments(node, timeout: float = 1.0) -> bool:
     return done
 
 
+#: Seconds the DDS teardown after a node's end (acknowledgments, destroy_node,
+#: rclpy.shutdown; well under 1 s normally) may take before the process exits without it.
+TEARDOWN_LIMIT = 3.0
+
+
+def guard_teardown(name: str, code: int, limit: float = TEARDOWN_LIMIT) -> Callable[[], None]:
+    """Bound the teardown that follows a node's end; returns the call that disarms it.
+
+    The node's state is saved by then (:func:`end_node`); what is left is the middleware's.
+    Once, under heavy load, a node hung there for 15 s after writing its checkpoint (and was
+    killed by its supervisor); it was never seen again in 60 stops under a profiler. If that
+    happens, after ``limit`` s the node says so, prints where each thread was (to find the
+    cause) and exits with its own code; the interpreter-free watchdog of :mod:`faulthandler`
+    ends it (code 1, with the same dump) should the first need the GIL a hung call holds."""
+    def cut():
+        print(f"[{name}] DDS teardown did not finish within {limit:.0f} s of the node's end "
+              "(its state is saved): exiting without it; the threads were at:",
+              file=sys.stderr, flush=True)
+        faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
+        sys.stdout.flush()
+        os._exit(code)
+
+    timer = threading.Timer(limit, cut)
+    timer.daemon = True
+    timer.start()
+    faulthandler.dump_traceback_later(limit + 2.0, exit=True)
+
+    def disarm():
+        timer.cancel()
+        faulthandler.cancel_dump_traceback_later()
+    return disarm
+
+
 def end_node(node) -> None:
     """A node's end once spinning stopped: a managed (lifecycle) node takes its ``shutdown``
     transition (:func:`tmgwr_common.lifecycle.end`: its ``on_shutdown(state)`` runs), any
@@ -471,8 +507,12 @@ def run(factory: Callable[[], Any], name: str, args=None,
             except Exception as exc:  # noqa: BLE001 -- still shut down cleanly
                 print(f"[{name}] shutdown hook failed: {exc}", file=sys.stderr, flush=True)
                 code = code or 1
+            disarm = guard_teardown(name, code)
             wait_for_acknowledgments(node)
             node.destroy_node()
+        else:
+            disarm = guard_teardown(name, code)
         rclpy.try_shutdown()
+        disarm()
         stop.ignore_from_now()
     return code
