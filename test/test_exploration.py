@@ -74,7 +74,9 @@ def test_goal_moved_into_unvisited_space_is_found_in_the_first_episode():
     oscillation on the node most like the goal), and the next greedy path is shortest.
     Seeds whose training walk visited goal 1 do not test this and are passed over."""
     tested = 0
-    for seed in range(12):
+    for seed in range(40):
+        if tested == 3:
+            break
         world, agent = trained(FAR, seed=seed)
         x1 = agent.preprocessor.goal_features(
             np.array(world.maze.goal_cell("1"), dtype=float))
@@ -87,7 +89,7 @@ def test_goal_moved_into_unvisited_space_is_found_in_the_first_episode():
         run_episode(world, agent)
         assert greedy_optimal(world, agent)
         tested += 1
-    assert tested >= 2
+    assert tested == 3
 
 
 def test_shortcut_is_found_when_the_remembered_wall_goes_stale():

@@ -399,14 +399,14 @@ def test_stale_walls_wait_when_the_episode_re_test_budget_is_used_up():
         st["bump_t"][i, a], st["bump_e"][i, a] = 10, 1
     mo.load_state_dict(st)
     mo.update(m)
-    assert mo.rho[0, RIGHT] == 1.0 and mo.rho[2, UP] == 1.0      # stale_prior 1
+    assert mo.rho[0, RIGHT] == 0.5 and mo.rho[2, UP] == 0.5      # stale_prior 1/2
     mo.record(2, 2, False, Outcome(action=UP, bumped=True), m.w)  # the re-test fails
     assert mo.retests == 1
     mo.update(m)
     assert mo.rho[0, RIGHT] == 0.0 and mo.rho[2, UP] == 0.0
     mo.record(-1, 0, False, EPISODE_START, m.w)                   # a new episode
     mo.update(m)
-    assert mo.retests == 0 and mo.rho[0, RIGHT] == 1.0
+    assert mo.retests == 0 and mo.rho[0, RIGHT] == 0.5
     assert mo.rho[2, UP] == 0.0                  # bumped this episode: trusted again
     none = known_estimator(m, U_MOVES, (0, 2), 5, stale_horizon=3.0, stale_budget=0.0)
     st = none.state_dict()
@@ -414,6 +414,50 @@ def test_stale_walls_wait_when_the_episode_re_test_budget_is_used_up():
     none.load_state_dict(st)
     none.update(m)
     assert none.rho[0, RIGHT] == 0.0
+
+
+# An L into the goal through cell X: 0 (0, 0) down 1 (1, 0) right 2 (1, 1) up 3 (0, 1) = X
+# right 4 (0, 2), the goal; 'right' from node 0 once led to X too (a move, no link).
+L_CELLS = [(0, 0), (1, 0), (1, 1), (0, 1), (0, 2)]
+L_MOVES = [(0, DOWN, 1), (1, RIGHT, 2), (2, UP, 3), (3, RIGHT, 4), (0, RIGHT, 3)]
+
+
+def test_a_cell_that_closed_is_closed_from_every_side_while_trusted_by_hand():
+    """Node 0's 'right', a move made before, bumps: X (node 3, where it led) has closed,
+    and the link 2 -> 3 into it from below is worth nothing while the bump is trusted: X
+    is terminal, V(3) = R_3 (no successor), V(2) = gamma R_3 (Eq. 5, link 2 -> 3), where
+    it was gamma (R_3 + gamma V(4)). After ``stale_horizon`` episodes X is doubted again
+    (its links back), and standing on X opens it at once. The stuck test ignores it: the
+    link 2 -> 3 itself never bumped. The same bump broke the known route, so the episode
+    re-tests no stale wall (its budget is spent) until the next one starts."""
+    g = 0.97
+    m = path_map(L_CELLS, [a for _, a, _ in L_MOVES[:4]])
+    R3 = np.exp(-0.01 / (2 * 0.03 ** 2))                 # sigma_g = 0.3 x the link 0.1
+    budget = known_estimator(m, L_MOVES, (0, 2), 1)
+    budget.update(m)
+    assert not budget.budget_spent(m.n)
+    budget.record(0, 0, False, Outcome(action=RIGHT, bumped=True), m.w)
+    assert budget.broken and budget.budget_spent(m.n)
+    budget.record(-1, 0, False, EPISODE_START, m.w)
+    assert not budget.broken and not budget.budget_spent(m.n)
+    # the rest with no stale wall's option (stale_budget 0), so V is Eq. 5 on the links
+    mo = known_estimator(m, L_MOVES, (0, 2), 1, stale_horizon=3.0, stale_budget=0.0)
+    open_V2 = g * (R3 + g * 1.0)
+    np.testing.assert_allclose(mo.update(m)[2], open_V2, rtol=1e-9)
+    mo.record(0, 0, False, Outcome(action=RIGHT, bumped=True), m.w)
+    assert mo.closed_e[3] == mo.episode
+    V = mo.update(m)
+    assert V[3] == pytest.approx(R3, rel=1e-9) and V[2] == pytest.approx(g * R3, rel=1e-9)
+    assert not mo.stuck(m, m.n)
+    for _ in range(2):                                   # trusted for 3 episodes
+        mo.record(-1, 0, False, EPISODE_START, m.w)
+        assert mo.update(m)[3] == pytest.approx(R3, rel=1e-9)
+    mo.record(-1, 0, False, EPISODE_START, m.w)          # stale: X's links count again
+    np.testing.assert_allclose(mo.update(m)[2], open_V2, rtol=1e-9)
+    mo.closed_e[3] = mo.episode                          # closed again; the agent walks
+    mo.record(2, 3, False, Outcome(action=UP, bumped=False), m.w)   # in from below
+    assert mo.closed_e[3] == -1
+    np.testing.assert_allclose(mo.update(m)[2], open_V2, rtol=1e-9)
 
 
 def test_thick_stale_wall_leads_straight_on_to_the_first_known_cell_by_hand():
@@ -426,7 +470,7 @@ def test_thick_stale_wall_leads_straight_on_to_the_first_known_cell_by_hand():
     acts = [DOWN, DOWN, RIGHT, RIGHT, RIGHT, UP, UP]
     moves = [(k, a, k + 1) for k, a in enumerate(acts)]
     m = path_map(cells, acts)
-    mo = known_estimator(m, moves, (0, 3), 5, stale_horizon=3.0)
+    mo = known_estimator(m, moves, (0, 3), 5, stale_horizon=3.0, stale_prior=1.0)
     st = mo.state_dict()
     st["bump_t"][0, RIGHT], st["bump_e"][0, RIGHT] = 10, 1
     mo.load_state_dict(st)
