@@ -460,6 +460,22 @@ def test_a_cell_that_closed_is_closed_from_every_side_while_trusted_by_hand():
     np.testing.assert_allclose(mo.update(m)[2], open_V2, rtol=1e-9)
 
 
+def test_outcome_memory_grows_with_the_map_whichever_comes_first():
+    """A solve on a map of more nodes than the outcome memory holds grows every per-node
+    array, the closed cells' too: a restarted estimator (restored from a checkpoint of a
+    64-slot memory) then records a move into node 79. It failed with an IndexError there,
+    killing the graph's estimator, when only the record grew the closed cells' array."""
+    cells = [(0, k) for k in range(80)]
+    m = path_map(cells, [RIGHT] * 79)
+    mo = MotivationEstimator(MotivationConfig())
+    mo.load_state_dict(MotivationEstimator(MotivationConfig()).state_dict())   # 64 slots
+    mo.set_goal(np.array([0.0, 7.9]))
+    mo.update(m)
+    mo.record(78, 79, False, Outcome(action=RIGHT, bumped=False), m.w)
+    mo.record(79, 79, False, Outcome(action=RIGHT, bumped=True), m.w)
+    assert len(mo.closed_e) >= 80 and mo.closed_e[79] == -1 and mo.tried[79, RIGHT]
+
+
 def test_thick_stale_wall_leads_straight_on_to_the_first_known_cell_by_hand():
     """A wall two cells thick, (0, 1) and (0, 2), between node 0 (0, 0) and the goal
     node (0, 3), the way round below: no known cell is next to (0, 1), so if it opened

@@ -387,8 +387,8 @@ class MotivationEstimator:
         # closed_t is absent from older checkpoints: each bump then counts as the first
         self.closed_t = np.array(d.get("closed_t", d["bump_t"]), dtype=np.int64)
         self.succ = np.array(d["succ"], dtype=np.int64)
-        self.closed_e = np.array(d["closed_e"], dtype=np.int64) if "closed_e" in d else \
-            np.full(len(self.succ), -1, dtype=np.int64)      # older checkpoints: none
+        self.closed_e = grown(np.array(d.get("closed_e", ()), dtype=np.int64),
+                              len(self.succ), -1)            # older checkpoints: none
         self.clock = int(d["clock"])
         # absent from older checkpoints: the episode counters start afresh and every
         # remembered wall is trusted from now on
@@ -431,6 +431,7 @@ class MotivationEstimator:
             self.closed_t = grown(self.closed_t, n, -1)
             self.bump_e = grown(self.bump_e, n, -1)
             self.succ = grown(self.succ, n, -1)
+            self.closed_e = grown(self.closed_e, n, -1)
             self.U = grown(self.U, n, 0.0)
             self.rho = grown(self.rho, n, 0.0)
             self.osucc = grown(self.osucc, n, -1)
