@@ -266,6 +266,7 @@ class MotivationEstimator:
         self.bump_e = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)    # episode of a bump
         self.succ = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)   # where a move led
         self.closed_e = np.full(64, -1, dtype=np.int64)   # episode a node's cell closed
+        self._closed: np.ndarray | None = None   # its trusted marks (derived, cached)
         self.clock = 0                # learning steps recorded
         self.episode = 0              # episodes started
         self.route = 0.0              # steps of the known route from this episode's start
@@ -329,6 +330,7 @@ class MotivationEstimator:
             self.episode += 1
             self.retests = 0
             self.broken = False
+            self._closed = None               # marks expire by the episode
             return
         self.clock += 1
         top = max(node, winner) + 1
@@ -345,10 +347,15 @@ class MotivationEstimator:
             self._dirty.add(winner)
         if not self._stuck and 0 <= node and self.bump_t[node, outcome.action] >= 0:
             self.retests += 1
-        if outcome.bumped and 0 <= node and self.bump_t[node, outcome.action] < 0 and \
-                self.succ[node, outcome.action] >= 0:
-            self.broken = True
-        self._close_cell(node, winner, inserted, outcome, w)
+        a = outcome.action
+        # a move made before bumps now: the known route broke, the cell it led to closed
+        broke = bool(outcome.bumped and 0 <= node and self.bump_t[node, a] < 0
+                     and self.succ[node, a] >= 0)
+        self.broken |= broke
+        if broke:
+            self._close_cell(node, a, w)
+        elif winner >= 0 and (inserted or not outcome.bumped):
+            self._mark_closed(winner, -1)     # a node stood on (or a new one) is open
         if kernels.record_outcome(self.tried, self.bump_t, self.closed_t, self.bump_e,
                                   self.succ, self.delta, self.moves, w, node, winner,
                                   inserted, outcome.action, outcome.bumped, self.clock,
@@ -356,19 +363,19 @@ class MotivationEstimator:
             self._dirty.add(node)
             self._bumps += 1
 
-    def _close_cell(self, node: int, winner: int, inserted: bool, outcome: Outcome,
-                    w: np.ndarray) -> None:
-        """A move made before that bumps now: the cell it led to has closed (the node it
-        led to, while that node is still at the predicted cell), and is closed from every
-        side; a node the agent stands on (or a new one) is open."""
-        a = outcome.action
-        if outcome.bumped and 0 <= node and self.bump_t[node, a] < 0:
-            j = self.succ[node, a]
-            if 0 <= j < len(w) and j != node and len(self.closed_e) > j and \
-                    np.abs(w[j] - w[node] - self.delta[a]).max() < 0.5 * self._scale:
-                self.closed_e[j] = self.episode
-        elif winner >= 0 and (inserted or not outcome.bumped):
-            self.closed_e[winner] = -1
+    def _close_cell(self, node: int, a: int, w: np.ndarray) -> None:
+        """Primitive a, a move made before from ``node``, bumps now: the cell it led to has
+        closed, from every side (the node it led to, while that node is still at the
+        predicted cell)."""
+        j = self.succ[node, a]
+        if j != node and np.abs(w[j] - w[node] - self.delta[a]).max() < 0.5 * self._scale:
+            self._mark_closed(j, self.episode)
+
+    def _mark_closed(self, j: int, episode: int) -> None:
+        """Node j's cell closed in ``episode`` (-1: open)."""
+        if self.closed_e[j] != episode:
+            self.closed_e[j] = episode
+            self._closed = None
 
     def state_dict(self) -> dict[str, np.ndarray | float | int]:
         """The outcome memory, as plain arrays and numbers (node rows ``[0, n)`` of the
@@ -389,6 +396,7 @@ class MotivationEstimator:
         self.succ = np.array(d["succ"], dtype=np.int64)
         self.closed_e = grown(np.array(d.get("closed_e", ()), dtype=np.int64),
                               len(self.succ), -1)            # older checkpoints: none
+        self._closed = None
         self.clock = int(d["clock"])
         # absent from older checkpoints: the episode counters start afresh and every
         # remembered wall is trusted from now on
@@ -463,12 +471,21 @@ class MotivationEstimator:
         """Flagged terminal nodes, and with the value of the unknown the nodes of closed
         cells while trusted (``stale_horizon`` episodes), except those of the current goal
         (R >= 1/2)."""
-        absorbing = m.terminal[:n].copy() if self.absorbing_terminals else np.zeros(n, bool)
+        absorbing = m.terminal[:n] if self.absorbing_terminals else np.zeros(n, bool)
         if self.value_unknown and closed:
+            absorbing = absorbing | self.closed_cells(n)
+        return absorbing & (self.R[:n] < GOAL_R)
+
+    def closed_cells(self, n: int) -> np.ndarray:
+        """The nodes of cells that closed, while trusted (``stale_horizon`` episodes since),
+        as a mask of n; recomputed only when a mark, the episode or n changed (it is read
+        at every solve)."""
+        if self._closed is None or len(self._closed) != n:
             k = min(n, len(self.closed_e))
             e = self.closed_e[:k]
-            absorbing[:k] |= (e >= 0) & (self.episode - e < self.stale_horizon)
-        return absorbing & (self.R[:n] < GOAL_R)
+            self._closed = np.zeros(n, dtype=bool)
+            self._closed[:k] = (e >= 0) & (self.episode - e < self.stale_horizon)
+        return self._closed
 
     def stuck_clock(self, nodes: int) -> tuple[int, float]:
         """(clock, T) for the doubt of walls while stuck: ``T = nodes`` steps (a bump older
