@@ -507,11 +507,10 @@ def run(factory: Callable[[], Any], name: str, args=None,
             except Exception as exc:  # noqa: BLE001 -- still shut down cleanly
                 print(f"[{name}] shutdown hook failed: {exc}", file=sys.stderr, flush=True)
                 code = code or 1
-            disarm = guard_teardown(name, code)
+        disarm = guard_teardown(name, code)
+        if node is not None:
             wait_for_acknowledgments(node)
             node.destroy_node()
-        else:
-            disarm = guard_teardown(name, code)
         rclpy.try_shutdown()
         disarm()
         stop.ignore_from_now()

@@ -222,10 +222,10 @@ class MotivationEstimatorNode(Node):
         self.core.record(s.previous_winner, s.winner, s.inserted, outcome_of(s), m.w)
         heard = self.heard if self.heard and self.heard[:2] == (s.run_id, s.step_id - 1) \
             else None               # the selector's action of the step before
-        self.provisional = None
-        if heard is None:   # solved without the draw (a resend, the action missing; a
-            # run's first step; a restart): provisional until that action turns up, if ever
-            self.provisional = ((s.run_id, s.step_id), copy.deepcopy(self.core))
+        # solved without the draw (a resend, the action missing; a run's first step; a
+        # restart): provisional until that action turns up, if ever
+        self.provisional = None if heard is not None else \
+            ((s.run_id, s.step_id), copy.deepcopy(self.core))
         V = self.core.update(m, skip=heard is not None and heard[2])
         out = FIELD.new()
         out.header = s.header
