@@ -128,17 +128,27 @@ def test_sigint_stops_every_node(graph):
     assert not alive, f"still running after up stopped: {alive}\n{out}"
 
 
-def test_up_reports_a_node_that_dies_and_stops_the_rest(ros_domain):
-    proc = spawn_module("tmgwr_agent.cli", "up", "--no-record", "--quiet", domain=ros_domain,
-                        name="tmgwr up")
+def kill_under_up(proc, name: str, after: str | None = None) -> tuple[dict[str, int], str]:
+    """SIGKILL node ``name`` of the graph ``./tmgwr up`` (``proc``) runs (once a line
+    matching ``after`` is out) and wait for ``up`` to end: it exits 1 naming the node.
+    Returns the graph's pids and the output."""
     with proc:
         pids = graph_up_pids(proc)
-        os.kill(pids["map_learner"], signal.SIGKILL)
+        if after is not None:
+            proc.wait_for_line(after, timeout=120)
+        os.kill(pids[name], signal.SIGKILL)
         proc.proc.wait(timeout=60)
         proc._reader.join(timeout=5)
     out = proc.output
     assert proc.proc.returncode == 1, out
-    assert re.search(r"node 'map_learner' died \(exit code -9\)", out), out
+    assert re.search(rf"node '{name}' died \(exit code -9\)", out), out
+    return pids, out
+
+
+def test_up_reports_a_node_that_dies_and_stops_the_rest(ros_domain):
+    proc = spawn_module("tmgwr_agent.cli", "up", "--no-record", "--quiet", domain=ros_domain,
+                        name="tmgwr up")
+    pids, out = kill_under_up(proc, "map_learner")
     # the others were stopped cleanly, in reverse order
     stopped = re.search(r"^graph stopped: (.*)$", out, re.M).group(1)
     assert "map_learner exit -9" in stopped, out
@@ -155,15 +165,8 @@ def test_up_saves_the_map_when_another_node_dies(ros_domain, tmp_path):
     run = tmp_path / "run"
     proc = spawn_module("tmgwr_agent.cli", "up", "--record-dir", str(run),
                         domain=ros_domain, name="tmgwr up")
-    with proc:
-        pids = graph_up_pids(proc)
-        proc.wait_for_line(r"^episode 1: \d+ steps", timeout=120)
-        os.kill(pids["action_selector"], signal.SIGKILL)
-        proc.proc.wait(timeout=60)
-        proc._reader.join(timeout=5)
-    out = proc.output
-    assert proc.proc.returncode == 1, out
-    assert re.search(r"node 'action_selector' died \(exit code -9\)", out), out
+    _, out = kill_under_up(proc, "action_selector",
+                           after=r"^episode 1: \d+ steps")
     saved = re.search(r"map_learner: saved (\d+) nodes, \d+ links \(step (\d+)\) to (\S+)",
                       out)
     assert saved, out
