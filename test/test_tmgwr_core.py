@@ -476,6 +476,18 @@ def test_outcome_memory_grows_with_the_map_whichever_comes_first():
     assert len(mo.closed_e) >= 80 and mo.closed_e[79] == -1 and mo.tried[79, RIGHT]
 
 
+def test_a_bump_whose_remembered_successor_is_past_a_smaller_map_closes_nothing():
+    """The learner's map can be replaced by a smaller one (lifecycle cleanup + configure,
+    load_map) while the outcome memory still remembers where moves led: a move made before
+    that bumps now, whose successor slot is past the new map, marks no cell (it raised an
+    IndexError in the graph's estimator and stopped the composed graph)."""
+    m = path_map(L_CELLS, [a for _, a, _ in L_MOVES[:4]])
+    mo = known_estimator(m, L_MOVES, (0, 2), 1)
+    mo.succ[0, RIGHT] = m.n + 3                        # a slot of the map that was
+    mo.record(0, 0, False, Outcome(action=RIGHT, bumped=True), m.w[: m.n])
+    assert mo.broken and not (mo.closed_e[: m.n] >= 0).any()
+
+
 def test_thick_stale_wall_leads_straight_on_to_the_first_known_cell_by_hand():
     """A wall two cells thick, (0, 1) and (0, 2), between node 0 (0, 0) and the goal
     node (0, 3), the way round below: no known cell is next to (0, 1), so if it opened

@@ -366,9 +366,11 @@ class MotivationEstimator:
     def _close_cell(self, node: int, a: int, w: np.ndarray) -> None:
         """Primitive a, a move made before from ``node``, bumps now: the cell it led to has
         closed, from every side (the node it led to, while that node is still at the
-        predicted cell)."""
+        predicted cell; a map loaded or rebuilt since may hold fewer nodes than ``succ``
+        remembers)."""
         j = self.succ[node, a]
-        if j != node and np.abs(w[j] - w[node] - self.delta[a]).max() < 0.5 * self._scale:
+        if j != node and j < len(w) and \
+                np.abs(w[j] - w[node] - self.delta[a]).max() < 0.5 * self._scale:
             self._mark_closed(j, self.episode)
 
     def _mark_closed(self, j: int, episode: int) -> None:
