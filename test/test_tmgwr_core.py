@@ -391,9 +391,11 @@ def test_stale_walls_wait_when_the_episode_re_test_budget_is_used_up():
     """Both sides of the wall (0, 1) are stale; the budget is max(1, 0.1 x route 4) = 1
     re-test an episode: once node 2's 'up' has been re-tested (a bump, not stuck), node
     0's 'right' has no option until the next episode starts; with ``stale_budget`` 0 no
-    stale wall has one at all."""
+    stale wall has one at all. (``stale_rank`` off: the ranking would offer only the
+    budget's best from the start.)"""
     m = path_map(U_CELLS, [a for _, a, _ in U_MOVES])
-    mo = known_estimator(m, U_MOVES, (0, 2), 5, stale_horizon=3.0)
+    mo = known_estimator(m, U_MOVES, (0, 2), 5, stale_horizon=3.0, stale_rank=False,
+                         stale_prior=0.5)
     st = mo.state_dict()
     for i, a in ((0, RIGHT), (2, UP)):
         st["bump_t"][i, a], st["bump_e"][i, a] = 10, 1
@@ -504,9 +506,73 @@ def test_thick_stale_wall_leads_straight_on_to_the_first_known_cell_by_hand():
     mo.load_state_dict(st)
     V = mo.update(m)
     assert mo.goal_node == 7 and mo.osucc[0, RIGHT] == -2
-    assert mo.U[0, RIGHT] == pytest.approx(g)            # one unknown cell on the way
+    exits = dict(zip(mo.onb[0, RIGHT], mo.ong[0, RIGHT]))
+    assert exits[7] == pytest.approx(g)                  # one unknown cell on the way
     assert V[0] == pytest.approx(g * max(g * V[1], g * g * V[7]))
     assert V[0] == pytest.approx(g ** 3 * V[7])          # the wall, if open, is shorter
+
+
+def test_stale_wall_opens_along_its_run_sideways_by_hand():
+    """A bent way through a wall: node A (2, 0) bumped 'down' into (3, 0); if that wall
+    opened along its run, (3, 1) and (3, 2) with it (no known cell beside (3, 1)), the
+    way leads on to the goal node B (2, 2) above (3, 2): k = 2 cells along the run, an
+    exit worth gamma^2 V(B), and A -> (3, 0) -> (3, 1) -> (3, 2) -> B is 4 steps against
+    the known route's 6 over the top, round the obstacle (1, 1) and the wall (2, 1).
+    (3, 0) has no known cell beside it and the run straight down meets none, so before
+    runs went sideways the option did not exist (a generated open field: an opened run
+    of three cells entered from its end was never re-tested). A place sensed at (4, 4)
+    puts row 3 inside the known extent; without it the run would leave the extent (the
+    maze's outer wall) and there is no exit."""
+    g = 0.97
+    cells = [(2, 0), (1, 0), (0, 0), (0, 1), (0, 2), (1, 2), (2, 2)]
+    acts = [UP, UP, RIGHT, RIGHT, DOWN, DOWN]
+    moves = [(k, a, k + 1) for k, a in enumerate(acts)]
+    m = path_map(cells, acts)
+    m.begin_episode()
+    m.step(0.1 * np.array([4.0, 4.0]), None)             # node 7, no link
+    assert m.size == 8
+    mo = known_estimator(m, moves, (2, 2), 5, stale_horizon=3.0, stale_prior=1.0)
+    st = mo.state_dict()
+    st["bump_t"][0, DOWN], st["bump_e"][0, DOWN] = 10, 1
+    mo.load_state_dict(st)
+    mo.update(m)
+    V = mo.update(m)                     # the exits are picked with the last solve's V
+    assert mo.goal_node == 6 and mo.osucc[0, DOWN] == -2
+    exits = {int(q): float(d) for q, d in zip(mo.onb[0, DOWN], mo.ong[0, DOWN]) if q >= 0}
+    assert exits[6] == pytest.approx(g ** 2)
+    assert V[0] == pytest.approx(g * g * g ** 2 * V[6])  # the run, if open, is shorter
+    assert V[0] > g * V[1]
+    bare = path_map(cells, acts)                         # row 3 outside the extent
+    mo = known_estimator(bare, moves, (2, 2), 5, stale_horizon=3.0, stale_prior=1.0)
+    mo.load_state_dict(st)
+    mo.update(bare)
+    assert mo.rho[0, DOWN] == 0.0 and mo.osucc[0, DOWN] == -1
+
+
+def test_an_episode_offers_the_stale_walls_that_save_most_by_hand():
+    """A U-shaped route of 8 steps from A (2, 0) up, along row 0 and down to the goal
+    (2, 4). Two stale walls: A 'right' into (2, 1) (if the bottom row opened along its
+    run, A -> (2, 1) -> (2, 2) -> (2, 3) -> goal: 4 steps, saving 4) and (0, 2) 'down'
+    into (1, 2) (its runs lead back to row 0 or to (1, 4): no step saved). The
+    episode's re-test budget is one (0.1 x 8 steps, at least 1): only A 'right' is
+    offered (rho > 0); without the ranking both are, whatever they save."""
+    cells = [(2, 0), (1, 0), (0, 0), (0, 1), (0, 2), (0, 3), (0, 4), (1, 4), (2, 4)]
+    acts = [UP, UP, RIGHT, RIGHT, RIGHT, RIGHT, DOWN, DOWN]
+    moves = [(k, a, k + 1) for k, a in enumerate(acts)]
+    m = path_map(cells, acts)
+    for rank in (True, False):
+        mo = known_estimator(m, moves, (2, 4), 5, stale_horizon=3.0, stale_rank=rank,
+                             stale_prior=0.5)
+        st = mo.state_dict()
+        for i, a in ((0, RIGHT), (4, DOWN)):
+            st["bump_t"][i, a], st["bump_e"][i, a] = 10, 1
+        st["route_due"] = 1
+        mo.load_state_dict(st)
+        mo.update(m)
+        assert mo.route == pytest.approx(8.0, abs=0.5)     # read off V0 (R near g)
+        assert mo.rho[0, RIGHT] == pytest.approx(0.5), rank
+        assert (mo.rho[4, DOWN] > 0) == (not rank), rank
+        assert mo.sel[0, RIGHT] and mo.sel[4, DOWN] == (not rank)
 
 
 def test_forgotten_move_to_a_removed_node_is_valued_as_unknown_space_by_hand():
@@ -573,7 +639,8 @@ U, rho = np.zeros((2, 4)), np.zeros((2, 4))
 osucc, onb = np.full((2, 4), -1), np.full((2, 4, 4), -1)
 kernels.option_row(w, out, np.ones(2, dtype=bool), 0, np.array([0.5, 0.5]),
                    np.zeros((4, 2)), 0.1, 10.0, 0.97, tried, bump_t, closed_t, bump_e,
-                   succ, 10, 2.0, 9, 3.0, 1.0, 1.0, False, grid, origin, U, rho, osucc, onb)
+                   succ, 10, 2.0, 9, 3.0, 1.0, 1.0, False, grid, origin, np.zeros(3),
+                   np.ones((2, 4), dtype=bool), U, rho, osucc, onb, np.zeros((2, 4, 4)))
 print(rho[0, RIGHT], osucc[0, RIGHT])
 """
 

@@ -145,27 +145,123 @@ def reaches_source(out, E, n, absorbing, alive, source, mark):
 
 
 @njit(cache=True)
-def successor_value(V, j, U_o, nb, k, gamma):
+def link_steps(out, E, n, alive, absorbing, root, reverse, dist):
+    """``dist[i]``: the fewest links with E > 0 from node ``root`` to i (``reverse``: from
+    i to ``root``), -1 where no link path leads; an absorbing node has no successor, a
+    dead slot is never reached. Breadth-first search over the links (their steps, not
+    their reliabilities: the route as the agent would walk it)."""
+    K = out.shape[1]
+    deg = np.zeros(n + 1, dtype=np.int64)          # adjacency (CSR) in the search's direction
+    for i in range(n):
+        if not alive[i] or absorbing[i]:
+            continue
+        for s in range(K):
+            j = out[i, s]
+            if j >= 0 and j < n and E[i, s] > 0.0:
+                deg[(i if not reverse else j) + 1] += 1
+    for j in range(n):
+        deg[j + 1] += deg[j]
+    adj = np.empty(deg[n], dtype=np.int64)
+    fill = deg[:n].copy()
+    for i in range(n):
+        if not alive[i] or absorbing[i]:
+            continue
+        for s in range(K):
+            j = out[i, s]
+            if j >= 0 and j < n and E[i, s] > 0.0:
+                a, b = (i, j) if not reverse else (j, i)
+                adj[fill[a]] = b
+                fill[a] += 1
+    dist[:n] = -1
+    if root < 0 or root >= n or not alive[root]:
+        return
+    queue = np.empty(n, dtype=np.int64)
+    queue[0] = root
+    dist[root] = 0
+    head, tail = 0, 1
+    while head < tail:
+        j = queue[head]
+        head += 1
+        for p in range(deg[j], deg[j + 1]):
+            i = adj[p]
+            if dist[i] < 0:
+                dist[i] = dist[j] + 1
+                queue[tail] = i
+                tail += 1
+
+
+@njit(cache=True)
+def stale_savings(w, alive, n, delta, L, gamma, grid, origin, tried, bump_e, succ, episode,
+                  trust, ds, dg, route, onb, ong, res_i, res_a, res_s):
+    """The steps each stale remembered wall would save on the known route if it opened
+    (motivation.py, Eq. 5'): for a pair (i, a) stale (``trust`` episodes since its last
+    bump), the way ``ds[i]`` steps from the episode's start to i, the step into the wall
+    cell, and on to the goal, ``dg`` steps, through the cell's known node (a move made
+    before) or its best exit (:func:`wall_exits`, ``k`` cells along its run then one step
+    out: ``k + 2``), against ``route`` steps. The pairs with a saving go to ``res_i``,
+    ``res_a``, ``res_s``; returns how many. ``onb`` / ``ong``: scratch."""
+    x = np.empty(w.shape[1])
+    Vd = np.zeros(n + 1)                       # gamma^dg: wall_exits then picks min k + dg
+    for q in range(n):
+        if dg[q] >= 0:
+            Vd[q] = gamma ** dg[q]
+    c = 0
+    for i in range(n):
+        if not alive[i] or ds[i] < 0:
+            continue
+        for a in range(tried.shape[1]):
+            if not tried[i, a] or bump_e[i, a] < 0 or episode - bump_e[i, a] < trust:
+                continue
+            for k in range(w.shape[1]):
+                x[k] = w[i, k] + delta[a, k]
+            best = -1
+            j = succ[i, a]
+            if j >= 0:
+                gap = 0.0
+                for k in range(w.shape[1]):
+                    gap += (w[j, k] - x[k]) ** 2
+                if j < n and alive[j] and gap <= 0.25 * L * L and dg[j] >= 0:
+                    best = ds[i] + 1 + dg[j]
+            else:
+                for b in range(onb.shape[2]):
+                    onb[i, a, b] = -1
+                    ong[i, a, b] = 0.0
+                if wall_exits(w, i, a, x, delta, L, grid, origin, Vd, gamma, onb, ong):
+                    for b in range(onb.shape[2]):
+                        q = onb[i, a, b]
+                        if q >= 0 and dg[q] >= 0:
+                            k = int(np.round(np.log(ong[i, a, b]) / np.log(gamma)))
+                            p = ds[i] + k + 2 + dg[q]
+                            if best < 0 or p < best:
+                                best = p
+            if best >= 0 and best < route:
+                res_i[c], res_a[c], res_s[c] = i, a, route - best
+                c += 1
+    return c
+
+
+@njit(cache=True)
+def successor_value(V, j, U_o, nb, ng, k, gamma):
     """S of Eq. 5' for an option whose successor is ``j``: V of a known node (j >= 0),
-    ``U_o`` gamma max V of the known nodes ``nb[k]`` beyond a remembered wall cell (j =
-    -2; ``U_o`` discounts the unknown cells between, 1 for a wall one cell thick), or the
-    optimistic U of unknown space (j = -1, ``U_o``)."""
+    gamma max ``ng[k, b] V(nb[k, b])`` over the known exits ``nb[k]`` of a remembered
+    wall cell (j = -2; ``ng`` discounts the unknown cells of the run between,
+    :func:`wall_exits`), or the optimistic U of unknown space (j = -1, ``U_o``)."""
     if j >= 0:
         return V[j]
     if j == -2:
         best = 0.0
         for b in range(nb.shape[1]):
             q = nb[k, b]
-            if q >= 0 and V[q] > best:
-                best = V[q]
-        return U_o * gamma * best
+            if q >= 0 and ng[k, b] * V[q] > best:
+                best = ng[k, b] * V[q]
+        return gamma * best
     return U_o
 
 
 @njit(cache=True)
-def option_successor(V, U, osucc, onb, i, a, gamma):
+def option_successor(V, U, osucc, onb, ong, i, a, gamma):
     """The value of option (i, a)'s successor (:func:`successor_value`)."""
-    return successor_value(V, osucc[i, a], U[i, a], onb[i], a, gamma)
+    return successor_value(V, osucc[i, a], U[i, a], onb[i], ong[i], a, gamma)
 
 
 @njit(cache=True)
@@ -185,10 +281,11 @@ def contradicted(out, E, n, bump_t, succ):
 
 
 @njit(cache=True)
-def option_lists(n, absorbing, rho, U, osucc, onb):
+def option_lists(n, absorbing, rho, U, osucc, onb, ong):
     """The options of Eq. 5' (``rho[i, a] > 0``) as flat lists, node by node (CSR: node
     i's are ``[first[i], first[i + 1])``, primitives in order): rho, the successor
-    ``osucc``, U, and a wall cell's known neighbours ``onb``. Absorbing nodes have none.
+    ``osucc``, U, and a wall cell's known exits ``onb`` with their discounts ``ong``.
+    Absorbing nodes have none.
     (The sweeps read these lists: a few times faster than the (node, primitive) tables.)"""
     A = rho.shape[1]
     first = np.zeros(n + 1, dtype=np.int64)
@@ -203,6 +300,7 @@ def option_lists(n, absorbing, rho, U, osucc, onb):
     o_succ = np.empty(m, dtype=np.int64)
     o_U = np.empty(m)
     o_nb = np.empty((m, onb.shape[2]), dtype=np.int64)
+    o_ng = np.empty((m, onb.shape[2]))
     c = 0
     for i in range(n):
         if not absorbing[i]:
@@ -210,13 +308,14 @@ def option_lists(n, absorbing, rho, U, osucc, onb):
                 if rho[i, a] > 0.0:
                     o_rho[c], o_succ[c], o_U[c] = rho[i, a], osucc[i, a], U[i, a]
                     o_nb[c] = onb[i, a]
+                    o_ng[c] = ong[i, a]
                     c += 1
-    return first, o_rho, o_succ, o_U, o_nb
+    return first, o_rho, o_succ, o_U, o_nb, o_ng
 
 
 @njit(cache=True)
 def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, absorbing,
-                    alive, U, rho, osucc, onb):
+                    alive, U, rho, osucc, onb, ong):
     """Synchronous sweeps of Eq. 4-5 (with the options of the value of the unknown) until
     every |beta Delta_V(i)| <= tol V(i) + v_floor.
 
@@ -230,7 +329,8 @@ def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, abso
     V = 0 (:func:`reaches_source`), as do dead slots. Returns the number of sweeps.
     """
     K = out.shape[1]
-    first, o_rho, o_succ, o_U, o_nb = option_lists(n, absorbing, rho, U, osucc, onb)
+    first, o_rho, o_succ, o_U, o_nb, o_ng = option_lists(n, absorbing, rho, U, osucc, onb,
+                                                         ong)
     source = np.empty(n, dtype=np.bool_)
     for i in range(n):
         source[i] = R[i] > 0.0 or first[i + 1] > first[i]
@@ -258,7 +358,7 @@ def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, abso
                 stay = R[i] + gamma * best      # where a failed test leaves the agent
                 opt = 0.0
                 for c in range(first[i], first[i + 1]):   # max_a O(i, a), Eq. 5'
-                    sv = successor_value(V, o_succ[c], o_U[c], o_nb, c, gamma)   # S
+                    sv = successor_value(V, o_succ[c], o_U[c], o_nb, o_ng, c, gamma)  # S
                     r = o_rho[c]
                     ov = r * sv + (1.0 - r) * stay
                     if ov > opt:
@@ -306,11 +406,12 @@ def cell_grid(w, alive, n, L):
 
 
 @njit(cache=True)
-def in_grid(grid, origin, L, x):
-    """Whether position x falls inside the table of :func:`cell_grid`."""
+def in_extent(grid, origin, L, x):
+    """Whether position x lies within the known extent of the world: the rows and
+    columns of :func:`cell_grid` that its nodes span (not its one-cell margin)."""
     r = int(np.floor((x[0] - origin[0]) / L + 0.5))
     c = int(np.floor((x[1] - origin[1]) / L + 0.5))
-    return 0 <= r < grid.shape[0] and 0 <= c < grid.shape[1]
+    return 1 <= r < grid.shape[0] - 1 and 1 <= c < grid.shape[1] - 1
 
 
 @njit(cache=True)
@@ -329,9 +430,97 @@ def node_at(grid, origin, L, w, x):
 
 
 @njit(cache=True)
+def wall_exits(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong):
+    """Where the remembered wall cell x (primitive a from node i bumped into it) leads if
+    it opened (motivation.py, Eq. 5'): a wall opens along its run, so the cells opened
+    with it may be a straight run of unknown cells from x in any direction but back to i
+    (straight on through a thick wall, or sideways along it), ``k`` cells from x, and
+    the way on is any known node next to x or to a cell of such a run, reached ``k + 1``
+    steps after x: an exit ``q`` worth ``gamma^k V(q)`` (times the gamma of the step out
+    of x). A run goes on only through cells with no known node beside them: it ends
+    after the first cell next to known space (its exits counted; beyond it the way
+    leads through known space anyway), at a known node, or where it would leave the
+    known extent of the world (the rows and columns its nodes span: nothing was ever
+    sensed beyond). Without these stops a run along the maze's outer wall reached the
+    goal's side over any wall between (a generated braided maze: every re-test went to
+    the outer wall, the opened wall waited for ever; the default maze: the outer wall
+    re-tested on the way to the block). The ``P`` exits of most ``gamma^k V(q)`` by
+    the last solve's V go to ``onb[i, a]`` / ``ong[i, a]`` (ties: the nearest); the
+    sweep takes the max over them with the V it iterates. Returns whether there is any
+    exit. A primitive that never moved the agent (``|delta_a| <= L / 2``) has no cell
+    to open."""
+    P = delta.shape[0]
+    step2 = 0.0
+    for k in range(w.shape[1]):
+        step2 += delta[a, k] * delta[a, k]
+    if step2 <= 0.25 * L * L:
+        return False
+    y = np.empty(w.shape[1])
+    z = np.empty(w.shape[1])
+    found = False
+    for b in range(-1, P):
+        back = False
+        if b >= 0:                                   # not the way back to i
+            dot = 0.0
+            for k in range(w.shape[1]):
+                dot += delta[b, k] * delta[a, k]
+            back = dot < -0.5 * step2
+            nb2 = 0.0
+            for k in range(w.shape[1]):
+                nb2 += delta[b, k] * delta[b, k]
+            if back or nb2 <= 0.25 * L * L:
+                continue
+        # b = -1: the exits of x itself; else the run from x along b
+        limit = 1 if b < 0 else grid.shape[0] + grid.shape[1] + 1
+        for m in range(0 if b < 0 else 1, limit):
+            for k in range(w.shape[1]):
+                y[k] = x[k] + (m * delta[b, k] if b >= 0 else 0.0)
+            if m > 0:
+                if not in_extent(grid, origin, L, y) or node_at(grid, origin, L, w, y) >= 0:
+                    break                            # the run ends
+            g = gamma ** m
+            touched = False
+            for c in range(P):
+                for k in range(w.shape[1]):
+                    z[k] = y[k] + delta[c, k]
+                q = node_at(grid, origin, L, w, z)
+                touched |= q >= 0
+                if q < 0 or q == i:
+                    continue
+                found = True
+                # keep the P best exits (by g V(q), then fewer steps); a node once
+                val = g * V[q]
+                slot = -1
+                for s in range(P):
+                    if onb[i, a, s] == q:
+                        slot = -2 if ong[i, a, s] >= g else s
+                        break
+                if slot == -2:
+                    continue
+                if slot < 0:
+                    worst, wv = -1, np.inf
+                    for s in range(P):
+                        if onb[i, a, s] < 0:
+                            worst = s
+                            break
+                        sv = ong[i, a, s] * V[onb[i, a, s]]
+                        if sv < wv or (sv == wv and ong[i, a, s] < ong[i, a, worst]):
+                            worst, wv = s, sv
+                    if onb[i, a, worst] >= 0 and \
+                            (val < wv or (val == wv and g <= ong[i, a, worst])):
+                        continue
+                    slot = worst
+                onb[i, a, slot] = q
+                ong[i, a, slot] = g
+            if touched and m > 0:
+                break                                # known space beside: the run ends
+    return found
+
+
+@njit(cache=True)
 def option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t,
                bump_e, succ, clock, horizon, episode, trust, rho_max, rho_new, stuck, grid,
-               origin, U, rho, osucc, onb):
+               origin, V, sel, U, rho, osucc, onb, ong):
     """The options of the value of the unknown (motivation.py, Eq. 5') of node i, per
     primitive a: ``rho[i, a]`` = ``rho_new`` for a primitive never taken from i (the
     chance a move opens, ``MotivationEstimator.open_prior``); 1 for one whose move's
@@ -339,20 +528,20 @@ def option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, c
     bump (a remembered wall): when ``stuck``, ``rho_max (1 - exp(-tau / (horizon + e)))``,
     ``tau`` the steps since the bump and ``e`` those it had been known closed before it
     (``bump_t - closed_t``: failed re-tests stretch the horizon); else ``rho_max`` once
-    ``trust`` episodes (``trust`` > 0) have started since its bump (``bump_e``), 0 before;
+    ``trust`` episodes (``trust`` > 0) have started since its bump (``bump_e``) and the
+    pair is one of this episode's re-tests (``sel[i, a]``), 0 otherwise;
     0 otherwise (known: no option). The option's successor ``osucc[i, a]``: a known node
     (where the move once led, if that node is still alive and there, else a node at the
     predicted position ``w_i + delta_a``),
     whose V the sweep reads; -1 when none, and then ``U[i, a] = v_star gamma^h``, ``h =
     |w_i + delta_a - x_g|_1 / L`` (the fewest steps from the predicted successor to the
     goal sensation); -2 for a remembered wall cell (not ``stuck``), whose value if it
-    opened is gamma times the best V of the known nodes next to it (``onb[i, a]``), or,
-    with none, of the first known node straight on, ``m`` steps from i, through the
-    unknown cells between (``U[i, a] = gamma^(m - 2)``, 1 next to it: a wall that opens
-    opens along its run); no such node: no option. ``stuck``: the optimistic U, as for
-    unknown space."""
+    opened is gamma times the best ``gamma^k V(q)`` of its exits ``onb[i, a]`` (discounts
+    ``ong[i, a]``): the known nodes next to it, or next to a cell of a run of unknown
+    cells from it, ``k`` cells along (straight on or sideways: a wall that opens opens
+    along its run, :func:`wall_exits`); no exit: no option. ``stuck``: the optimistic U,
+    as for unknown space. ``V``: the last solve's potentials (they pick the exits)."""
     x = np.empty(w.shape[1])
-    y = np.empty(w.shape[1])
     for a in range(U.shape[1]):
         j = -1
         wall = False
@@ -364,7 +553,7 @@ def option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, c
             r = rho_max * (1.0 - np.exp(-tau / (horizon + e)))
             j = succ[i, a]
         elif not stuck and bump_e[i, a] >= 0 and trust > 0 and episode - bump_e[i, a] >= trust:
-            r = rho_max
+            r = rho_max if sel[i, a] else 0.0
             j = succ[i, a]
             wall = j < 0
         elif bump_t[i, a] < 0 and succ[i, a] >= 0 and not _linked(out, i, succ[i, a]):
@@ -384,39 +573,13 @@ def option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, c
             #                 reused elsewhere): the cell is looked up as for any move
         for b in range(U.shape[1]):
             onb[i, a, b] = -1
+            ong[i, a, b] = 0.0
         u = v_star * gamma ** (d / L)
         if r > 0.0 and wall:
-            # a remembered wall: if it opened, the cell leads on to its known
-            # neighbours (other than i), or straight on to the first known cell
+            # a remembered wall: if it opened, the cell leads on to known nodes
             j = -2
             u = 1.0
-            found = False
-            for b in range(U.shape[1]):
-                for k in range(w.shape[1]):
-                    y[k] = x[k] + delta[b, k]
-                q = node_at(grid, origin, L, w, y)
-                if q >= 0 and q != i:
-                    onb[i, a, b] = q
-                    found = True
-            step2 = 0.0
-            for k in range(w.shape[1]):
-                step2 += delta[a, k] * delta[a, k]
-            # straight on, while the move is known to go somewhere (|delta_a| > L / 2)
-            # and inside the map's table: at most its rows + columns cells
-            for m in range(2, grid.shape[0] + grid.shape[1] + 2):
-                if found or step2 <= 0.25 * L * L:
-                    break
-                for k in range(w.shape[1]):
-                    y[k] = w[i, k] + m * delta[a, k]
-                if not in_grid(grid, origin, L, y):
-                    break
-                q = node_at(grid, origin, L, w, y)
-                if q >= 0 and q != i:
-                    onb[i, a, 0] = q
-                    found = True
-                else:
-                    u *= gamma                   # one more unknown cell on the way
-            if not found:
+            if not wall_exits(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong):
                 r = 0.0
         elif r > 0.0 and j < 0:
             j = node_at(grid, origin, L, w, x)
@@ -441,7 +604,7 @@ def _linked(out, i, j):
 @njit(cache=True)
 def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, bump_t,
                   closed_t, bump_e, succ, clock, horizon, episode, trust, rho_max, rho_new,
-                  stuck, grid, origin, U, rho, osucc, onb):
+                  stuck, grid, origin, V, sel, U, rho, osucc, onb, ong):
     """:func:`option_row` of the nodes ``rows`` (none for dead slots)."""
     for i in rows:
         if i >= n:
@@ -454,7 +617,7 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
             continue
         option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t,
                    bump_e, succ, clock, horizon, episode, trust, rho_max, rho_new, stuck, grid,
-                   origin, U, rho, osucc, onb)
+                   origin, V, sel, U, rho, osucc, onb, ong)
 
 
 @njit(cache=True)
@@ -495,7 +658,7 @@ def record_outcome(tried, bump_t, closed_t, bump_e, succ, delta, moves, w, node,
 
 
 @njit(cache=True)
-def option_links(out_i, E_i, A_i, V, i, U, rho, osucc, onb, R_i, gamma, primitives):
+def option_links(out_i, E_i, A_i, V, i, U, rho, osucc, onb, ong, R_i, gamma, primitives):
     """Node i's links followed by one virtual link per option (motivation.py): targets,
     reliabilities and action vectors, where an option's target is i itself and its
     reliability makes E V(target) the option's successor value, so Eq. 6 ranks links and
@@ -521,7 +684,7 @@ def option_links(out_i, E_i, A_i, V, i, U, rho, osucc, onb, R_i, gamma, primitiv
         for a in range(P):
             r = rho[i, a]
             if r > 0.0:
-                sv = option_successor(V, U, osucc, onb, i, a, gamma)
+                sv = option_successor(V, U, osucc, onb, ong, i, a, gamma)
                 targets[K + a] = i
                 E[K + a] = (r * sv + (1.0 - r) * stay) / V[i]
     return targets, E, A
