@@ -95,6 +95,36 @@ def goal_rewards(w, alive, n, g, sigma, floor, R):
 
 
 @njit(cache=True)
+def link_adjacency(out, E, n, alive, absorbing, reverse):
+    """The links with E > 0 as adjacency lists (CSR): node j's are ``adj[deg[j]:deg[j +
+    1]]``, its successors, or with ``reverse`` its predecessors. An absorbing node has no
+    successor; dead slots have none either way."""
+    K = out.shape[1]
+    deg = np.zeros(n + 1, dtype=np.int64)
+    for i in range(n):
+        if not alive[i] or absorbing[i]:
+            continue
+        for s in range(K):
+            j = out[i, s]
+            if j >= 0 and j < n and E[i, s] > 0.0:
+                deg[(j if reverse else i) + 1] += 1
+    for j in range(n):
+        deg[j + 1] += deg[j]
+    adj = np.empty(deg[n], dtype=np.int64)
+    fill = deg[:n].copy()
+    for i in range(n):
+        if not alive[i] or absorbing[i]:
+            continue
+        for s in range(K):
+            j = out[i, s]
+            if j >= 0 and j < n and E[i, s] > 0.0:
+                a, b = (j, i) if reverse else (i, j)
+                adj[fill[a]] = b
+                fill[a] += 1
+    return deg, adj
+
+
+@njit(cache=True)
 def reaches_source(out, E, n, absorbing, alive, source, mark):
     """``mark[i]``: some link path with E > 0 leads from node i to a source node
     (``source[i]``: R_i > 0 or an option of the value of the unknown). A reverse
@@ -104,27 +134,7 @@ def reaches_source(out, E, n, absorbing, alive, source, mark):
     Eq. 4-5 have no source in an unmarked node, whose potential is then exactly 0; value
     iteration alone only approaches 0 geometrically, leaving numerical dust that Eq. 6
     would follow."""
-    K = out.shape[1]
-    deg = np.zeros(n + 1, dtype=np.int64)         # reverse adjacency (CSR): j <- i
-    for i in range(n):
-        if not alive[i] or absorbing[i]:
-            continue
-        for s in range(K):
-            j = out[i, s]
-            if j >= 0 and E[i, s] > 0.0:
-                deg[j + 1] += 1
-    for j in range(n):
-        deg[j + 1] += deg[j]
-    pred = np.empty(deg[n], dtype=np.int64)
-    fill = deg[:n].copy()
-    for i in range(n):
-        if not alive[i] or absorbing[i]:
-            continue
-        for s in range(K):
-            j = out[i, s]
-            if j >= 0 and E[i, s] > 0.0:
-                pred[fill[j]] = i
-                fill[j] += 1
+    deg, pred = link_adjacency(out, E, n, alive, absorbing, True)   # j <- i
     queue = np.empty(n, dtype=np.int64)
     head, tail = 0, 0
     for i in range(n):
@@ -150,28 +160,7 @@ def link_steps(out, E, n, alive, absorbing, root, reverse, dist):
     i to ``root``), -1 where no link path leads; an absorbing node has no successor, a
     dead slot is never reached. Breadth-first search over the links (their steps, not
     their reliabilities: the route as the agent would walk it)."""
-    K = out.shape[1]
-    deg = np.zeros(n + 1, dtype=np.int64)          # adjacency (CSR) in the search's direction
-    for i in range(n):
-        if not alive[i] or absorbing[i]:
-            continue
-        for s in range(K):
-            j = out[i, s]
-            if j >= 0 and j < n and E[i, s] > 0.0:
-                deg[(i if not reverse else j) + 1] += 1
-    for j in range(n):
-        deg[j + 1] += deg[j]
-    adj = np.empty(deg[n], dtype=np.int64)
-    fill = deg[:n].copy()
-    for i in range(n):
-        if not alive[i] or absorbing[i]:
-            continue
-        for s in range(K):
-            j = out[i, s]
-            if j >= 0 and j < n and E[i, s] > 0.0:
-                a, b = (i, j) if not reverse else (j, i)
-                adj[fill[a]] = b
-                fill[a] += 1
+    deg, adj = link_adjacency(out, E, n, alive, absorbing, reverse)
     dist[:n] = -1
     if root < 0 or root >= n or not alive[root]:
         return
