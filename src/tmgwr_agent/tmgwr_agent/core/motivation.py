@@ -159,7 +159,8 @@ Costs: the options are recomputed in full when the map's structure, the episode 
 stuck, a tick of the step clock), the stuck state or the re-test budget changes, else only
 on the rows whose outcome memory changed; the reachability pass and the option loop are a
 few linear passes over the map. Reading the route costs one solve of Eq. 5 without
-options per episode.
+options per episode, choosing its re-tests two breadth-first searches over the links and
+the exits of every stale wall (51 x 51 maze: mean step 181 -> 211 us, median unchanged).
 
 Terminal nodes (``absorbing_terminals``, our addition, on by default; off = Eq. 5 on every
 node). The agent notices when an episode ends: it is moved back to the start instead of
