@@ -180,6 +180,23 @@ def link_steps(out, E, n, alive, absorbing, root, reverse, dist):
 
 
 @njit(cache=True)
+def stale(bump_e, i, a, episode, trust):
+    """Pair (i, a) is a stale wall: its last outcome was a bump, ``trust`` episodes (> 0)
+    or more ago (motivation.py, Eq. 5')."""
+    return trust > 0 and bump_e[i, a] >= 0 and episode - bump_e[i, a] >= trust
+
+
+@njit(cache=True)
+def at_cell(w, alive, j, x, L):
+    """Node j is alive and within L / 2 of position x (where a move once led is still
+    the node at the cell it predicts)."""
+    gap = 0.0
+    for k in range(w.shape[1]):
+        gap += (w[j, k] - x[k]) ** 2
+    return alive[j] and gap <= 0.25 * L * L
+
+
+@njit(cache=True)
 def stale_savings(w, alive, n, delta, L, gamma, grid, origin, tried, bump_e, succ, episode,
                   trust, ds, dg, route, onb, ong, res_i, res_a, res_s):
     """The steps each stale remembered wall would save on the known route if it opened
@@ -199,17 +216,14 @@ def stale_savings(w, alive, n, delta, L, gamma, grid, origin, tried, bump_e, suc
         if not alive[i] or ds[i] < 0:
             continue
         for a in range(tried.shape[1]):
-            if not tried[i, a] or bump_e[i, a] < 0 or episode - bump_e[i, a] < trust:
+            if not tried[i, a] or not stale(bump_e, i, a, episode, trust):
                 continue
             for k in range(w.shape[1]):
                 x[k] = w[i, k] + delta[a, k]
             best = -1
             j = succ[i, a]
             if j >= 0:
-                gap = 0.0
-                for k in range(w.shape[1]):
-                    gap += (w[j, k] - x[k]) ** 2
-                if j < n and alive[j] and gap <= 0.25 * L * L and dg[j] >= 0:
+                if j < n and at_cell(w, alive, j, x, L) and dg[j] >= 0:
                     best = ds[i] + 1 + dg[j]
             else:
                 for b in range(onb.shape[2]):
@@ -541,7 +555,7 @@ def option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, c
             e = bump_t[i, a] - closed_t[i, a] if closed_t[i, a] >= 0 else 0
             r = rho_max * (1.0 - np.exp(-tau / (horizon + e)))
             j = succ[i, a]
-        elif not stuck and bump_e[i, a] >= 0 and trust > 0 and episode - bump_e[i, a] >= trust:
+        elif not stuck and stale(bump_e, i, a, episode, trust):
             r = rho_max if sel[i, a] else 0.0
             j = succ[i, a]
             wall = j < 0
@@ -551,13 +565,10 @@ def option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, c
         else:
             r = 0.0
         d = 0.0
-        gap = 0.0
         for k in range(w.shape[1]):
             x[k] = w[i, k] + delta[a, k]
             d += abs(x[k] - goal[k])
-            if j >= 0:
-                gap += (w[j, k] - x[k]) ** 2
-        if j >= 0 and (not alive[j] or gap > 0.25 * L * L):
+        if j >= 0 and not at_cell(w, alive, j, x, L):
             j = -1          # where the move led, a node since removed (its slot maybe
             #                 reused elsewhere): the cell is looked up as for any move
         for b in range(U.shape[1]):
