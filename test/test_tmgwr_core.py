@@ -622,6 +622,41 @@ def test_rho_of_an_untried_primitive_is_the_share_of_tries_that_moved_by_hand():
         assert mo.osucc[3, UP] == -1 and mo.U[3, UP] == pytest.approx(mo.v_star * g ** 3)
 
 
+def test_an_untried_chain_shorter_than_the_known_route_is_planned_open_by_hand():
+    """Eq. 5': the map walked (1, 0) down, right, right, up to the goal (1, 2), then left
+    to (1, 1): the known route from node 0 is 4 links; 'right' from node 0 (into node
+    5's cell) and 'right' from node 5 (into the goal's), never tried, are a way of 2
+    steps between known places: this episode's untried chain, planned open (rho 1,
+    successors the nodes at their cells), so Eq. 6 takes it from node 0. With the goal
+    at (2, 2), 3 links away and no shorter way, there is no chain."""
+    cells = [(1, 0), (2, 0), (2, 1), (2, 2), (1, 2), (1, 1)]
+    acts = [DOWN, RIGHT, RIGHT, UP, LEFT]
+    moves = [(k, a, k + 1) for k, a in enumerate(acts)]
+    for goal, want in (((1, 2), True), ((2, 2), False)):
+        m = path_map(cells, acts)
+        mo = known_estimator(m, moves, goal, 5)
+        st = mo.state_dict()
+        for i in (0, 5):
+            st["tried"][i, RIGHT], st["bump_t"][i, RIGHT], st["bump_e"][i, RIGHT] = \
+                False, -1, -1
+            st["closed_t"][i, RIGHT] = -1
+        mo.load_state_dict(st)
+        mo.record(-1, 0, False, EPISODE_START, m.w)
+        V = mo.update(m)
+        assert mo.chain[0, RIGHT] == want and mo.chain[5, RIGHT] == want, goal
+        assert mo.chain.sum() == 2 * want
+        if want:
+            assert mo.rho[0, RIGHT] == 1.0 and mo.osucc[0, RIGHT] == 5
+            assert mo.rho[5, RIGHT] == 1.0 and mo.osucc[5, RIGHT] == 4
+            assert V[0] == pytest.approx(mo.R[0] + 0.97 * V[5])
+            links = mo.links_of(m, 0)
+            best = int(np.argmax(links.E * V[np.maximum(links.targets, 0)]
+                                 * (links.targets >= 0)))
+            assert best == m.out.shape[1] + RIGHT        # the option 'right'
+        else:
+            assert mo.rho[0, RIGHT] < 1.0
+
+
 NEVER_MADE = """
 import numpy as np
 from tmgwr_agent.core import kernels
@@ -640,7 +675,8 @@ osucc, onb = np.full((2, 4), -1), np.full((2, 4, 4), -1)
 kernels.option_row(w, out, np.ones(2, dtype=bool), 0, np.array([0.5, 0.5]),
                    np.zeros((4, 2)), 0.1, 10.0, 0.97, tried, bump_t, closed_t, bump_e,
                    succ, 10, 2.0, 9, 3.0, 1.0, 1.0, False, grid, origin, np.zeros(3),
-                   np.ones((2, 4), dtype=bool), U, rho, osucc, onb, np.zeros((2, 4, 4)))
+                   np.ones((2, 4), dtype=bool), np.zeros((2, 4), dtype=bool), U, rho, osucc,
+                   onb, np.zeros((2, 4, 4)))
 print(rho[0, RIGHT], osucc[0, RIGHT])
 """
 

@@ -433,6 +433,62 @@ def node_at(grid, origin, L, w, x):
 
 
 @njit(cache=True)
+def untried_chain(out, E, n, alive, absorbing, w, delta, L, grid, origin, tried, start, goal,
+                  route, chain):
+    """The shortest way from node ``start`` to node ``goal`` over the links with E > 0
+    and the untried moves between known places (primitive a never taken from i, a known
+    node j within L / 2 of its predicted cell ``w_i + delta_a``, :func:`node_at`), one
+    step each; when it is shorter than ``route`` (the known route's link steps) its
+    untried moves are marked in ``chain`` (motivation.py, Eq. 5'). Returns its steps (-1:
+    none). Breadth-first from ``start``, links before untried moves, so that of equally
+    short ways the one the agent knows more of is kept; an absorbing node has no
+    successor, a dead slot is never reached."""
+    if start < 0 or goal < 0 or start >= n or goal >= n or not alive[start]:
+        return -1
+    K, P = out.shape[1], tried.shape[1]
+    dist = np.full(n, -1, dtype=np.int64)
+    parent = np.full(n, -1, dtype=np.int64)
+    hop = np.full(n, -1, dtype=np.int64)          # the untried primitive into j, or -1
+    queue = np.empty(n, dtype=np.int64)
+    x = np.empty(w.shape[1])
+    queue[0] = start
+    dist[start] = 0
+    head, tail = 0, 1
+    while head < tail and dist[goal] < 0:
+        i = queue[head]
+        head += 1
+        if absorbing[i] and i != start:
+            continue
+        for s in range(K + P):
+            if s < K:
+                j = out[i, s]
+                if j < 0 or E[i, s] <= 0.0:
+                    continue
+            else:
+                if i >= tried.shape[0] or tried[i, s - K]:
+                    continue
+                for d in range(w.shape[1]):
+                    x[d] = w[i, d] + delta[s - K, d]
+                j = node_at(grid, origin, L, w, x)
+                if j < 0 or j == i:
+                    continue
+            if alive[j] and dist[j] < 0:
+                dist[j] = dist[i] + 1
+                parent[j] = i
+                hop[j] = s - K if s >= K else -1
+                queue[tail] = j
+                tail += 1
+    d_goal = dist[goal]
+    if 0 < d_goal < route:
+        j = goal
+        while j != start:
+            if hop[j] >= 0:
+                chain[parent[j], hop[j]] = True
+            j = parent[j]
+    return d_goal
+
+
+@njit(cache=True)
 def wall_exits(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong):
     """Where the remembered wall cell x (primitive a from node i bumped into it) leads if
     it opened (motivation.py, Eq. 5'): a wall opens along its run, so the cells opened
@@ -523,10 +579,11 @@ def wall_exits(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong):
 @njit(cache=True)
 def option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t,
                bump_e, succ, clock, horizon, episode, trust, rho_max, rho_new, stuck, grid,
-               origin, V, sel, U, rho, osucc, onb, ong):
+               origin, V, sel, chain, U, rho, osucc, onb, ong):
     """The options of the value of the unknown (motivation.py, Eq. 5') of node i, per
     primitive a: ``rho[i, a]`` = ``rho_new`` for a primitive never taken from i (the
-    chance a move opens, ``MotivationEstimator.open_prior``); 1 for one whose move's
+    chance a move opens, ``MotivationEstimator.open_prior``), 1 if it is a move of this
+    episode's untried chain (``chain[i, a]``, :func:`untried_chain`); 1 for one whose move's
     link (to ``succ[i, a]``) the map has since deleted; for one whose last outcome was a
     bump (a remembered wall): when ``stuck``, ``rho_max (1 - exp(-tau / (horizon + e)))``,
     ``tau`` the steps since the bump and ``e`` those it had been known closed before it
@@ -549,7 +606,7 @@ def option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, c
         j = -1
         wall = False
         if not tried[i, a]:
-            r = rho_new
+            r = 1.0 if chain[i, a] else rho_new
         elif stuck and 0 <= bump_t[i, a] < clock and horizon > 0.0:
             tau = clock - bump_t[i, a]
             e = bump_t[i, a] - closed_t[i, a] if closed_t[i, a] >= 0 else 0
@@ -604,7 +661,7 @@ def _linked(out, i, j):
 @njit(cache=True)
 def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, bump_t,
                   closed_t, bump_e, succ, clock, horizon, episode, trust, rho_max, rho_new,
-                  stuck, grid, origin, V, sel, U, rho, osucc, onb, ong):
+                  stuck, grid, origin, V, sel, chain, U, rho, osucc, onb, ong):
     """:func:`option_row` of the nodes ``rows`` (none for dead slots)."""
     for i in rows:
         if i >= n:
@@ -617,7 +674,7 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
             continue
         option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t,
                    bump_e, succ, clock, horizon, episode, trust, rho_max, rho_new, stuck, grid,
-                   origin, V, sel, U, rho, osucc, onb, ong)
+                   origin, V, sel, chain, U, rho, osucc, onb, ong)
 
 
 @njit(cache=True)
