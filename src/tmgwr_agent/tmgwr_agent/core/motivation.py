@@ -54,9 +54,10 @@ successor, an *option*, in the max of Eq. 5::
   first solve, a breadth-first search from its start over the links and the untried
   moves between known places (a primitive never taken from i whose predicted cell holds
   a known node) finds the shortest way to the goal; when it is shorter than the known
-  route, its untried moves have ``rho = 1`` this episode, planned as open as the
-  re-tests below are (:func:`kernels.untried_chain`). Each hop's odds alone make a
-  way of ``k`` untried moves worth about ``rho^k`` of its saving, and a short cut along
+  route (or no route is known), its untried moves have ``rho = 1`` this episode,
+  planned as open as the re-tests below are (:func:`kernels.untried_chain`). Each
+  hop's odds alone make a way of ``k`` untried moves worth about ``rho^k`` of its
+  saving, and a short cut along
   cells known but never walked in that direction was never taken: one trial of a
   generated large maze (1300 cells, suite seed 1) kept a greedy path of 80 steps against
   78 for good. With a route as short as any such way (a converged agent) there is no
@@ -171,7 +172,7 @@ on the rows whose outcome memory changed; the reachability pass and the option l
 few linear passes over the map. Reading the route costs one solve of Eq. 5 without
 options per episode, choosing its re-tests two breadth-first searches over the links and
 the exits of every stale wall (51 x 51 maze: mean step 181 -> 211 us, median unchanged),
-its untried chain two more.
+its untried chain one more (over the links and the untried moves).
 
 Terminal nodes (``absorbing_terminals``, our addition, on by default; off = Eq. 5 on every
 node). The agent notices when an episode ends: it is moved back to the start instead of
@@ -567,8 +568,10 @@ class MotivationEstimator:
         """At an episode's first solve: its re-tests (:meth:`_select_retests`) and its
         untried chain (``chain``: the untried moves between known places on the shortest
         way from its start to the goal over the links and such moves, when it is shorter
-        than the known route, :func:`kernels.untried_chain`), from the link steps from
-        the start and to the goal over the links the outcome memory does not contradict."""
+        than the known route or no route is known, :func:`kernels.untried_chain`), from
+        the link steps from the start and to the goal over the links the outcome memory
+        does not contradict. Every stale wall stays a re-test when ``stale_rank`` is off
+        or no route is known."""
         self.sel[:] = True
         self.chain[:] = False
         start = self._winner
@@ -593,8 +596,7 @@ class MotivationEstimator:
         """The stale walls this episode may re-test (``sel``), the budget's worth
         (:meth:`budget_spent`) of those that would save the most steps on the known route
         (``route`` link steps; ``ds``, ``dg``: link steps from the start and to the goal)
-        if they opened (:func:`kernels.stale_savings`; ties: the nearest first); every
-        stale wall when ``stale_rank`` is off or no route is known."""
+        if they opened (:func:`kernels.stale_savings`; ties: the nearest first)."""
         ri, ra, rs = (np.empty(n * N_PRIMITIVES, dtype=np.int64) for _ in range(3))
         c = kernels.stale_savings(m.w, m.alive, n, self.delta, self._scale, self.gamma, grid,
                                   origin, self.tried, self.bump_e, self.succ, self.episode,
