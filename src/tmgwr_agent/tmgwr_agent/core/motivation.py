@@ -375,14 +375,7 @@ class MotivationEstimator:
         self.clock += 1
         top = max(node, winner) + 1
         if top > len(self.tried):
-            self.tried = grown(self.tried, top, False)
-            self.bump_t = grown(self.bump_t, top, -1)
-            self.closed_t = grown(self.closed_t, top, -1)
-            self.bump_e = grown(self.bump_e, top, -1)
-            self.succ = grown(self.succ, top, -1)
-            self.closed_e = grown(self.closed_e, top, -1)
-            self.sel = grown(self.sel, top, True)
-            self.chain = grown(self.chain, top, False)
+            self._grow_memory(top)
         if self.delta.shape[1] != w.shape[1]:
             self.delta = np.zeros((N_PRIMITIVES, w.shape[1]))
         if inserted and winner >= 0:
@@ -404,6 +397,15 @@ class MotivationEstimator:
                                   self.episode):
             self._dirty.add(node)
             self._bumps += 1
+
+    #: The outcome memory's per-node arrays and the value of a new node's row.
+    _MEMORY = (("tried", False), ("bump_t", -1), ("closed_t", -1), ("bump_e", -1),
+               ("succ", -1), ("closed_e", -1), ("sel", True), ("chain", False))
+
+    def _grow_memory(self, n: int) -> None:
+        """The outcome memory with at least n node rows (:func:`grown`)."""
+        for name, fill in self._MEMORY:
+            setattr(self, name, grown(getattr(self, name), n, fill))
 
     def _close_cell(self, node: int, a: int, w: np.ndarray) -> None:
         """Primitive a, a move made before from ``node``, bumps now: the cell it led to has
@@ -483,14 +485,7 @@ class MotivationEstimator:
             self.V = self._extended(self.V, n)
             self.V0 = self._extended(self.V0, n)
         if len(self.U) < n:
-            self.tried = grown(self.tried, n, False)
-            self.bump_t = grown(self.bump_t, n, -1)
-            self.closed_t = grown(self.closed_t, n, -1)
-            self.bump_e = grown(self.bump_e, n, -1)
-            self.succ = grown(self.succ, n, -1)
-            self.closed_e = grown(self.closed_e, n, -1)
-            self.sel = grown(self.sel, n, True)
-            self.chain = grown(self.chain, n, False)
+            self._grow_memory(n)
             self.U = grown(self.U, n, 0.0)
             self.rho = grown(self.rho, n, 0.0)
             self.osucc = grown(self.osucc, n, -1)
