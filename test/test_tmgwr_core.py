@@ -657,6 +657,44 @@ def test_an_untried_chain_shorter_than_the_known_route_is_planned_open_by_hand()
             assert mo.rho[0, RIGHT] < 1.0
 
 
+def test_a_link_into_the_goal_alone_is_ranked_once_the_route_broke_by_hand():
+    """Eq. 6 with Eq. 5': the walk (2, 0) up (1, 0) right (1, 1) right (1, 2), the goal;
+    every other pair bumped except 'up' from node 2, into unknown (0, 1), two cells
+    from the goal: an option worth rho V* gamma^2 (rho = 1 here), which outranks node 2's
+    link into the goal node (V = R_g = 1: the agent never moved from it). Once a move made
+    before bumps this episode (node 0 'up': the route broke), node 2's link into the goal
+    alone is ranked; the potentials keep the option."""
+    cells = [(2, 0), (1, 0), (1, 1), (1, 2)]
+    acts = [UP, RIGHT, RIGHT]
+    m = path_map(cells, acts)
+    mo = known_estimator(m, [(k, a, k + 1) for k, a in enumerate(acts)], (1, 2), 5,
+                         untried_rho=1.0)
+    st = mo.state_dict()
+    st["tried"][2, UP], st["bump_t"][2, UP], st["bump_e"][2, UP] = False, -1, -1
+    st["closed_t"][2, UP] = -1
+    mo.load_state_dict(st)
+    mo.record(-1, 0, False, EPISODE_START, m.w)
+    V = mo.update(m)
+    g, vs = 0.97, 1.0 / (1.0 - 0.97 ** 2)
+    assert mo.goal_node == 3 and V[3] == pytest.approx(mo.R[3])
+    assert mo.rho[2, UP] == 1.0 and mo.U[2, UP] == pytest.approx(vs * g ** 2)
+    K = m.out.shape[1]
+
+    def best(links):
+        return int(np.argmax(links.E * V[np.maximum(links.targets, 0)]
+                             * (links.targets >= 0)))
+
+    links = mo.links_of(m, 2)
+    assert best(links) == K + UP                       # the option 'up', not the goal
+    mo.record(0, 0, False, Outcome(action=UP, bumped=True), m.w)
+    assert mo.broken
+    V = mo.update(m)
+    links = mo.links_of(m, 2)
+    assert list(links.targets) == [3]                  # the link into the goal alone
+    assert ActionSelector.action_index(links.actions[0]) == RIGHT
+    assert mo.rho[2, UP] == 1.0 and V[2] > g * V[3]    # the potentials keep the option
+
+
 NEVER_MADE = """
 import numpy as np
 from tmgwr_agent.core import kernels

@@ -154,6 +154,20 @@ successor, an *option*, in the max of Eq. 5::
   few dozen steps and the agent never got far from it (one held-out suite trial: 5318
   steps, 130 x the oracle). While stuck the clock is the step (the task is impossible
   now, not in a few episodes) and the re-test budget does not apply.
+* *The goal when the route broke*: an episode ends at the goal, so the agent never moves
+  from a goal node, and its potential in Eq. 5' is ``R_g`` plus what its own untried
+  moves promise (about 10 here, against ``V* = 17`` for a goal Eq. 5 can step off and
+  back onto); a neighbour's untried move can then outrank the step into the goal. In a
+  training episode that look round pays, since the map learns the goal's surroundings
+  (with the step into the goal always taken: openings within 10 episodes 95.9 -> 92.2 %
+  over six suite seeds, blocks median 1.04-1.12 -> 1.15-1.18 x the oracle; with the goal
+  a terminal state worth ``V*``, which puts every known route nearer: median 1.17-1.30).
+  In an episode whose known route broke (a move made before bumped: ``broken``) the
+  agent is finding its way round and the look only delays, so from a node with a link
+  into a goal node that the outcome memory does not contradict, Eq. 6 ranks those links
+  alone (:meth:`MotivationEstimator.options_of`). One generated large maze (suite seed
+  3, large-00, trial 2) stood beside the goal 273 steps into the first episode after the
+  block and searched the unknown for 1500 steps more; now 274 steps in all.
 * The goal node exists only once the map represents the goal (a node within ``L / 2`` of
   the goal sensation, i.e. the goal has been sensed): before that ``R = 0`` everywhere and
   the options alone lead the agent, by the nearest plausible unknown, towards the goal
@@ -730,14 +744,31 @@ class MotivationEstimator:
         """Node i's links followed by its options as virtual links (Eq. 6 ranks both):
         an option's target is i itself, its reliability ``O(i, a) / V(i)`` so that
         ``E V(target)`` is its successor value, its action the primitive's vector. Over
-        the graph they travel in the MotivationField's winner-link arrays."""
+        the graph they travel in the MotivationField's winner-link arrays. In an episode
+        whose known route broke, node i's links into the goal alone when it has any
+        (:meth:`_into_goal`; the goal when the route broke, in the module docstring)."""
         if not self.value_unknown or i < 0 or i >= len(self.V) - 1:
             return links
+        if self.broken:                       # finding the way round: into the goal
+            into = self._into_goal(i, links)
+            if into.any():
+                return Links(links.targets[into], links.E[into], links.actions[into])
         R_i = self.R[i] if i < len(self.R) else 0.0
         return Links(*kernels.option_links(links.targets, links.E, links.actions, self.V, i,
                                            self.U, self.rho, self.osucc, self.onb,
                                            self.ong, R_i,
                                            self.gamma, _PRIMITIVES))
+
+    def _into_goal(self, i: int, links: Links) -> np.ndarray:
+        """Which of node i's links lead into a goal node (R >= GOAL_R) by a move the
+        outcome memory does not contradict (none of i's primitives that led there has
+        bumped since)."""
+        t = links.targets
+        into = (t >= 0) & (t < len(self.R)) & (links.E > 0)
+        into[into] = self.R[t[into]] >= GOAL_R
+        if into.any() and i < len(self.succ):
+            into &= ~np.isin(t, self.succ[i][self.bump_t[i] >= 0])
+        return into
 
     def links_of(self, m: SensorimotorMap, i: int) -> Links:
         """:meth:`options_of` node i's links in map m (what Eq. 6 ranks in-process)."""
