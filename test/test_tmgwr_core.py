@@ -657,13 +657,14 @@ def test_an_untried_chain_shorter_than_the_known_route_is_planned_open_by_hand()
             assert mo.rho[0, RIGHT] < 1.0
 
 
-def test_a_link_into_the_goal_alone_is_ranked_once_the_route_broke_by_hand():
-    """Eq. 6 with Eq. 5': the walk (2, 0) up (1, 0) right (1, 1) right (1, 2), the goal;
+def test_the_goal_is_terminal_at_v_star_once_the_route_broke_by_hand():
+    """Eq. 5' and Eq. 6: the walk (2, 0) up (1, 0) right (1, 1) right (1, 2), the goal;
     every other pair bumped except 'up' from node 2, into unknown (0, 1), two cells
     from the goal: an option worth rho V* gamma^2 (rho = 1 here), which outranks node 2's
-    link into the goal node (V = R_g = 1: the agent never moved from it). Once a move made
-    before bumps this episode (node 0 'up': the route broke), node 2's link into the goal
-    alone is ranked; the potentials keep the option."""
+    link into the goal node (V = R_g = 1: the agent never moved from it, and its own
+    pairs are known walls). Once a move made before bumps this episode (node 0 'up': the
+    known route broke), the goal node is a terminal state worth V*, and node 2's link into
+    it wins."""
     cells = [(2, 0), (1, 0), (1, 1), (1, 2)]
     acts = [UP, RIGHT, RIGHT]
     m = path_map(cells, acts)
@@ -678,21 +679,25 @@ def test_a_link_into_the_goal_alone_is_ranked_once_the_route_broke_by_hand():
     g, vs = 0.97, 1.0 / (1.0 - 0.97 ** 2)
     assert mo.goal_node == 3 and V[3] == pytest.approx(mo.R[3])
     assert mo.rho[2, UP] == 1.0 and mo.U[2, UP] == pytest.approx(vs * g ** 2)
+    assert V[2] == pytest.approx(mo.R[2] + g * vs * g ** 2)      # the option 'up'
     K = m.out.shape[1]
 
     def best(links):
         return int(np.argmax(links.E * V[np.maximum(links.targets, 0)]
                              * (links.targets >= 0)))
 
-    links = mo.links_of(m, 2)
-    assert best(links) == K + UP                       # the option 'up', not the goal
+    assert best(mo.links_of(m, 2)) == K + UP                 # the option, not the goal
     mo.record(0, 0, False, Outcome(action=UP, bumped=True), m.w)
     assert mo.broken
     V = mo.update(m)
+    assert V[3] == pytest.approx(vs) and mo.R[3] == pytest.approx(1.0)
+    assert V[2] == pytest.approx(mo.R[2] + g * vs)           # the link into the goal
     links = mo.links_of(m, 2)
-    assert list(links.targets) == [3]                  # the link into the goal alone
-    assert ActionSelector.action_index(links.actions[0]) == RIGHT
-    assert mo.rho[2, UP] == 1.0 and V[2] > g * V[3]    # the potentials keep the option
+    slot = best(links)
+    assert links.targets[slot] == 3
+    assert ActionSelector.action_index(links.actions[slot]) == RIGHT
+    mo.record(-1, 0, False, EPISODE_START, m.w)     # a new episode: the goal keeps Eq. 5'
+    assert not mo.broken and mo.update(m)[3] < 0.6 * vs     # (stuck now: its walls doubted)
 
 
 NEVER_MADE = """
