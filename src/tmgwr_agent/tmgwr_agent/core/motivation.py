@@ -199,10 +199,11 @@ solver would: ``V(i) = R_i``, no successor, no option; except the nodes of the c
 (``R_i >= 1/2``), which keep Eq. 5 (unless the route broke, above). Without this a route
 through a cell that ends the episode (the previous goal in the goal-change scenario of
 section 5.2.1, which stays a termination point) looks as good as any other, and the agent
-keeps being sent home through it. The goal's own cell is flagged too, while it is the goal, so that when the goal moves
-the old goal is known to end episodes from the first episode on (the agent cannot tell a
-goal cell from a terminal cell; if the old goal became an ordinary cell, the flag goes the
-first time the agent walks on from it). Episodes cut by a step limit flag nothing.
+keeps being sent home through it. The goal's own cell is flagged too, while it is the
+goal, so that when the goal moves the old goal is known to end episodes from the first
+episode on (the agent cannot tell a goal cell from a terminal cell; if the old goal became
+an ordinary cell, the flag goes the first time the agent walks on from it). Episodes cut
+by a step limit flag nothing.
 
 The outcome memory (primitives tried per node, step and episode of the last bump and since
 when a pair is known closed, where each move led, the step and episode clocks, the known
