@@ -89,17 +89,18 @@ successor, an *option*, in the max of Eq. 5::
   knew into it (held-out open fields: one block cell bumped from three sides). The stuck
   test (below) ignores it: those links never bumped.
 * The *re-tests* of an episode (``stale_rank``): a re-test costs a step and often a
-  detour, so an episode re-tests at most ``B = stale_budget`` times ``d`` stale walls
-  (at least one; ``stale_budget`` 0.1, the share of steps the paper's agent spends on its
-  random walk at Eq. 7's floor), ``d`` the steps of the known route from the episode's
-  start, read off the potentials of Eq. 5 without options there (``V0(start) = gamma^d
-  V0(g)``; before a route is known, the number of nodes). At the episode's first solve
-  every stale wall gets what it would save if it opened, ``s = d - (d_S(i) + 1 + k + 1 +
-  d_G(q))`` steps on the known route (``d_S``, ``d_G``: link steps from the start and to
-  the goal over the links the outcome memory does not contradict; ``q`` its best exit,
-  ``k`` cells along its run, :func:`kernels.stale_savings`), and what a failed test
-  would cost, ``c = d_S(i) + 1 + d_G(i) - d`` (at least 1); the ``B`` walls with ``s >
-  0`` and the most ``t s / c``, ``t`` the episodes since the wall was last bumped, are
+  detour, so an episode re-tests at most ``B = stale_budget`` times ``d`` stale walls,
+  rounded up (at least one; ``stale_budget`` 0.1, the share of steps the paper's agent
+  spends on its random walk at Eq. 7's floor), ``d`` the steps of the known route from
+  the episode's start, read off the potentials of Eq. 5 without options there
+  (``V0(start) = gamma^d V0(g)``; before a route is known, the number of nodes). At the
+  episode's first solve every stale wall gets what it would save if it opened, ``s = d -
+  (d_S(i) + 1 + k + 1 + d_G(q))`` steps on the known route (``d_S``, ``d_G``: link steps
+  from the start and to the goal over the links the outcome memory does not contradict;
+  ``q`` its best exit, ``k`` cells along its run, :func:`kernels.stale_savings`), and
+  what a failed test would cost, ``c = d_S(i) + 1 + d_G(i) - d`` (at least 1); the ``B``
+  walls with ``s > 0`` and the most ``t s / c``, ``t`` the episodes since the wall was
+  last bumped, are
   this episode's re-tests (ties: the nearest first). Walls change, if at all, at some
   rate, so the chance a wall has opened grows with ``t``, and the gain of finding it is
   that chance times ``s`` (each episode after), against ``c``. A wall just re-tested
@@ -265,7 +266,8 @@ class MotivationConfig(Config):
                                  "it goes stale (0: walls never go stale unless stuck)",
                                  low=0.0, high=1e6)
     stale_budget: float = param(0.1, "Eq. 5': re-tests of stale walls per episode, at most "
-                                "this share of the known route's steps (at least 1; 0: none)",
+                                "this share of the known route's steps rounded up (at least "
+                                "1; 0: none)",
                                 low=0.0, high=1.0)
     stale_rank: bool = param(True, "Eq. 5': an episode offers as re-tests only the stale "
                              "walls that would save the most steps on the known route, "
@@ -569,7 +571,9 @@ class MotivationEstimator:
     def budget_spent(self, n: int) -> bool:
         """This episode's re-tests of stale walls are used up: at most ``stale_budget``
         times the steps of the known route from the episode's start (the number of nodes
-        before a route is known), and at least one, unless ``stale_budget`` is 0."""
+        before a route is known), rounded up, and at least one, unless ``stale_budget`` is
+        0. (Rounded down instead, six suite seeds: openings within 10 episodes 95.9 ->
+        83.3 %, no block won more.)"""
         return self.stale_budget <= 0.0 or self.broken or \
             self.retests >= max(1.0, self.stale_budget * (self.route or n))
 
