@@ -649,10 +649,9 @@ def test_an_untried_chain_shorter_than_the_known_route_is_planned_open_by_hand()
             assert mo.rho[0, RIGHT] == 1.0 and mo.osucc[0, RIGHT] == 5
             assert mo.rho[5, RIGHT] == 1.0 and mo.osucc[5, RIGHT] == 4
             assert V[0] == pytest.approx(mo.R[0] + 0.97 * V[5])
-            links = mo.links_of(m, 0)
-            best = int(np.argmax(links.E * V[np.maximum(links.targets, 0)]
-                                 * (links.targets >= 0)))
-            assert best == m.out.shape[1] + RIGHT        # the option 'right'
+            links = mo.links_of(m, 0)                    # Eq. 6's argmax over them
+            best = kernels.best_links(links.targets, links.E, V)
+            assert list(best) == [m.out.shape[1] + RIGHT]    # the option 'right'
         else:
             assert mo.rho[0, RIGHT] < 1.0
 
@@ -682,18 +681,17 @@ def test_the_goal_is_terminal_at_v_star_once_the_route_broke_by_hand():
     assert V[2] == pytest.approx(mo.R[2] + g * vs * g ** 2)      # the option 'up'
     K = m.out.shape[1]
 
-    def best(links):
-        return int(np.argmax(links.E * V[np.maximum(links.targets, 0)]
-                             * (links.targets >= 0)))
+    def best(links):                                         # Eq. 6's argmax
+        return list(kernels.best_links(links.targets, links.E, V))
 
-    assert best(mo.links_of(m, 2)) == K + UP                 # the option, not the goal
+    assert best(mo.links_of(m, 2)) == [K + UP]               # the option, not the goal
     mo.record(0, 0, False, Outcome(action=UP, bumped=True), m.w)
     assert mo.broken
     V = mo.update(m)
     assert V[3] == pytest.approx(vs) and mo.R[3] == pytest.approx(1.0)
     assert V[2] == pytest.approx(mo.R[2] + g * vs)           # the link into the goal
     links = mo.links_of(m, 2)
-    slot = best(links)
+    [slot] = best(links)
     assert links.targets[slot] == 3
     assert ActionSelector.action_index(links.actions[slot]) == RIGHT
     mo.record(-1, 0, False, EPISODE_START, m.w)     # a new episode: the goal keeps Eq. 5'
