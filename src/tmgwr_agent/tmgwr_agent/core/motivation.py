@@ -42,45 +42,44 @@ successor, an *option*, in the max of Eq. 5::
     Delta_V(i) = R_i + gamma max( max_k E[i, k] V(k), max_a O(i, a) ) - V(i)     (Eq. 5')
     O(i, a)    = rho(i, a) S(i, a) + (1 - rho(i, a)) (R_i + gamma max_k E[i, k] V(k))
 
-* ``rho`` is the probability that the option leads on. For a primitive never taken from
-  i it is the chance the agent's own experience gives that a move opens: of its tried
+* ``rho`` is the probability that the option leads on. For a primitive never taken from i
+  it is the chance the agent's own experience gives that a move opens: of its tried
   (node, primitive) pairs of live nodes, the share ``k / t`` whose last try moved it,
   smoothed by Laplace's rule, ``(k + 1) / (t + 2)`` (1/2 before any try; re-estimated
   with the options, at least once an episode; ``untried_rho``, negative by default, fixes
-  it instead: 1 is R-max's optimistic bound). In a maze of corridors about half the
-  moves bump, in an open field few do, and the agent learns which world it is in: an
-  untried move beside a good route is tried only when ``rho`` times its saving beats the
-  bump's step. The *untried chain* of an episode (``chain``) is the exception: at its
-  first solve, a breadth-first search from its start over the links and the untried
-  moves between known places (a primitive never taken from i whose predicted cell holds
-  a known node) finds the shortest way to the goal; when it is shorter than the known
-  route (or no route is known), its untried moves have ``rho = 1`` this episode,
-  planned as open as the re-tests below are (:func:`kernels.untried_chain`). Each
-  hop's odds alone make a way of ``k`` untried moves worth about ``rho^k`` of its
-  saving, and a short cut along
+  it instead: 1 is R-max's optimistic bound). In a maze of corridors about half the moves
+  bump, in an open field few do, and the agent learns which world it is in: an untried
+  move beside a good route is tried only when ``rho`` times its saving beats the bump's
+  step. The *untried chain* of an episode (``chain``) is the exception: at its first
+  solve, a breadth-first search from its start over the links and the untried moves
+  between known places (a primitive never taken from i whose predicted cell holds a known
+  node) finds the shortest way to the goal; when it is shorter than the known route (or
+  no route is known), its untried moves have ``rho = 1`` this episode, planned as open as
+  the re-tests below are (:func:`kernels.untried_chain`). Each hop's odds alone make a
+  way of ``k`` untried moves worth about ``rho^k`` of its saving, and a short cut along
   cells known but never walked in that direction was never taken: one trial of a
   generated large maze (1300 cells, suite seed 1) kept a greedy path of 80 steps against
   78 for good. With a route as short as any such way (a converged agent) there is no
-  chain. With the bound (``rho = 1``) the agent tried almost every untried pair
-  whose L1 heuristic beat the route (default maze b: 85.6 steps against 80.5; held-out
-  suite seed 1, blocks median 1.33 x the oracle against 1.18, worst trial 6.8 x against
-  4.5). 1 also for a move whose link the map has since deleted (GWR ageing: a forgotten
-  piece of a route is walked again when it may be worth it); when the node it led to is
-  gone, or no longer within ``L / 2`` of the predicted cell (its slot reused), the cell
-  is looked up as for any move. A pair whose last outcome was a
-  bump is a remembered wall, *trusted* for ``T = stale_horizon`` episodes after the bump
-  (``rho = 0``: no option) and *stale* after that (R-max's known threshold with
-  forgetting). A wall can only be seen to have opened by re-testing it (the agent senses
-  its position and its touch sensor, nothing at a distance), and a shortcut is news
-  only if the agent goes and looks; the clock is the episode, the unit of the task. Which
-  stale walls an episode re-tests is decided once, at its start (the *re-tests*, below);
-  those have ``rho = stale_prior`` = 1, planned as open: a test is worth its cost over
-  all the episodes a shortcut would serve, not over this one, so the one-episode odds of
-  Eq. 5' are not what decides it (with ``rho`` = 1/2, as before the re-tests were
-  chosen, an opening that saves two steps a cell off the route never paid for its way
-  there and back within the episode, and such openings were never found: fresh suite
-  seed 5, open fields 17 % within 10 episodes). The others have no option. A failed test
-  leaves the agent where it was after one step, hence the ``(1 - rho)`` term.
+  chain. With the bound (``rho = 1``) the agent tried almost every untried pair whose L1
+  heuristic beat the route (default maze b: 85.6 steps against 80.5; held-out suite seed
+  1, blocks median 1.33 x the oracle against 1.18, worst trial 6.8 x against 4.5). 1 also
+  for a move whose link the map has since deleted (GWR ageing: a forgotten piece of a
+  route is walked again when it may be worth it); when the node it led to is gone, or no
+  longer within ``L / 2`` of the predicted cell (its slot reused), the cell is looked up
+  as for any move. A pair whose last outcome was a bump is a remembered wall, *trusted*
+  for ``T = stale_horizon`` episodes after the bump (``rho = 0``: no option) and *stale*
+  after that (R-max's known threshold with forgetting). A wall can only be seen to have
+  opened by re-testing it (the agent senses its position and its touch sensor, nothing at
+  a distance), and a shortcut is news only if the agent goes and looks; the clock is the
+  episode, the unit of the task. Which stale walls an episode re-tests is decided once,
+  at its start (the *re-tests*, below); those have ``rho = stale_prior`` = 1, planned as
+  open: a test is worth its cost over all the episodes a shortcut would serve, not over
+  this one, so the one-episode odds of Eq. 5' are not what decides it (with ``rho`` =
+  1/2, as before the re-tests were chosen, an opening that saves two steps a cell off the
+  route never paid for its way there and back within the episode, and such openings were
+  never found: fresh suite seed 5, open fields 17 % within 10 episodes). The others have
+  no option. A failed test leaves the agent where it was after one step, hence the ``(1 -
+  rho)`` term.
 * *A cell that closed*: when a move made before bumps now, the cell it led to has
   closed, from every side: the node it led to (while still at the predicted cell) is
   terminal in Eq. 5, worth its own R (no successor), for the ``T`` episodes the bump
@@ -100,22 +99,21 @@ successor, an *option*, in the max of Eq. 5::
   ``q`` its best exit, ``k`` cells along its run, :func:`kernels.stale_savings`), and
   what a failed test would cost, ``c = d_S(i) + 1 + d_G(i) - d`` (at least 1); the ``B``
   walls with ``s > 0`` and the most ``t s / c``, ``t`` the episodes since the wall was
-  last bumped, are
-  this episode's re-tests (ties: the nearest first). Walls change, if at all, at some
-  rate, so the chance a wall has opened grows with ``t``, and the gain of finding it is
-  that chance times ``s`` (each episode after), against ``c``. A wall just re-tested
-  waits, a long-unchecked one rises, so no wall waits for ever behind others (with the
-  re-tests chosen as Eq. 5' ranked them from where the agent stood, more than ``T``
-  times ``B`` walls near the route starved one further off: a generated braided maze,
-  dev seed 0, never found its opening); the cost keeps a far wall from sending the agent
-  on a long excursion in an episode that meets a block (default maze b, 10 trials:
+  last bumped, are this episode's re-tests (ties: the nearest first). Walls change, if at
+  all, at some rate, so the chance a wall has opened grows with ``t``, and the gain of
+  finding it is that chance times ``s`` (each episode after), against ``c``. A wall just
+  re-tested waits, a long-unchecked one rises, so no wall waits for ever behind others
+  (with the re-tests chosen as Eq. 5' ranked them from where the agent stood, more than
+  ``T`` times ``B`` walls near the route starved one further off: a generated braided
+  maze, dev seed 0, never found its opening); the cost keeps a far wall from sending the
+  agent on a long excursion in an episode that meets a block (default maze b, 10 trials:
   78.7 -> 71.1 steps, worst 92 -> 78). With the runs below, suite seeds 0, 1, 4 and 5
   (104 openings x 5 trials): within 10 episodes 89.2 % before these changes, 95.8 % with
   the runs alone (but default b 81.8, two block trials over 5 x the oracle), 96.0 % with
-  the runs and these re-tests. An episode in which a move made before has bumped (the known
-  route broke) re-tests none from then on: the agent is finding its way round, and an
-  old wall re-tested on the way costs steps the detour needs. A re-test is an action at
-  a pair known closed while not *stuck* (below). ``stale_rank`` off: every stale wall
+  the runs and these re-tests. An episode in which a move made before has bumped (the
+  known route broke) re-tests none from then on: the agent is finding its way round, and
+  an old wall re-tested on the way costs steps the detour needs. A re-test is an action
+  at a pair known closed while not *stuck* (below). ``stale_rank`` off: every stale wall
   has ``rho = stale_prior`` until ``B`` re-tests are used up, Eq. 5' ranking them from
   where the agent stands.
 * ``S`` is what the successor is worth. A known node when there is one: where the move
