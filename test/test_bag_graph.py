@@ -131,6 +131,33 @@ def test_graph_recording_is_complete_and_decodes_everywhere(graph_run, foxglove_
     assert {t: n for t, n in fox.items() if n} == counts
 
 
+def test_the_foxglove_report_survives_a_late_reader(graph_run, foxglove_decoder, tmp_path):
+    """decode.js prints more than a pipe holds (64 KiB); a reader that comes late gets it all.
+
+    CI once read the first 65536 characters only: decode.js ended with process.exit(), which
+    drops what a pipe could not take at once. It now sets process.exitCode instead. The
+    report grows with the run, so the bag's files are given under enough names to fill a pipe.
+    """
+    import math
+    import subprocess
+
+    from test_recorder import JS_DIR, NODE
+    files = mcap_files(graph_run[0])
+    one = len(json.dumps(foxglove_decoder(files)))
+    names = []
+    for k in range(math.ceil(2 * 65536 / one)):
+        for f in files:
+            names.append(tmp_path / f"{k}_{f.name}")
+            names[-1].symlink_to(f)
+    proc = subprocess.Popen([NODE, str(JS_DIR / "decode.js"), *map(str, names)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(2.0)                      # the pipe fills and node has to wait for us
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 0, err
+    assert len(out) > 65536, len(out)
+    assert set(json.loads(out)["files"]) == set(map(str, names))
+
+
 def test_recorder_lost_nothing(graph_run):
     bag, _live, _goal_step, out = graph_run
     m = re.search(r"recorded: received (\d+), written (\d+) messages", out)

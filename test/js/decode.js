@@ -127,8 +127,11 @@ async function main() {
       failed = true;
     }
   }
+  // No process.exit(): a pipe takes 64 KiB at once and the rest of a write is queued, and
+  // process.exit() drops the queue (the reader got the first 65536 characters only).
+  // Setting exitCode lets node exit once stdout is flushed.
+  process.exitCode = failed ? 1 : 0;
   process.stdout.write(JSON.stringify(result) + "\n");
-  process.exit(failed ? 1 : 0);
 }
 
 main();
