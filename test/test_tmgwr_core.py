@@ -281,8 +281,9 @@ def test_value_of_a_remembered_wall_by_hand():
     """A stale bump when the agent is stuck: the chain 0 -> 1 -> 2, the goal sensed at
     node 2, every pair known, but 'right' from node 0 bumped 3 steps ago (its link to
     node 1 is gone): no route from node 0, so its walls are doubted with
-    rho = 1/2 (1 - exp(-tau / N)), N = 3 nodes, and the option leads to node 1, where
-    the move once led: O(0, right) = rho V(1) + (1 - rho)(R_0 + gamma * 0)."""
+    rho = p (1 - exp(-tau / N)), N = 3 nodes, p = 1/2 before any re-test, and the option
+    leads to node 1, where the move once led: O(0, right) = rho V(1) + (1 - rho)(R_0 +
+    gamma * 0)."""
     g = 0.97
     m = chain_map()
     slot = int(np.flatnonzero(m.out[0] == 1)[0])
@@ -312,6 +313,22 @@ def test_value_of_a_remembered_wall_by_hand():
     V = mo.update(m)
     rho = 0.5 * (1.0 - np.exp(-3.0 / 6.0))
     np.testing.assert_allclose(V[0], g * rho * (R1 + g), rtol=1e-9)
+    # the limit 1/2 is Laplace's rule before any re-test; after 2 re-tests of walls, both
+    # of which moved the agent, it is (2 + 1) / (2 + 2) = 3/4, after 3 that all bumped
+    # (0 + 1) / (3 + 2) = 1/5
+    for tests, opened, limit in ((2, 2, 0.75), (3, 0, 0.2)):
+        st = mo.state_dict()
+        st["wall_tests"], st["wall_opened"] = tests, opened
+        mo.load_state_dict(st)
+        assert mo.wall_prior() == limit
+        V = mo.update(m)
+        rho = limit * (1.0 - np.exp(-3.0 / 6.0))
+        np.testing.assert_allclose(V[0], g * rho * (R1 + g), rtol=1e-9)
+    # record counts them: 'right' from node 0 (known closed) bumps again: 4 tests, 0 moved
+    mo.record(0, 0, False, Outcome(action=RIGHT, bumped=True), m.w)
+    assert (mo.wall_tests, mo.wall_opened) == (4, 0) and mo.wall_prior() == 1 / 6
+    mo.record(0, 0, False, Outcome(action=DOWN), m.w)        # not a wall: not counted
+    assert mo.wall_tests == 4
 
 
 def path_map(cells, actions):
