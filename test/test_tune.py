@@ -24,6 +24,7 @@ from tmgwr_agent.experiments.tune import (
     interleaved,
     load_tuned,
     open_run,
+    parse_space,
     score,
     search_space,
     tasks,
@@ -127,6 +128,19 @@ def test_search_space_lies_inside_the_declared_ranges(agent):
         assert d.low < d.high
 
 
+def test_space_names_take_their_search_interval_and_fix_holds_some_back():
+    # a bare name: the interval SEARCH gives it (a_T's declared range (0, 1) is open)
+    dims = {d.name: d for d in search_space("tmgwr", parse_space("a_T,E_min,eps_b"))}
+    assert (dims["a_T"].low, dims["a_T"].high) == (SEARCH["tmgwr"]["a_T"].low,
+                                                  SEARCH["tmgwr"]["a_T"].high)
+    assert dims["E_min"].log
+    assert (dims["eps_b"].low, dims["eps_b"].high) == (0.0, 1.0)   # not in SEARCH: declared
+    # --fix: the default space without these (they keep their defaults)
+    fixed = search_space("tmgwr", fix=["eps_min", "p_turn"])
+    assert [d.name for d in fixed] == [n for n in SEARCH["tmgwr"]
+                                       if n not in ("eps_min", "p_turn")]
+
+
 def test_objective_by_hand():
     tasks = [Task("m1", "f", "", "a", 10, 50.0), Task("m2", "f", "", "a", 20, 40.0)]
     runs = [[{"steps": 20, "train_episodes": 3}, {"steps": 40, "train_episodes": 3},
@@ -173,6 +187,10 @@ def test_opening_runs_are_the_experiment_runs(tmp_path):
     (["tune", "q_leaning"], "unknown agent 'q_leaning'"),
     (["tune", "dyna_q_plus", "--space", "kapa"], "did you mean 'kappa'"),
     (["tune", "q_learning", "--space", "gamma=0.5:1.5"], "leaves its declared range"),
+    (["tune", "tmgwr", "--space", "goal_sigma"], "give --space goal_sigma=LOW:HIGH inside"),
+    (["tune", "q_learning", "--fix", "gama"], "did you mean 'gamma'"),
+    (["tune", "q_learning", "--fix", "eps_start"], "--fix 'eps_start': it is not searched"),
+    (["tune", "q_learning", "--space", "gamma", "--fix", "gamma"], "leaves no parameter"),
     (["tune", "q_learning", "--suite", "shortcut:1"], "no maze with a block event"),
     (["tune", "q_learning", "--open-suite", "blocking:1"], "no maze with an opening"),
     (["tune", "q_learning", "--open-weight", "-1"], "--open-weight must be >= 0"),

@@ -153,8 +153,12 @@ def register(subparsers) -> None:
     t.add_argument("--seed", type=int, default=0,
                    help="seed of the trial seeds and of the sampler (default 0)")
     t.add_argument("--space", default=None, metavar="LIST",
-                   help="search these instead: NAME (its declared range), NAME=LOW:HIGH "
-                        "or NAME=LOW:HIGH:log, comma-separated")
+                   help="search these instead: NAME (the interval --list shows for it, "
+                        "else its declared range), NAME=LOW:HIGH or NAME=LOW:HIGH:log, "
+                        "comma-separated")
+    t.add_argument("--fix", default=None, metavar="LIST",
+                   help="keep these searched parameters at their defaults, "
+                        "comma-separated (e.g. --fix eps_min)")
     t.add_argument("--list", action="store_true",
                    help="list the agent's parameters, searched or fixed, and exit")
     t.add_argument("--params-out", default=None, metavar="FILE",

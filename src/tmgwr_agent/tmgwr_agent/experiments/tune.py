@@ -42,8 +42,11 @@ Search space, one place per fact: *which* parameters an agent tunes and the inte
 searched are :data:`SEARCH` (a parameter's default, type and valid range stay its
 ``param()`` declaration in the agent's Config class, read at run time, so a parameter
 added to a Config is seen by ``tune --list`` and can be searched with ``--space`` without
-editing this module). An interval bound left ``None`` is the declared bound; every
-interval is checked against the declared range. The shared exploration parameters
+editing this module). A name given to ``--space`` without bounds takes its
+:data:`SEARCH` interval, else its declared range (an interval bound left ``None`` is the
+declared bound); ``--fix`` holds parameters of the space at their defaults (the
+goal-change scenario needs ``eps_min`` 0, Tuning in the README); every interval is
+checked against the declared range. The shared exploration parameters
 (``eps_min``, ``eps_decay``, ``p_turn``) are searched for every agent over the same
 intervals. The study's first trial is the agent's defaults (the paper's settings), so
 the report shows what tuning gained on the training split.
@@ -249,11 +252,24 @@ def parse_space(text: str) -> dict[str, Interval]:
     return out
 
 
-def search_space(agent: str, space: Mapping[str, Interval] | None = None) -> list[Dim]:
-    """The resolved search space of ``agent`` (``space``: instead of :data:`SEARCH`)."""
+def search_space(agent: str, space: Mapping[str, Interval] | None = None,
+                 fix: Sequence[str] = ()) -> list[Dim]:
+    """The resolved search space of ``agent`` (``space``: instead of :data:`SEARCH`; a
+    name given without bounds there takes its :data:`SEARCH` interval when it has one,
+    else its declared range), without the parameters ``fix`` (kept at their defaults)."""
     declared = {p.name: p for p in agent_specs(agent)}
     name, _ = parse_agent(agent)
-    wanted = SEARCH[name] if space is None else space
+    wanted = SEARCH[name] if space is None else \
+        {k: SEARCH[name].get(k, iv) if iv == Interval() else iv for k, iv in space.items()}
+    for pname in fix:
+        if pname not in declared:
+            raise UsageError(f"tune {agent}: --fix: " + unknown_name_message(pname, declared))
+        if pname not in wanted:
+            raise UsageError(f"tune {agent}: --fix {pname!r}: it is not searched "
+                             f"(searched: {', '.join(wanted)})")
+    wanted = {k: iv for k, iv in wanted.items() if k not in fix}
+    if not wanted:
+        raise UsageError(f"tune {agent}: --fix leaves no parameter to search")
     dims = []
     for pname, iv in wanted.items():
         p = declared.get(pname)
@@ -272,16 +288,18 @@ def search_space(agent: str, space: Mapping[str, Interval] | None = None) -> lis
                 p.check(int(bound) if p.integer else float(bound))
             except ParamError as exc:
                 raise UsageError(f"tune {agent}: search interval [{low:g}, {high:g}] of "
-                                 f"{pname!r} leaves its declared range: {exc}") from None
+                                 f"{pname!r} leaves its declared range: {exc}; give "
+                                 f"--space {pname}=LOW:HIGH inside it") from None
         if iv.log and low <= 0:
             raise UsageError(f"tune {agent}: a log interval of {pname!r} needs LOW > 0")
         dims.append(Dim(pname, low, high, iv.log, p.integer, p.default))
     return dims
 
 
-def describe_space(agent: str, space: Mapping[str, Interval] | None = None) -> str:
+def describe_space(agent: str, space: Mapping[str, Interval] | None = None,
+                   fix: Sequence[str] = ()) -> str:
     """``tune AGENT --list``: every parameter, searched (with its interval) or fixed."""
-    dims = {d.name: d for d in search_space(agent, space)}
+    dims = {d.name: d for d in search_space(agent, space, fix)}
     lines = [f"parameters of {agent} ('*' = searched by tune; --space changes the set)"]
     for p in agent_specs(agent):
         d = dims.get(p.name)
@@ -779,9 +797,10 @@ def run(args) -> int:
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     space = parse_space(args.space) if args.space else None
-    dims = search_space(args.agent, space)
+    fix = [f.strip() for f in (args.fix or "").split(",") if f.strip()]
+    dims = search_space(args.agent, space, fix)
     if args.list:
-        print(describe_space(args.agent, space))
+        print(describe_space(args.agent, space, fix))
         return 0
     if args.trials < 1 or args.workers < 1 or args.seeds < 1 or args.eval_trials < 1:
         raise UsageError("--trials, --workers, --seeds and --eval-trials must be >= 1")
