@@ -99,6 +99,23 @@ def test_a_terminal_node_left_without_links_is_kept():
     assert m.alive[2] and m.terminal[2] and not m.alive[0]
 
 
+def test_an_episode_end_flags_every_node_of_its_place():
+    """A second node for node 2's place (0.003 away: within the GWR's radius -ln a_T =
+    0.051; in a run, a node reached in another temporal context): an episode ending on
+    node 2 flags both, not node 1 (0.1 away); walking on from the second clears both, and
+    not the flag of another place (node 0)."""
+    m = chain_map()
+    twin = m._insert(m.w[2] + [0.0, 0.003], m.c[2])
+    m.mark_terminal(0)
+    m.mark_terminal(2)
+    assert list(m.terminal[:4]) == [True, False, True, True]
+    assert list(m.nodes_at(2)) == [2, twin]
+    m.begin_episode()
+    assert m.step(m.w[twin].copy(), None) == twin
+    m.step(np.array([0.0, 0.1]), ACTION_VECTORS[LEFT])  # walked on: not an episode end
+    assert list(m.terminal[:4]) == [True, False, False, False]
+
+
 # ---------------------------------------------------------------- GWR + Merge-GNG
 def test_context_is_merge_gng_blend_of_previous_winner():
     m = SensorimotorMap(dim=2, config=MapConfig(beta_c=0.25, alpha_c=0.5))

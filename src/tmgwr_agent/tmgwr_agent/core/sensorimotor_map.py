@@ -60,6 +60,7 @@ changes (insertion, deletion) so consumers know when ids were reassigned.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
@@ -258,13 +259,24 @@ class SensorimotorMap:
         """An episode ended on node i (the agent is moved back to the start next), at the
         goal or short of it.
 
-        The flag is the map's memory that i is a terminal state of the world; it is cleared
-        as soon as the agent walks on from i within an episode (:meth:`step`), e.g. when a
-        goal moved away and its old cell became an ordinary one. The motivation estimator
-        treats flagged nodes as absorbing (no successor in Eq. 5), except the nodes of the
-        current goal."""
+        The flag is the map's memory that i's place is a terminal state of the world, so
+        every node of that place gets it (:meth:`nodes_at`: the map may hold more than one
+        node for a place, reached in different temporal contexts, and a link into an
+        unflagged one led the agent into an old goal in the goal-change scenario); it is
+        cleared, on every node of the place, as soon as the agent walks on from a flagged
+        node within an episode (:meth:`step`), e.g. when a goal moved away and its old cell
+        became an ordinary one. The motivation estimator treats flagged nodes as absorbing (no
+        successor in Eq. 5), except the nodes of the current goal."""
         if 0 <= i < self.n:
+            self.terminal[self.nodes_at(i)] = True
             self.terminal[i] = True
+
+    def nodes_at(self, i: int, among: np.ndarray | None = None) -> np.ndarray:
+        """The live nodes (of ``among``, default all) whose weights lie within the GWR's own
+        radius of node i's, ``-ln a_T`` (a winner that near inserts no node): i's place."""
+        idx = np.flatnonzero(self.alive[: self.n]) if among is None else among
+        d = self.w[idx] - self.w[i]
+        return idx[np.einsum("ij,ij->i", d, d) < math.log(self.a_T) ** 2]
 
     def experience(self, x: np.ndarray, outcome: Outcome, learn: bool = True) -> int:
         """The map stage of one agent step (Fig. 1a): input x, reached by the outcome's
@@ -304,7 +316,9 @@ class SensorimotorMap:
                                   self.c[b] + lam * (C - self.c[b]))
             self._habituate(b, self.tau_b)
         if learn and self.prev >= 0 and action is not None:
-            self.terminal[self.prev] = False    # walked on from prev: not an episode end
+            if self.terminal[self.prev]:        # walked on from prev: its place is not an
+                self.terminal[self.nodes_at(self.prev)] = False            # episode end
+                self.terminal[self.prev] = False
             self._update_links(self.prev, winner, np.asarray(action, dtype=float))
         self.prev = self.winner = winner
         return winner
