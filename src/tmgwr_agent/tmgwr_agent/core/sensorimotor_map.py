@@ -264,17 +264,17 @@ class SensorimotorMap:
         node for a place, reached in different temporal contexts, and a link into an
         unflagged one led the agent into an old goal in the goal-change scenario); it is
         cleared, on every node of the place, as soon as the agent walks on from a flagged
-        node within an episode (:meth:`step`), e.g. when a goal moved away and its old cell
-        became an ordinary one. The motivation estimator treats flagged nodes as absorbing (no
-        successor in Eq. 5), except the nodes of the current goal."""
+        node within an episode (:meth:`step`), e.g. when a goal moved away and its old
+        cell became an ordinary one. The motivation estimator treats flagged nodes as
+        absorbing (no successor in Eq. 5), except the nodes of the current goal."""
         if 0 <= i < self.n:
             self.terminal[self.nodes_at(i)] = True
             self.terminal[i] = True
 
-    def nodes_at(self, i: int, among: np.ndarray | None = None) -> np.ndarray:
-        """The live nodes (of ``among``, default all) whose weights lie within the GWR's own
-        radius of node i's, ``-ln a_T`` (a winner that near inserts no node): i's place."""
-        idx = np.flatnonzero(self.alive[: self.n]) if among is None else among
+    def nodes_at(self, i: int) -> np.ndarray:
+        """The live nodes whose weights lie within the GWR's own radius of node i's,
+        ``-ln a_T`` (a winner that near inserts no node): i's place."""
+        idx = np.flatnonzero(self.alive[: self.n])
         d = self.w[idx] - self.w[i]
         return idx[np.einsum("ij,ij->i", d, d) < math.log(self.a_T) ** 2]
 
