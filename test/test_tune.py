@@ -82,9 +82,13 @@ def test_two_workers_share_one_journal_study_and_the_file_loads(tmp_path):
     assert (agent.gamma, agent.beta, agent.r_wall) == pytest.approx(
         (values["gamma"], values["beta"], values["r_wall"]))
 
-    # the study is complete: running again adds no trial; other options are refused
+    # the study is complete: running again adds no trial, also with its space named in
+    # another order (bare names: their search intervals); other options are refused
     tune(tmp_path, "--trials", "4")
+    tune(tmp_path, "--trials", "4", "--space", ",".join(reversed(SEARCH["q_learning"])))
     assert len(trials_in(tmp_path / "study.journal")) == 4
+    assert "# searched: " + ", ".join(sorted(SEARCH["q_learning"])) + "; the rest" in \
+        (tmp_path / "best.yaml").read_text()
     proc = tune(tmp_path, "--trials", "4", "--seed", "3", check=False)
     assert proc.returncode == 2
     assert "made with other options" in proc.stderr and "seed" in proc.stderr

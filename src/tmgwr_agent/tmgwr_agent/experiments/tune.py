@@ -578,7 +578,10 @@ def _create(storage: str, study_name: str, setup: Setup):
     study = optuna.create_study(study_name=study_name, storage=open_storage(storage),
                                 direction="minimize", load_if_exists=True)
     mine = json.loads(json.dumps(asdict(setup)))
+    mine["space"] = sorted(mine["space"])       # the same space named in any order
     theirs = study.user_attrs.get("setup")
+    if theirs is not None and "space" in theirs:
+        theirs = {**theirs, "space": sorted(theirs["space"])}
     if theirs is None:
         study.set_user_attr("setup", mine)
         defaults = {d.name: d.default for d in setup.dims() if d.contains(d.default)}
@@ -841,7 +844,9 @@ def run(args) -> int:
               f"{'-' if d_value is None else format(d_value, '.4f')}) "
               f"on --suite {args.suite} --open-suite {open_suite or '-'} --open-weight "
               f"{setup.open_weight:g} --suite-seed {args.suite_seed} "
-              f"--suite-first {args.suite_first}, {args.seeds} seeds")
+              f"--suite-first {args.suite_first}, {args.seeds} seeds\n"
+              f"searched: {', '.join(sorted(d.name for d in dims))}; the rest at their "
+              "defaults")
     write_params(out_params, args.agent, params, header)
     load_tuned(out_params, args.agent)          # what we wrote reads back
     workers = {}
