@@ -286,6 +286,12 @@ class MotivationConfig(Config):
                                low=-1.0, high=1.0)
 
 
+def laplace(k: int, t: int) -> float:
+    """Laplace's rule of succession: the chance of a success after k in t trials,
+    (k + 1) / (t + 2) (1/2 before any trial)."""
+    return (k + 1.0) / (t + 2.0)
+
+
 def grown(a: np.ndarray, n: int, fill) -> np.ndarray:
     """``a`` with at least n rows (doubling), new rows set to ``fill``."""
     if len(a) >= n:
@@ -661,8 +667,8 @@ class MotivationEstimator:
         nodes = self.nodes_alive(m, n)
         clock, T = self.stuck_clock(nodes)
         spent = not stuck and self.budget_spent(nodes)
-        key = (m.version, clock if stuck else self.episode, n, stuck, spent,
-               self.wall_prior() if stuck else 0.0)
+        rho_max = self.wall_prior() if stuck else 0.0 if spent else self.stale_prior
+        key = (m.version, clock if stuck else self.episode, n, stuck, spent, rho_max)
         if key != self._options_key:
             if self._options_key[:1] != key[:1]:
                 self._grid, self._origin = kernels.cell_grid(m.w, m.alive, n, self._scale)
@@ -674,7 +680,6 @@ class MotivationEstimator:
         else:
             return
         self._dirty.clear()
-        rho_max = self.wall_prior() if stuck else 0.0 if spent else self.stale_prior
         kernels.option_values(m.w, m.out, m.alive, n, rows, self.goal_x, self.delta,
                               self._scale, self.v_star, self.gamma, self.tried, self.bump_t,
                               self.closed_t, self.bump_e, self.succ, clock, T, self.episode,
@@ -693,13 +698,13 @@ class MotivationEstimator:
         tried = self.tried[:k] & m.alive[:k, None]
         t = int(np.count_nonzero(tried))
         opened = int(np.count_nonzero(tried & (self.bump_t[:k] < 0)))
-        return (opened + 1.0) / (t + 2.0)
+        return laplace(opened, t)
 
     def wall_prior(self) -> float:
         """rho's limit for a remembered wall while stuck: the chance that a wall known
         closed has opened, estimated from the agent's own re-tests as the share that
         moved it, (k + 1) / (t + 2) (Laplace's rule: 1/2 before any re-test)."""
-        return (self.wall_opened + 1.0) / (self.wall_tests + 2.0)
+        return laplace(self.wall_opened, self.wall_tests)
 
     def stuck(self, m: SensorimotorMap, n: int) -> bool:
         """The goal is represented but no link path leads from the agent's node to it
