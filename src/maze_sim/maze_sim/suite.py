@@ -17,14 +17,14 @@ Families (free cells, the size an agent has to map):
 
 ``braided`` (about 70-210)
     A perfect maze carved by a recursive backtracker or by Kruskal's algorithm (long
-    corridors versus many short dead ends), then 8-20 % of the remaining inner walls
+    corridors versus many short dead ends), then a share of 0.08-0.2 of the remaining inner walls
     knocked out: loops, so that a blocked corridor has a way round it.
 ``rooms`` (about 50-330)
     2 x 2 to 3 x 3 rooms of random sizes joined by one-cell doors (a spanning tree of
     doors plus extra ones; the 2 x 2 case has all four doors: Sutton, Precup & Singh's
     four rooms). Shortest paths are wide inside a room and one cell wide at a door.
 ``open`` (about 50-230)
-    An open field with random rectangular obstacles (15-28 % of it); pockets that the
+    An open field with random rectangular obstacles (a share of 0.15-0.28 of it); pockets that the
     obstacles cut off are filled. Shortest paths are many and wide.
 ``blocking`` (about 40-130)
     Sutton & Barto's blocking maze (Fig. 8.4) with random size, wall height, start
@@ -41,12 +41,12 @@ Families (free cells, the size an agent has to map):
     indices, kept between 1000 and 1300 free cells (:data:`MAX_FREE_CELLS`).
 
 Start and goal (``braided``, ``rooms``, ``open``, ``large``): ``S`` is drawn among the
-cells farthest (>= 80 % of the maximum BFS distance) from a random cell, ``G`` among the
+cells farthest (at least 0.8 of the maximum BFS distance) from a random cell, ``G`` among the
 cells farthest from ``S``: a long route, different each time.
 
 Named goals for goal-change (``SuiteMaze.goals`` = ``1``-``4``), as the paper's section
-5.2.1 places them: ``1`` and ``2`` near the start (15-45 % of the largest BFS distance
-from S), ``3`` and ``4`` far (65-100 %), never on S, G or an event cell, at least a sixth
+5.2.1 places them: ``1`` and ``2`` near the start (0.15-0.45 of the largest BFS distance
+from S), ``3`` and ``4`` far (0.65-1), never on S, G or an event cell, at least a sixth
 of that distance apart, and no named goal on any shortest path from S to another one
 (goal-change keeps the previous goal terminal, so a goal on the way would end the
 episode before the agent could reach the new one).
@@ -61,7 +61,7 @@ the layout before any event); ``blocking`` gets ``a``, ``shortcut`` gets ``b``.
   ``dS(c) + dG(c) = d(S, G)`` and ``dS(c) = k``. Every shortest path visits exactly one
   cell of each layer, so walling a layer closes every shortest path; a layer of width 1
   is a cell that all shortest paths share (a corridor cell, a door). Among the layers
-  with ``k`` in the middle 70 % of the route, we take the narrowest ones (at most
+  with ``k`` in the middle seven tenths of the route, we take the narrowest ones (at most
   :data:`MAX_BLOCK_WIDTH` cells) whose closing leaves G and every named goal reachable,
   and among (up to 24 of) those one whose detour adds at least a fifth of the route if
   there is one (a block that costs two steps tests little), else the longest detour;
@@ -70,7 +70,7 @@ the layout before any event); ``blocking`` gets ``a``, ``shortcut`` gets ``b``.
 * Opening (why: a shortcut is only news if it beats the route the agent knows): a
   straight run of 1 (``open``: up to 3) inner wall cells whose removal makes the S-G
   distance strictly shorter (no shorter run inside it does), drawn at random among
-  those that save at least 20 % of the route, or among those that save the most when
+  those that save at least a fifth of the route, or among those that save the most when
   none does.
 
 :func:`validate` re-checks all of it from the text alone (parse, goals, every old

@@ -6,6 +6,7 @@ independent (a module that fails to import only disables its own commands):
 * ``experiment``, ``demo``, ``bench``  -- :mod:`tmgwr_agent.experiments.cli`
 * ``up``, ``goal``, ``cell``, ``event`` -- :mod:`tmgwr_agent.graph.cli` (the ROS 2 node graph)
 * ``recover``, ``replay``, ``report``  -- :mod:`tmgwr_agent.bag.cli` (MCAP recordings)
+* ``results``                       -- :mod:`tmgwr_agent.experiments.results` (results/ as data)
 
 A module provides ``register(subparsers)`` which adds its parsers and sets
 ``func=callable(args) -> int`` on each.
@@ -21,6 +22,7 @@ FAMILIES = (
     "tmgwr_agent.experiments.cli",
     "tmgwr_agent.graph.cli",
     "tmgwr_agent.bag.cli",
+    "tmgwr_agent.experiments.results",
 )
 
 

@@ -34,17 +34,14 @@ are refused when the codec is made, not guessed.
 
 Why not a library: rosbags' serde (a pinned dependency; a typestore holding the installed
 ``.msg`` files, ``deserialize_cdr`` / ``serialize_cdr``) writes the same bytes, but it
-unpacks field by field into a dataclass and sizes a message before it writes it. On the
-recorded bytes of a default-maze run (``test/measure_cdr.py``, rounds alternated, 2 cores,
-load 3.4-3.8) it took 2.4-2.5x this module's time to read each ring message (Action 4.1
-against 1.7 µs, SensorimotorState 12.8 against 5.3) and 1.5-1.9x to write one (3.2
-against 1.7, 9.3 against 5.6), before the dtype coercion and defaults the nodes need
-(rclpy: 5-7x to read, 1.6-3.4x to write). Its ``deserialize_cdr`` also refuses the bytes
-of rclpy's ``serialize_message`` when they end in more than 3 unused bytes (its size
-estimate; 41 of 300 random Observations). ``mcap_ros2_support_fast`` reads as fast as
-this module but writes 2.2-2.6x slower and is GPL-3.0; pycdr2 (Cyclone DDS's IDL layer)
-took 7x and needs every type declared again in Python, as does cydr (and a C compiler at
-run time).
+unpacks field by field into a dataclass and sizes a message before it writes it, so on
+the recorded bytes of a run (``python test/measure_cdr.py RUN_DIR`` times both, and
+rclpy's own conversion) it reads and writes each ring message slower than this module,
+before the dtype coercion and defaults the nodes need. Its ``deserialize_cdr`` also
+refuses the bytes of rclpy's ``serialize_message`` when they end in more than 3 unused
+bytes (its size estimate). ``mcap_ros2_support_fast`` reads as fast as this module but
+writes slower and is GPL-3.0; pycdr2 (Cyclone DDS's IDL layer) is slower still and needs
+every type declared again in Python, as does cydr (and a C compiler at run time).
 """
 
 from __future__ import annotations

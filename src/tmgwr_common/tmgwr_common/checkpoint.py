@@ -326,8 +326,8 @@ class Checkpointer:
 
     The checkpoint of a period (:meth:`step`) is taken in the node's thread, when its step
     is done, and written to disk by a thread of its own, so the lockstep ring does not wait
-    for the disk (the writes with their two fsyncs took 14 % of a composed graph's wall time
-    on a loaded machine when the nodes waited for them). One write is in flight at most: the
+    for the disk (the writes with their two fsyncs were a large share of a composed graph's
+    wall time when the nodes waited for them). One write is in flight at most: the
     next one, a clean stop's (:meth:`stop`) and a direct :meth:`save` wait for it first, so
     checkpoints reach the disk in step order, and a kill leaves the older or the newer one.
 

@@ -429,8 +429,8 @@ def spin_until(executor, done: Callable[[], bool], ok_period: float = 0.1) -> No
 
     ``rclpy.ok()`` is asked at most every ``ok_period`` s, not after every callback: it
     takes a lock that the EventsExecutor's own thread holds while it works, and waiting
-    for it took 5 % of a composed graph's wall time when it was asked after every
-    callback."""
+    for it was a visible share of a composed graph's wall time when it was asked after
+    every callback."""
     import rclpy
     next_ok = 0.0
     while not done():

@@ -9,7 +9,7 @@
   (ten consecutive optimal greedy paths); on the large maze (``generate_maze(51, 51)``,
   about 1300 free cells) training runs until one greedy rollout is optimal (at most 20
   episodes; the first episode, a random walk over the whole maze, takes about a minute).
-  Reported: median (the target: <= 50 us on the default maze, <= 1 ms on the large one),
+  Reported: median (its targets: docs, Benchmarks),
   mean, p10, p90, p99, max, and the map's node count.
 * ``cpu_to_convergence``: per agent, CPU seconds (``time.process_time``) of the training
   episodes from scratch to convergence on goal G of the default maze, STAT over

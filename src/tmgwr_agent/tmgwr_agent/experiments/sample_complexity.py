@@ -1,7 +1,7 @@
 """Scenario: sample complexity (sections 5.2.4, 6.2.2, Fig. 6).
 
 Protocol, per agent, goal of ``--goals`` (default ``1,2,3,4``) and trial: a fresh agent
-(its generator from the trial's seed) starts 100 % exploratory (Eq. 7) and runs training
+(its generator from the trial's seed) starts fully exploratory (epsilon 1, Eq. 7) and runs training
 episodes from S to the goal; after each episode a greedy rollout probes convergence
 (:mod:`.runner`). It runs at least ``--episodes`` episodes (default 100) for the curve and
 on until convergence or the caps.

@@ -68,8 +68,8 @@ the measures that matter are ``optimal_within_10``, ``optimal_found`` and
 A goal-change ``SUMMARY``: ``current_pct`` (STAT + median over mazes of the maze's mean %
 of episodes ending at the current goal, over transitions and trials), ``worst_pct``
 (the smallest % of any transition of any trial), ``perfect_trials`` (fraction of the
-trials with 100 % on every transition), ``win_rate`` (mean % higher), plus ``mazes``,
-``skipped``, ``trials``.
+trials with every episode of every transition at the current goal), ``win_rate`` (mean
+% higher), plus ``mazes``, ``skipped``, ``trials``.
 """
 
 from __future__ import annotations

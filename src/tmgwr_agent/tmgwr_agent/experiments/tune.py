@@ -26,9 +26,9 @@ greedy path does not use the shortcut by then. Then::
 
 The median over seeds is robust to one odd run. Over mazes the geometric mean, not the
 median: every maze counts (a median of 16 mazes ignores what happens on the hardest
-half, where the agents differ most), yet a maze 100 x the oracle weighs log(100), not
-100. The penalty (:data:`PENALTY` = 10 oracle ratios spread over the runs) makes a setting
-that fails anywhere worse than one that does not. A trial runs the tasks block and
+half, where the agents differ most), yet a maze at a hundred times the oracle weighs
+log(100), not 100. The penalty (:data:`PENALTY` = 10 oracle ratios spread over the runs)
+makes a setting that fails anywhere worse than one that does not. A trial runs the tasks block and
 opening alternately and is stopped early by Optuna's median rule (:func:`pruner`) when
 its objective so far is worse than the earlier trials' median: the same for every agent,
 it spends the budget's time on settings that can win. ``--open-weight`` (default 1: every

@@ -1,0 +1,349 @@
+"""Results kept as data: ``./tmgwr results`` (``make results``).
+
+Every measured figure the README and the documentation show comes from a JSON file under
+``results/`` (committed), and every table of them is generated from it:
+
+* ``./tmgwr results record NAME -- COMMAND ...`` runs a ``./tmgwr`` command (an
+  ``experiment`` or ``bench``) with ``--json`` pointed at a scratch file under ``runs/``
+  and writes ``results/NAME.json``: the command as typed, the commit it ran at (and
+  whether ``src/`` had uncommitted changes), the machine's cores and its load average at
+  the start and the end, the wall time, and the command's own JSON under ``result``
+  (its contract: docs, Experiments).
+* ``./tmgwr results`` (``render``) rewrites every table between the marker comments
+  ``<!-- results:TABLE -->`` and ``<!-- /results:TABLE -->`` in ``README.md`` and
+  ``docs/**/*.md`` from those files (:data:`TABLES` says which file makes which table),
+  and draws each file's figure to ``docs/figures/NAME.png`` with
+  :func:`tmgwr_agent.experiments.plots.plot`.
+* ``./tmgwr results --check`` rewrites nothing and exits 1 naming every table that
+  differs from what its JSON gives (test/test_results.py runs the same comparison).
+
+A table names the trial count of its runs, so a reader knows how much each cell rests on.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import shlex
+import subprocess
+import sys
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Callable
+
+from tmgwr_agent.experiments.stats import fmt
+
+#: The repository root (``src/tmgwr_agent/tmgwr_agent/experiments/results.py``).
+ROOT = Path(__file__).resolve().parents[4]
+#: The files whose marked tables are generated.
+DOC_GLOBS = ("README.md", "docs/**/*.md")
+MARKER = re.compile(r"(<!-- results:([a-z0-9_-]+) -->\n)(.*?)(<!-- /results:\2 -->)", re.S)
+#: Results files whose figure goes to ``docs/figures/NAME.png``.
+FIGURES_DIR = "docs/figures"
+
+
+class ResultsError(RuntimeError):
+    """A results file or a marked table that cannot be generated (named in the message)."""
+
+
+# ---------------------------------------------------------------- recording
+
+def _git(root: Path, *args: str) -> str:
+    out = subprocess.run(["git", *args], cwd=root, capture_output=True, text=True)
+    return out.stdout.strip() if out.returncode == 0 else ""
+
+
+def record(name: str, argv: list[str], root: Path = ROOT) -> Path:
+    """Run ``./tmgwr ARGV --json SCRATCH`` and write ``results/NAME.json`` around its JSON."""
+    if not re.fullmatch(r"[a-z0-9_-]+", name):
+        raise ResultsError(f"results name {name!r}: use [a-z0-9_-] only")
+    if not argv or argv[0] not in ("experiment", "bench"):
+        raise ResultsError("record runs `experiment ...` or `bench ...` (got "
+                           f"{' '.join(argv) or 'nothing'!r})")
+    if "--json" in argv:
+        raise ResultsError("record sets --json itself; leave it out of the command")
+    scratch = root / "runs" / "results" / f"{name}.json"
+    scratch.parent.mkdir(parents=True, exist_ok=True)
+    scratch.unlink(missing_ok=True)
+    commit = _git(root, "rev-parse", "HEAD")
+    dirty = bool(_git(root, "status", "--porcelain", "--", "src"))   # what made the result
+    load_start = list(os.getloadavg())
+    started = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    t0 = time.monotonic()
+    proc = subprocess.run([sys.executable, "-m", "tmgwr_agent.cli", *argv, "--json",
+                           str(scratch)], cwd=root)
+    wall = time.monotonic() - t0
+    if proc.returncode != 0 or not scratch.is_file():
+        raise ResultsError(f"`./tmgwr {shlex.join(argv)}` exited {proc.returncode}; "
+                           f"results/{name}.json not written")
+    doc = {
+        "name": name,
+        "command": "./tmgwr " + shlex.join(argv),
+        "commit": commit,
+        "dirty": dirty,
+        "started": started,
+        "wall_s": round(wall, 1),
+        "machine": {"cores": os.cpu_count(), "load_start": load_start,
+                    "load_end": list(os.getloadavg())},
+        "result": json.loads(scratch.read_text()),
+    }
+    out = root / "results" / f"{name}.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(doc, indent=1) + "\n")
+    return out
+
+
+def load(name: str, root: Path = ROOT) -> dict:
+    path = root / "results" / f"{name}.json"
+    if not path.is_file():
+        raise ResultsError(f"results/{name}.json is missing (make it with "
+                           f"`./tmgwr results record {name} -- ...`)")
+    doc = json.loads(path.read_text())
+    for key in ("command", "commit", "machine", "result"):
+        if key not in doc:
+            raise ResultsError(f"results/{name}.json has no {key!r}")
+    return doc
+
+
+# ---------------------------------------------------------------- tables
+
+def _md(header: list[str], rows: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def _source(*docs: dict) -> str:
+    """The line under a table: the commands, their commit and the machine."""
+    parts = []
+    for d in docs:
+        m = d["machine"]
+        parts.append(f"`{d['command']}` at {d['commit'][:7]}{' (dirty)' if d['dirty'] else ''}"
+                     f", {m['cores']} cores, load {m['load_start'][0]:.1f}-"
+                     f"{m['load_end'][0]:.1f}")
+    return "Source: " + "; ".join(parts) + "."
+
+
+def _steps(s: dict) -> str:
+    text = fmt(s)
+    return "never" if text.startswith("inf") else text
+
+
+def _goal_change_means(result: dict) -> dict[str, dict]:
+    """Per agent: the mean over transitions and trials of % at the current goal, and the
+    worst transition mean."""
+    out = {}
+    for a, d in result["agents"].items():
+        means = [t["current_pct"]["mean"] for t in d["transitions"]]
+        out[a] = {"mean": sum(means) / len(means), "worst": min(means)}
+    return out
+
+
+def table_headline(root: Path) -> str:
+    """The README's table: per agent, steps after events a and b, % at the current goal."""
+    a, b, gc = (load(n, root) for n in ("env_change_a", "env_change_b", "goal_change"))
+    ra, rb, rg = a["result"], b["result"], gc["result"]
+    pct = _goal_change_means(rg)
+    agents = list(dict.fromkeys([*ra["agents"], *rg["agents"]]))
+    rows = []
+    for name in agents:
+        cells = [f"`{name}`"]
+        for r in (ra, rb):
+            cells.append(_steps(r["agents"][name]["steps"]) if name in r["agents"] else "")
+        cells.append(f"{pct[name]['mean']:.1f} (worst {pct[name]['worst']:.1f})"
+                     if name in pct else "")
+        rows.append(cells)
+    header = ["agent",
+              f"steps after event a (oracle {ra['oracle_steps']}, {ra['trials']} trials)",
+              f"steps after event b (oracle {rb['oracle_steps']}, {rb['trials']} trials)",
+              f"goal change {','.join(rg['goals'])}: % at the current goal "
+              f"({rg['episodes']} episodes per goal, {rg['trials']} trials)"]
+    return _md(header, rows) + "\n\n" + _source(a, b, gc)
+
+
+def table_env_change(root: Path) -> str:
+    """Table 6: per event and agent, steps of the first episode after the event and the
+    episodes until the greedy path is optimal again."""
+    docs = [load(n, root) for n in ("env_change_a", "env_change_b")]
+    rows = []
+    for d in docs:
+        r = d["result"]
+        for name, v in r["agents"].items():
+            rows.append([f"{r['event']} ({r['oracle_steps']})", f"`{name}`", _steps(v["steps"]),
+                         _steps(v["episodes_to_optimal"]), _steps(v["train_episodes"])])
+    trials = sorted({d["result"]["trials"] for d in docs})
+    header = ["event (oracle)", "agent", "steps after the event",
+              "episodes to optimal", "training episodes"]
+    return (_md(header, rows) + f"\n\nMean ± std over {'/'.join(map(str, trials))} trials; "
+            "`never`: every trial hit its cap. " + _source(*docs))
+
+
+def table_goal_change(root: Path) -> str:
+    """Tables 3-5: % of episodes at the previous / current goal per transition."""
+    d = load("goal_change", root)
+    r = d["result"]
+    agents = list(r["agents"])
+    first = r["agents"][agents[0]]["transitions"]
+    rows = []
+    for i, t in enumerate(first):
+        row = [f"{t['from']} -> {t['to']}"]
+        for a in agents:
+            tt = r["agents"][a]["transitions"][i]
+            row.append(f"{tt['previous_pct']['mean']:.1f} / {tt['current_pct']['mean']:.1f}")
+        rows.append(row)
+    return (_md(["transition"] + [f"`{a}`" for a in agents], rows)
+            + f"\n\n% of episodes ending at the previous / current goal, mean over "
+            f"{r['trials']} trials, {r['episodes']} episodes per goal. " + _source(d))
+
+
+def table_suite(root: Path) -> str:
+    """The suite summary: per family and agent, the median over mazes of the per-maze
+    median steps / oracle, the worst trial, failed trials."""
+    d = load("suite_blocks", root)
+    r, s = d["result"], d["result"]["suite"]
+    agents = list(r["agents"])
+    rows = []
+    for fam, f in list(s["families"].items()) + [("all", s["overall"])]:
+        if not f["mazes"]:
+            continue
+        row = [f"{fam} ({f['mazes']})"]
+        for a in agents:
+            ratio = f["oracle_ratio"][a]["median"]
+            worst = f["worst_trial_ratio"][a]
+            failed = f["failures"][a]
+            row.append(("-" if ratio is None else f"{ratio:.2f}")
+                       + ("" if worst is None else f" / {worst:.1f}")
+                       + (f" ({failed} failed)" if failed else ""))
+        rows.append(row)
+    return (_md(["family (mazes)"] + [f"`{a}`" for a in agents], rows)
+            + f"\n\nMedian over mazes of the per-maze median steps / oracle after the block, "
+            f"then the worst trial; suite `{s['spec']}`, suite seed {s['seed']}, "
+            f"{r['trials']} trials per maze. " + _source(d))
+
+
+def table_bench(root: Path) -> str:
+    """`make bench`'s ratios to the empty ring of 5 processes measured in the same run."""
+    d = load("bench", root)
+    ratios = d["result"].get("ratios")
+    if not isinstance(ratios, dict) or not ratios:
+        raise ResultsError("results/bench.json: result has no 'ratios'")
+    rows = [[f"`{k}`", f"{v:.2f}" if isinstance(v, (int, float)) else str(v)]
+            for k, v in ratios.items()]
+    return _md(["measure", "ratio"], rows) + "\n\n" + _source(d)
+
+
+#: Marked table name -> the function that generates it from results/.
+TABLES: dict[str, Callable[[Path], str]] = {
+    "headline": table_headline,
+    "env-change": table_env_change,
+    "goal-change": table_goal_change,
+    "suite": table_suite,
+    "bench": table_bench,
+}
+
+
+# ---------------------------------------------------------------- rendering
+
+def doc_files(root: Path = ROOT) -> list[Path]:
+    files: list[Path] = []
+    for pattern in DOC_GLOBS:
+        files += sorted(root.glob(pattern))
+    return files
+
+
+def render_text(text: str, root: Path = ROOT, where: str = "") -> str:
+    """``text`` with every marked table regenerated."""
+    def sub(m: re.Match) -> str:
+        name = m.group(2)
+        if name not in TABLES:
+            raise ResultsError(f"{where}: unknown results table {name!r} "
+                               f"(known: {', '.join(TABLES)})")
+        return m.group(1) + TABLES[name](root) + "\n" + m.group(4)
+    return MARKER.sub(sub, text)
+
+
+def stale_tables(root: Path = ROOT) -> list[str]:
+    """``file: table`` for every marked table that differs from what its JSON gives."""
+    stale = []
+    for path in doc_files(root):
+        text = path.read_text()
+        rel = path.relative_to(root)
+        new = render_text(text, root, str(rel))
+        if new != text:
+            old_tables = {m.group(2): m.group(3) for m in MARKER.finditer(text)}
+            for m in MARKER.finditer(new):
+                if old_tables.get(m.group(2)) != m.group(3):
+                    stale.append(f"{rel}: {m.group(2)}")
+    return stale
+
+
+def render(root: Path = ROOT, figures: bool = True) -> list[Path]:
+    """Rewrite the marked tables (and draw the figures); return the files changed."""
+    changed = []
+    for path in doc_files(root):
+        text = path.read_text()
+        new = render_text(text, root, str(path.relative_to(root)))
+        if new != text:
+            path.write_text(new)
+            changed.append(path)
+    if figures:
+        from tmgwr_agent.experiments.plots import plot
+        out = root / FIGURES_DIR
+        out.mkdir(parents=True, exist_ok=True)
+        for f in sorted((root / "results").glob("*.json")):
+            doc = load(f.stem, root)
+            if "scenario" in doc["result"]:
+                plot(doc["result"], out / f"{f.stem}.png")
+                changed.append(out / f"{f.stem}.png")
+    return changed
+
+
+# ---------------------------------------------------------------- command line
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "results", help="regenerate the results tables and figures from results/*.json",
+        description="Regenerate every results table of README.md and docs/ (between "
+                    "<!-- results:NAME --> markers) and the figures in docs/figures/ from "
+                    "results/*.json; `record` makes such a file by running a command.")
+    p.add_argument("--check", action="store_true",
+                   help="change nothing; exit 1 naming every table that differs from its JSON")
+    p.add_argument("--no-figures", action="store_true", help="tables only")
+    p.set_defaults(func=cmd_results)
+    sub = p.add_subparsers(dest="results_command", metavar="SUBCOMMAND")
+    r = sub.add_parser("record", help="run a ./tmgwr command and keep its JSON as "
+                                      "results/NAME.json with its provenance",
+                       description="./tmgwr results record NAME -- experiment env-change ...")
+    r.add_argument("name", metavar="NAME", help="results/NAME.json ([a-z0-9_-])")
+    r.add_argument("argv", nargs=argparse.REMAINDER, metavar="-- COMMAND ...",
+                   help="the ./tmgwr command to run, without --json")
+    r.set_defaults(func=cmd_record)
+
+
+def cmd_results(args: argparse.Namespace) -> int:
+    try:
+        if args.check:
+            stale = stale_tables()
+            for s in stale:
+                print(f"tmgwr results: stale table {s}", file=sys.stderr)
+            return 1 if stale else 0
+        for path in render(figures=not args.no_figures):
+            print(f"wrote {path.relative_to(ROOT)}")
+    except ResultsError as exc:
+        print(f"tmgwr: error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def cmd_record(args: argparse.Namespace) -> int:
+    argv = args.argv[1:] if args.argv[:1] == ["--"] else args.argv
+    try:
+        out = record(args.name, argv)
+    except ResultsError as exc:
+        print(f"tmgwr: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {out.relative_to(ROOT)}")
+    return 0
