@@ -3,7 +3,7 @@
 SHELL := /bin/bash
 PYTEST_ARGS ?=
 
-.PHONY: all bootstrap rebuild demo test bench clean distclean
+.PHONY: all bootstrap rebuild demo test bench docs results clean distclean
 
 all: bootstrap
 
@@ -22,9 +22,18 @@ test: bootstrap
 bench:
 	./tmgwr bench
 
+# The documentation (mkdocs.yml, docs/): strict, so a warning (a broken link, an unknown
+# API reference, a page missing from the nav) fails the build. Output in site/.
+docs: bootstrap
+	@source tools/env.sh && NO_MKDOCS_2_WARNING=1 mkdocs build --strict --quiet
+
+# Every results table of README.md and docs/, and docs/figures/, from results/*.json.
+results:
+	./tmgwr results
+
 # Build trees only (the .venv stays; `make distclean` removes it too).
 clean:
-	rm -rf build install log
+	rm -rf build install log site
 
 distclean: clean
 	rm -rf .venv

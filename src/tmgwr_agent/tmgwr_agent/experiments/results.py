@@ -199,40 +199,80 @@ def table_goal_change(root: Path) -> str:
             f"{r['trials']} trials, {r['episodes']} episodes per goal. " + _source(d))
 
 
+def _families(s: dict) -> list[tuple[str, dict]]:
+    return [(f, d) for f, d in list(s["families"].items()) + [("all", s["overall"])]
+            if d["mazes"]]
+
+
+def _pct(x: float | None) -> str:
+    return "-" if x is None else f"{100 * x:.0f} %"
+
+
 def table_suite(root: Path) -> str:
-    """The suite summary: per family and agent, the median over mazes of the per-maze
-    median steps / oracle, the worst trial, failed trials."""
+    """Blocks on the suite: per family and agent, the median over mazes of the per-maze
+    median steps / oracle and the worst trial; the first agent's share of mazes won."""
     d = load("suite_blocks", root)
     r, s = d["result"], d["result"]["suite"]
     agents = list(r["agents"])
+    first, others = agents[0], agents[1:]
     rows = []
-    for fam, f in list(s["families"].items()) + [("all", s["overall"])]:
-        if not f["mazes"]:
-            continue
+    for fam, f in _families(s):
         row = [f"{fam} ({f['mazes']})"]
         for a in agents:
-            ratio = f["oracle_ratio"][a]["median"]
-            worst = f["worst_trial_ratio"][a]
+            ratio, worst = f["oracle_ratio"][a]["median"], f["worst_trial_ratio"][a]
             failed = f["failures"][a]
-            row.append(("-" if ratio is None else f"{ratio:.2f}")
+            row.append(("never" if ratio is None else f"{ratio:.2f}")
                        + ("" if worst is None else f" / {worst:.1f}")
                        + (f" ({failed} failed)" if failed else ""))
+        row.append(" / ".join(_pct(f["win_rate"][first].get(b)) for b in others))
         rows.append(row)
-    return (_md(["family (mazes)"] + [f"`{a}`" for a in agents], rows)
-            + f"\n\nMedian over mazes of the per-maze median steps / oracle after the block, "
-            f"then the worst trial; suite `{s['spec']}`, suite seed {s['seed']}, "
-            f"{r['trials']} trials per maze. " + _source(d))
+    header = (["family (mazes)"] + [f"`{a}` median / worst" for a in agents]
+              + [f"`{first}` beats {' / '.join(f'`{b}`' for b in others)}"])
+    return (_md(header, rows)
+            + "\n\nSteps of the first episode after the block over `oracle_steps`: the "
+            "median over mazes of each maze's median trial, then the worst trial; a maze "
+            "is won when the agent's median steps are strictly fewer. "
+            f"Suite `{s['spec']}`, suite seed {s['seed']}, {r['trials']} trials per maze. "
+            + _source(d))
+
+
+def table_suite_openings(root: Path) -> str:
+    """Openings on the suite: per family and agent, the share of trials whose greedy path
+    uses the shortcut within 10 episodes, and ever (within the caps)."""
+    d = load("suite_openings", root)
+    r, s = d["result"], d["result"]["suite"]
+    agents = list(r["agents"])
+    rows = []
+    for fam, f in _families(s):
+        rows.append([f"{fam} ({f['mazes']})"]
+                    + [f"{_pct(f['optimal_within_10'][a])} / {_pct(f['optimal_found'][a])}"
+                       for a in agents])
+    return (_md(["family (mazes)"] + [f"`{a}` within 10 / ever" for a in agents], rows)
+            + "\n\nShare of trials whose greedy path uses the new shortcut within 10 "
+            "episodes of the opening, and within the caps. "
+            f"Suite `{s['spec']}`, suite seed {s['seed']}, {r['trials']} trials per maze. "
+            + _source(d))
+
+
+def table_sample_complexity(root: Path) -> str:
+    """Fig. 6: episodes until ten consecutive greedy rollouts take a shortest path."""
+    d = load("sample_complexity", root)
+    r = d["result"]
+    agents = list(r["agents"])
+    rows = [[f"goal {g}"] + [_steps(r["agents"][a]["goals"][g]["episodes_to_converge"])
+                             for a in agents] for g in r["goals"]]
+    return (_md(["goal"] + [f"`{a}`" for a in agents], rows)
+            + f"\n\nEpisodes to converge, mean ± std over {r['trials']} trials. "
+            + _source(d))
 
 
 def table_bench(root: Path) -> str:
-    """`make bench`'s ratios to the empty ring of 5 processes measured in the same run."""
+    """`make bench`'s summary: rates as ratios to the empty ring of 5 processes measured in
+    the same run, bytes per step, CPU to convergence, the core step (with its targets)."""
+    from tmgwr_agent.experiments.bench import RATIO_HEADER, ratio_rows
     d = load("bench", root)
-    ratios = d["result"].get("ratios")
-    if not isinstance(ratios, dict) or not ratios:
-        raise ResultsError("results/bench.json: result has no 'ratios'")
-    rows = [[f"`{k}`", f"{v:.2f}" if isinstance(v, (int, float)) else str(v)]
-            for k, v in ratios.items()]
-    return _md(["measure", "ratio"], rows) + "\n\n" + _source(d)
+    rows = [[c.replace("|", "/") for c in r] for r in ratio_rows(d["result"])]
+    return _md(list(RATIO_HEADER), rows) + "\n\n" + _source(d)
 
 
 #: Marked table name -> the function that generates it from results/.
@@ -240,7 +280,9 @@ TABLES: dict[str, Callable[[Path], str]] = {
     "headline": table_headline,
     "env-change": table_env_change,
     "goal-change": table_goal_change,
+    "sample-complexity": table_sample_complexity,
     "suite": table_suite,
+    "suite-openings": table_suite_openings,
     "bench": table_bench,
 }
 
