@@ -1,6 +1,6 @@
 """Per-message decode and encode time of the ring's messages: ``tmgwr_common.cdr`` against
 rosbags' serde (a pinned dependency) and rclpy's own (de)serialization, with the bytes
-compared both ways (what README, Topics and services, says about the choice). Run it from
+compared both ways (what docs/graph.md, Topics and services, says about the choice). Run it from
 the repository root on a recording (any ``./tmgwr up`` run directory, or one ``.mcap``)::
 
     source tools/env.sh && python test/measure_cdr.py runs/<stamp> [--rounds 9]

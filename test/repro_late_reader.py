@@ -1,5 +1,5 @@
 """Reproduce, without this project, why a /features subscription made at ``activate`` took
-~10 s to get a message in the composed graph (README, The map learner's lifecycle).
+~10 s to get a message in the composed graph (docs/graph.md, The map learner's lifecycle).
 
 One process, one DDS participant (Fast DDS through rmw_fastrtps, as the Jazzy wheels ship
 it), one SingleThreadedExecutor, std_msgs/UInt64 on a topic with the graph's per-step QoS

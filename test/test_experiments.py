@@ -1,6 +1,6 @@
 """The experiments CLI end to end (``python -m tmgwr_agent.cli experiment ...`` in a
 subprocess, on a small maze with few trials): the JSON shape of every scenario
-(README, Experiment JSON), identical JSON for the same seed whatever ``--jobs``, ``null`` and
+(docs/experiments.md), identical JSON for the same seed whatever ``--jobs``, ``null`` and
 ``"failed"`` for trials that never reach the goal, ``oracle_steps`` computed by hand, the
 figures, and exit code 2 with a clear message for bad names."""
 

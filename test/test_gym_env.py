@@ -96,7 +96,7 @@ def test_shortest_path_on_the_default_maze_reaches_the_goal():
     env = MazeEnv()
     env.reset(seed=0)
     actions = shortest_actions(env)
-    assert len(actions) == 44   # README: the unique shortest S-G path
+    assert len(actions) == 44   # docs/mazes.md: the unique shortest S-G path
     for a in actions[:-1]:
         obs, reward, terminated, truncated, info = env.step(a)
         assert (reward, terminated, truncated) == (0.0, False, False)

@@ -10,7 +10,7 @@ real ``ros2 lifecycle`` command line (skipped, saying why, where there is no ``r
 * ``autostart:=false``: the learner waits unconfigured, the ring with it, until ``ros2
   lifecycle set ... configure`` and ``activate``; then the graph steps;
 * the composed graph (one process), past 5000 steps: after ``activate``, and after
-  ``cleanup``, ``configure``, ``activate``, the ring resumes at the next resend (README,
+  ``cleanup``, ``configure``, ``activate``, the ring resumes at the next resend (docs/graph.md,
   The map learner's lifecycle: why /features is subscribed for the learner's whole life);
 * a map timer event run after ``cleanup`` (rclpy's EventsExecutor) is harmless.
 """
@@ -182,8 +182,8 @@ def test_autostart_false_waits_unconfigured_until_configure_and_activate(ros_dom
 
 
 #: Past this many /features samples (Fast DDS's default max_samples of a data reader) a
-#: reader made later in the composed process got nothing for ~depth resends (README, The
-#: map learner's lifecycle): the composed test runs the ring past it first.
+#: reader made later in the composed process got nothing for ~depth resends (docs/graph.md,
+#: The map learner's lifecycle): the composed test runs the ring past it first.
 LATE_READER_SAMPLES = 5000
 
 
@@ -240,7 +240,7 @@ def test_composed_graph_deactivate_activate_resumes_at_once(ros_domain, tmp_path
     after activate, and after cleanup + configure + activate, the ring resumes at the next
     resend. A /features subscription made at activate (or at a second configure) got
     nothing there for ~10 resends once the preprocessor's writer was past Fast DDS's
-    default max_samples (README, The map learner's lifecycle; test/repro_late_reader.py);
+    default max_samples (docs/graph.md, The map learner's lifecycle; test/repro_late_reader.py);
     the learner now subscribes once, when it is built."""
     require_ros2()
     graph = ros2_run("tmgwr_agent", "composed", "--executor", executor, "--ros-args", "-p",

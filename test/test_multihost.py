@@ -4,7 +4,7 @@ between them over one link, the run equal to the in-process run step for step.
 The two hosts are network namespaces joined by a veth pair on this machine
 (:class:`tmgwr_agent.graph.bench.TwoHosts`): each sees only its loopback and its end of the
 link, discovers with ``ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET`` and ``ROS_STATIC_PEERS`` =
-the other host (README, More than one host), and its Fast DDS profile allows UDP on the
+the other host (docs/graph.md, More than one host), and its Fast DDS profile allows UDP on the
 link address only (no shared memory between them), so every message between maze_sim and
 the agent crosses the link. Needs root (CI runs as root); skipped, saying why, when the
 namespaces cannot be made.

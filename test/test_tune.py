@@ -1,4 +1,4 @@
-"""``./tmgwr tune`` (README, Tuning): two worker processes on one Optuna journal study, the
+"""``./tmgwr tune`` (docs/tuning.md): two worker processes on one Optuna journal study, the
 parameter file it writes, the search space read from the Config declarations, the
 objective by hand, and clear errors for a bad agent, space or storage."""
 

@@ -1,4 +1,4 @@
-"""The maze text format (README, Maze format) and grid geometry.
+"""The maze text format (docs/mazes.md, Maze format) and grid geometry.
 
 One row per line, all rows the same length::
 

@@ -1,4 +1,4 @@
-"""``ros2 run maze_sim maze_sim``: the grid world as a ROS 2 node (README, Topics and services).
+"""``ros2 run maze_sim maze_sim``: the grid world as a ROS 2 node (docs/graph.md).
 
 Owns a :class:`~maze_sim.world.GridWorld` and drives the lockstep ring: it publishes one
 ``Observation`` per step and steps the world only when the ``Action`` carrying that
@@ -84,7 +84,7 @@ def new_run_id() -> int:
     return max(time.time_ns(), 1)
 
 SPECS = (
-    Param("maze", DEFAULT_MAZE, "maze file (README, Maze format): absolute, relative to "
+    Param("maze", DEFAULT_MAZE, "maze file (docs/mazes.md, Maze format): absolute, relative to "
           "the working directory, or a file name shipped in share/maze_sim/mazes"),
     Param("goal", "G", "initial goal: a goal name of the maze ('G', '1'..'9') or 'row,col'"),
     Param("seed", 0, "seed of the world's sensor-noise generator", low=0, high=2 ** 63 - 1,

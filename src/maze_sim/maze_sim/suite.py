@@ -5,7 +5,7 @@
 ``(family, index, seed)`` always gives the same text: the generator draws from
 ``numpy.random.SeedSequence([seed, crc32(family), index, attempt])`` and, when a draw
 fails :func:`validate`, moves on to the next ``attempt`` (deterministic retries). The
-text is the project's maze format (README, Maze format), so ``sm.write(dir)`` gives a
+text is the project's maze format (docs/mazes.md, Maze format), so ``sm.write(dir)`` gives a
 file every experiment can load with ``--maze``. An experiment over a suite::
 
     for sm in suite(spec, seed):                  # spec "FAMILY[:N]" from --suite
@@ -119,7 +119,7 @@ class SuiteMaze:
     family: str
     index: int
     seed: int
-    text: str                       # the maze file (README, Maze format)
+    text: str                       # the maze file (docs/mazes.md, Maze format)
     goals: tuple[str, ...]          # named goals for goal-change, near ones first
     block_event: str | None         # closes every shortest S-G path, leaves a detour
     open_event: str | None          # opens a strictly shorter S-G path

@@ -4,7 +4,7 @@ The agent senses the coordinates of its cell (section 5.1 of the paper), optiona
 Gaussian noise. Four actions (``maze.ACTIONS``); a move into a wall leaves the agent in
 place and is reported as a bump. An episode terminates at the current goal, or at the
 previous goal while one is set (the goal-change scenario, section 5.2.1). Events fired at
-runtime turn free cells into walls or open walls (README, Maze format).
+runtime turn free cells into walls or open walls (docs/mazes.md, Maze format).
 
 Edits keep the task solvable or are refused: :meth:`GridWorld.set_cell`,
 :meth:`GridWorld.fire_event` and :meth:`GridWorld.set_goal` raise :class:`EditRefused` (a

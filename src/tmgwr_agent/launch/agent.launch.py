@@ -1,4 +1,4 @@
-"""Launch the node graph on a ROS 2 Jazzy install (Fig. 1a; README, With ROS 2 Jazzy installed).
+"""Launch the node graph on a ROS 2 Jazzy install (Fig. 1a; docs/graph.md).
 
     ros2 launch tmgwr_agent agent.launch.py
     ros2 launch tmgwr_agent agent.launch.py maze:=paper_13x17.txt goal:=2 seed:=1 record:=true
@@ -29,7 +29,7 @@ When any node exits, the launch ends: with exit code 0 when it finished (maze_si
 error line (e.g. ``maze_sim exited with code 2: [maze_sim] cannot start: ...``). Ctrl-C
 stops every node. The launch file sets no DDS setting (``ROS_DOMAIN_ID``,
 ``ROS_AUTOMATIC_DISCOVERY_RANGE``, ``ROS_STATIC_PEERS``, ``RMW_IMPLEMENTATION``, Fast DDS
-profiles): the nodes inherit the user's environment (README, DDS settings).
+profiles): the nodes inherit the user's environment (docs/graph.md, DDS settings).
 
 The pip-only environment has no ``launch`` package (not on PyPI): there ``./tmgwr up``
 does the same with tmgwr_agent.graph.supervisor.
@@ -114,7 +114,7 @@ def graph_nodes(context):
         "action_selector": {"seed": seed},
     }
     resume_dir = LaunchConfiguration("resume").perform(context).strip()
-    if resume_dir:               # continue from the checkpoints there (README, Continuing)
+    if resume_dir:               # continue from the checkpoints there (docs/graph.md, Continuing)
         import os
         run_dir = os.path.abspath(os.path.expanduser(resume_dir))
         if not os.path.isdir(run_dir):

@@ -1,5 +1,5 @@
 """Where the map learner keeps its maps, and which files it agrees to read or write
-(README, Maps on disk). ROS-free: the node passes in its domain and namespace.
+(docs/graph.md, Maps on disk). ROS-free: the node passes in its domain and namespace.
 
 * A map is addressed by a **name**, never a path: :func:`map_file_name` accepts 1 to
   :data:`MAX_NAME` characters of ``[A-Za-z0-9_.-]``, no leading ``.`` and no ``..``; the

@@ -3,7 +3,7 @@
 rclpy turns every message it takes into a Python object field by field (the generated
 class's ``__init__``, then one property setter per field, nested messages included) and
 every message it publishes back into C the same way, then serializes it. For the ring's
-small per-step messages that conversion is most of a node's callback (README,
+small per-step messages that conversion is most of a node's callback (docs/benchmarks.md,
 Benchmarks). The ring nodes therefore take and publish the serialized message itself,
 which rclpy supports as it is (``create_subscription(..., raw=True)`` hands the callback
 the CDR bytes; ``Publisher.publish(bytes)`` publishes them as they are), and this module

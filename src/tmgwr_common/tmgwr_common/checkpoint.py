@@ -1,5 +1,5 @@
 """Checkpoints: what a node needs to continue a run after any stop, SIGKILL included
-(README, Continuing a run). ROS-free; maze_sim and the agent nodes both use it, so it lives
+(docs/graph.md, Continuing a run). ROS-free; maze_sim and the agent nodes both use it, so it lives
 here (``maze_sim`` may not import ``tmgwr_agent``).
 
 * **Who.** Each node that owns state writes its own checkpoint: maze_sim (the counters:

@@ -1,5 +1,5 @@
 """Managed (lifecycle) nodes of the graph: what rclpy.lifecycle leaves to the node
-(README, The map learner's lifecycle).
+(docs/graph.md, The map learner's lifecycle).
 
 A node whose state needs configuring and a clean end (the map learner's map) is an
 ``rclpy.lifecycle.LifecycleNode`` (ROS 2 managed nodes, as in ros2/demos ``lifecycle_py``):

@@ -202,7 +202,7 @@ def subscribe_decoded(node, msg_class, topic: str, callback: Callable[[Any], Non
                       **kwargs):
     """Subscribe ``callback`` to ``topic`` as rclpy delivers serialized messages
     (``raw=True``), handing it the fields read by :mod:`tmgwr_common.cdr` instead of an
-    rclpy message object (README, Benchmarks: the conversion costs more than the step)."""
+    rclpy message object (docs/benchmarks.md: the conversion costs more than the step)."""
     return node.create_subscription(msg_class, topic,
                                     decoded(msg_class, callback, node.get_logger().warning),
                                     qos, raw=True, **kwargs)

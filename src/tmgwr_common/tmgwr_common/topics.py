@@ -1,4 +1,4 @@
-"""Topic and service names of the node graph (a contract: README, Topics and services).
+"""Topic and service names of the node graph (a contract: docs/graph.md, Topics and services).
 
 Every node, the recorder, the bag tools and the tests take names from here. Data flows
 once around the ring per step (lockstep)::

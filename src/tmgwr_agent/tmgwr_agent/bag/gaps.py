@@ -1,5 +1,5 @@
-"""Gaps in the per-step topics of a recording, counted as the messages arrive (README,
-Recording and analysing runs).
+"""Gaps in the per-step topics of a recording, counted as the messages arrive
+(docs/recording.md).
 
 Every per-step message of the graph (Observation, Features, SensorimotorState,
 MotivationField, Action) starts with ``std_msgs/Header header``, ``uint64 run_id``,

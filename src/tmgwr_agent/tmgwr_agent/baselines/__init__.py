@@ -1,4 +1,4 @@
-"""The three baseline agents the TMGWR agent is compared with (README, Experiments).
+"""The three baseline agents the TMGWR agent is compared with (docs/experiments.md).
 
 * :mod:`.q_learning` -- tabular Q-learning, the paper's model-free agent (Eq. 8, Table 2);
 * :mod:`.model_based` -- value iteration with the transition model T(s, a, s') of the

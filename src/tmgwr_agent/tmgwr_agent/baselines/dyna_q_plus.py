@@ -35,9 +35,10 @@ Scaled to rewards of tens to hundreds: a pair untried for tau = 10^4 real steps 
 re-testing in planning once it is stale by thousands of steps, while the bonus of a pair
 tried in the last hundred steps (<= 1) stays small against the reward differences that
 decide the route near the goal. Larger kappa (>= 1) makes the planned values so
-optimistic about every stale pair that the greedy policy wanders and converges later; the
-measured effect of kappa on the paper's maze is in the README / report (kappa in {0,
-0.03, 0.1, 0.3, 1}: detour after event 'a' and episodes to an optimal greedy path).
+optimistic about every stale pair that the greedy policy wanders and converges later
+(``./tmgwr experiment env-change --agents dyna_q_plus --params F`` with a file setting
+``kappa`` measures it: the detour after event 'a' and the episodes to an optimal greedy
+path).
 
 Default n = 10 planning steps per real step: enough to propagate a changed value along a
 corridor within a few real steps (the book's maze examples use n between 5 and 50) while

@@ -1,4 +1,4 @@
-"""The paper's experiments (sections 5.2, 6; README, Experiments), one idea per module.
+"""The paper's experiments (sections 5.2, 6; docs/experiments.md), one idea per module.
 
 * :mod:`.runner` -- training episodes, greedy rollouts, the convergence test (ten
   consecutive optimal greedy paths) and the step caps that keep every run finite;

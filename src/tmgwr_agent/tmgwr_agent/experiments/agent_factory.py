@@ -1,4 +1,4 @@
-"""Agent names of the experiments CLI (README, Experiments) and their factory.
+"""Agent names of the experiments CLI (docs/experiments.md) and their factory.
 
 ``make_agent("tmgwr:credit", maze, rng)``: a name, optionally followed by ``:options``
 joined by ``+``. TMGWR options: ``literal`` / ``credit`` choose the sensorimotor-link rule

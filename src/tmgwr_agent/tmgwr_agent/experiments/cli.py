@@ -1,4 +1,4 @@
-"""``./tmgwr experiment | demo | bench | tune`` (README, Experiments, Tuning).
+"""``./tmgwr experiment | demo | bench | tune`` (docs/experiments.md, Tuning).
 
 ``experiment SCENARIO --maze FILE --agents LIST --trials N --seed S --json OUT
 [--plot OUT.png] [--jobs J] [--params FILE | AGENT=FILE ...]`` with ``--goals``,
@@ -36,7 +36,7 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "experiment", help="run one of the paper's experiments (Tables 3-6, Figs 5-7)",
         description="Run a scenario of the paper over several trials and write its JSON "
-                    "(README, Experiment JSON). Agents: tmgwr, tmgwr:literal, tmgwr:credit, "
+                    "(docs/experiments.md). Agents: tmgwr, tmgwr:literal, tmgwr:credit, "
                     "q_learning, model_based, dyna_q_plus; tmgwr options join with + and "
                     "'paper' turns our three additions off (tmgwr:credit+paper).")
     p.add_argument("scenario", choices=SCENARIOS, metavar="SCENARIO",
@@ -120,8 +120,8 @@ def register(subparsers) -> None:
                     "shows them), minimising the geometric mean over the training mazes of "
                     "steps / oracle of the first episode after the block, plus a penalty "
                     "for failed runs, plus --open-weight x the share of openings whose "
-                    "shortcut the greedy path does not use within 10 episodes (README, "
-                    "Tuning). Writes the best parameters as a ROS 2 parameter file and a "
+                    "shortcut the greedy path does not use within 10 episodes (docs/"
+                    "tuning.md). Writes the best parameters as a ROS 2 parameter file and a "
                     "JSON summary.")
     t.add_argument("agent", metavar="AGENT",
                    help="tmgwr (with options, e.g. tmgwr:credit), q_learning, model_based "

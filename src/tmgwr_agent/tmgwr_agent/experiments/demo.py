@@ -6,7 +6,7 @@ for events ``a`` and ``b`` with both TMGWR link rules; sample-complexity on goal
 ``1,2,3,4`` with 50-episode curves; timing (train on G, goal 4 -> 3, event a). Each
 scenario writes ``<name>.json`` and ``<name>.png`` under ``results/<UTC time>/`` (or
 ``--out``) and prints its table. The full-size runs are ``./tmgwr experiment ...``
-(README). Then :mod:`tmgwr_agent.graph.demo` plays the ROS 2 graph scenario (not with
+(docs/experiments.md). Then :mod:`tmgwr_agent.graph.demo` plays the ROS 2 graph scenario (not with
 ``--no-graph``).
 """
 

@@ -24,7 +24,7 @@ shortest paths of the old maze that run into a blocked cell, the smallest such t
 (:func:`oracle_steps`). When some old shortest path avoids every blocked cell the bound is
 the (unchanged) shortest path length.
 
-Link rules: the TMGWR agent is run under both readings of Eq. 1-2 (README, Interpretation choices):
+Link rules: the TMGWR agent is run under both readings of Eq. 1-2 (docs/interpretation.md):
 the default agent list of this scenario is ``tmgwr,tmgwr:literal,tmgwr:credit,q_learning,
 model_based,dyna_q_plus`` (plain ``tmgwr`` is the default rule of ``MapConfig.link_rule``;
 with the same seeds it repeats one of the two named runs exactly).

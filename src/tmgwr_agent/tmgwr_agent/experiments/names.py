@@ -1,3 +1,3 @@
-"""The scenario names of the CLI (a contract: README, Experiment JSON); import-light."""
+"""The scenario names of the CLI (a contract: docs/experiments.md); import-light."""
 
 SCENARIOS = ("goal-change", "env-change", "sample-complexity", "timing")

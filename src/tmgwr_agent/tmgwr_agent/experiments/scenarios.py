@@ -2,7 +2,7 @@
 
 :func:`run_scenario` validates every name before any work starts (agents, goals, event,
 maze file) and raises :class:`UsageError` with a message naming what is wrong; the CLI
-turns it into exit code 2. The JSON starts with the contract header (README, Experiment JSON)
+turns it into exit code 2. The JSON starts with the contract header (docs/experiments.md)
 (``scenario, maze, trials, seed``), then the scenario's own top-level fields, the step
 caps used (:class:`.runner.Caps`), with parameter overrides (``--params``) the ``params``
 they came from (:func:`params_record`), and ``agents``.

@@ -1,4 +1,4 @@
-"""The statistics of the experiment JSON (README, Experiment JSON).
+"""The statistics of the experiment JSON (docs/experiments.md, Experiment JSON).
 
 ``STAT = {"mean": x, "std": x, "values": [...]}``: ``values`` holds one entry per trial in
 trial order, ``None`` (JSON ``null``) for a trial that failed (never reached the goal

@@ -1,4 +1,4 @@
-"""``./tmgwr tune AGENT``: fair hyperparameter tuning with Optuna (README, Tuning).
+"""``./tmgwr tune AGENT``: fair hyperparameter tuning with Optuna (docs/tuning.md).
 
 The paper tuned every agent by Bayesian optimisation (hyperopt's TPE, section 5.3); this
 is the same with Optuna's :class:`~optuna.samplers.TPESampler`, the same budget and the
@@ -45,7 +45,7 @@ added to a Config is seen by ``tune --list`` and can be searched with ``--space`
 editing this module). A name given to ``--space`` without bounds takes its
 :data:`SEARCH` interval, else its declared range (an interval bound left ``None`` is the
 declared bound); ``--fix`` holds parameters of the space at their defaults (the
-goal-change scenario needs ``eps_min`` 0, Tuning in the README); every interval is
+goal-change scenario needs ``eps_min`` 0, docs/tuning.md); every interval is
 checked against the declared range. The shared exploration parameters
 (``eps_min``, ``eps_decay``, ``p_turn``) are searched for every agent over the same
 intervals. The study's first trial is the agent's defaults (the paper's settings), so
@@ -152,7 +152,7 @@ _REWARDS = {
     "r_empty": Interval(-100.0, 0.0),
 }
 
-#: What ``tune`` searches per agent (README, Tuning): name -> interval. Everything else
+#: What ``tune`` searches per agent (docs/tuning.md): name -> interval. Everything else
 #: keeps its default (``tune AGENT --list`` shows both sides).
 SEARCH: dict[str, dict[str, Interval]] = {
     "tmgwr": {
@@ -838,7 +838,7 @@ def run(args) -> int:
     params = dict(best.params)
     out_params = Path(args.params_out or RESULTS / f"{study_name}.yaml")
     d_value = None if default_trial is None else default_trial.value
-    header = (f"tuned by ./tmgwr tune {args.agent} (README, Tuning): study {study_name}, "
+    header = (f"tuned by ./tmgwr tune {args.agent} (docs/tuning.md): study {study_name}, "
               f"best of {len(counted)} trials\n"
               f"objective {best.value:.4f} (defaults "
               f"{'-' if d_value is None else format(d_value, '.4f')}) "

@@ -1,4 +1,4 @@
-"""Running the ROS 2 node graph from the pip-only environment (README, Without a ROS install).
+"""Running the ROS 2 node graph from the pip-only environment (docs/graph.md).
 
 * :mod:`.supervisor` -- start the five nodes (and the recorder) as separate processes,
   wait until each is ready, forward their output, stop them in reverse order.

@@ -306,7 +306,7 @@ class TwoHosts:
     """Two hosts on one link, on this machine: network namespaces A and B joined by a veth
     pair (``LINK_SUBNET``.1 and .2, /30), each with only its loopback and its end of the
     link. :meth:`command` runs a command on a host with what a ROS user sets on a LAN
-    (README, More than one host): ``ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET``,
+    (docs/graph.md, More than one host): ``ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET``,
     ``ROS_STATIC_PEERS`` = the other host, and a Fast DDS profile limited to the link
     address (no shared memory, so nothing crosses between them but the link). The
     namespaces (and with them the veth pair) go in :meth:`close`. Root only."""

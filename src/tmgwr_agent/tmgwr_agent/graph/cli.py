@@ -3,7 +3,7 @@
 * ``up`` starts the five nodes (and the recorder, to ``runs/<UTC timestamp>/`` unless
   ``--no-record``) as separate processes and keeps them running until Ctrl-C, printing
   each episode (steps, outcome) as the Observation topic shows it. ``up --resume RUN``
-  continues a run from its directory's checkpoints (graph.resume; README, Continuing a
+  continues a run from its directory's checkpoints (graph.resume; docs/graph.md, Continuing a
   run).
 * ``goal X Y`` calls ``/set_goal`` (x = column, y = row); ``cell R C --block|--open`` and
   ``event NAME`` change the maze; ``reset`` restarts the episode. Each waits a bounded

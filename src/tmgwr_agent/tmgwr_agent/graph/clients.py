@@ -73,7 +73,7 @@ def call_once(srv_type, name: str, request, timeout: float = 10.0):
 
 # ----------------------------------------------------------------------- requests
 def set_goal_request(x: float, y: float):
-    """SetGoal request: x = column, y = row (cell coordinates; README, Topics and services)."""
+    """SetGoal request: x = column, y = row (cell coordinates; docs/graph.md)."""
     from geometry_msgs.msg import Point
 
     from tmgwr_interfaces.srv import SetGoal

@@ -1,4 +1,4 @@
-"""``./tmgwr up --resume RUN``: which run directory, with which settings (README,
+"""``./tmgwr up --resume RUN``: which run directory, with which settings (docs/graph.md,
 Continuing a run).
 
 A run directory (``runs/<UTC stamp>/``, or ``--record-dir DIR``) holds the recording, the

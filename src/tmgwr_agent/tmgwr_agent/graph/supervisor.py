@@ -42,7 +42,7 @@ from tmgwr_common.params import check_params_file
 READY = re.compile(r"\bready\b", re.IGNORECASE)
 RECORDER_READY = re.compile(r"\bready\b|\brecording\b.* to ", re.IGNORECASE)
 
-#: The five nodes of Fig. 1a in data-flow order (contract names: README, Topics and services).
+#: The five nodes of Fig. 1a in data-flow order (contract names: docs/graph.md).
 GRAPH_NODES: tuple[tuple[str, str], ...] = (
     ("maze_sim", "maze_sim"),
     ("tmgwr_agent", "sensory_preprocessor"),
@@ -52,7 +52,7 @@ GRAPH_NODES: tuple[tuple[str, str], ...] = (
 )
 
 
-#: The nodes that keep a checkpoint (tmgwr_common.checkpoint; README, Continuing a run).
+#: The nodes that keep a checkpoint (tmgwr_common.checkpoint; docs/graph.md, Continuing a run).
 CHECKPOINTED = ("maze_sim", "map_learner", "motivation_estimator", "action_selector")
 
 

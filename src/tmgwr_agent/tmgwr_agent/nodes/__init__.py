@@ -1,4 +1,4 @@
-"""The ROS 2 nodes of the graph (README, Topics and services): thin shells around the core.
+"""The ROS 2 nodes of the graph (docs/graph.md, Topics and services): thin shells around the core.
 
 One module per node; :mod:`tmgwr_common.node` holds what they share (QoS, parameters, flat
 arrays, ``main``). Each per-step callback calls the same core objects, in the same order,

@@ -6,7 +6,7 @@ builds the very node classes the five executables build (``maze_sim``,
 ``sensory_preprocessor``, ``map_learner``, ``motivation_estimator``, ``action_selector``,
 with ``--record`` the ``recorder`` first), with their own names, parameters, topics and
 services, and spins them all on one executor. Tools see the same graph as with five
-processes (``ros2 node list``, the topics of README "Topics and services"); only the
+processes (``ros2 node list``, the topics of docs/graph.md "Topics and services"); only the
 messages no longer cross a process boundary (one DDS participant: Fast DDS delivers them
 inside the process, no socket).
 

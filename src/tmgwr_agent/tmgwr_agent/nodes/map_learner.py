@@ -23,7 +23,7 @@ On the timer each of the two is built only while something subscribes to it (the
 recorder, RViz): a new subscriber gets the last one at once and a fresh one within
 ``1 / publish_rate`` s. A map the learner starts from or loads is published at once.
 
-Persistence (:mod:`tmgwr_agent.map_store`; README, Maps on disk): maps live in one
+Persistence (:mod:`tmgwr_agent.map_store`; docs/graph.md, Maps on disk): maps live in one
 directory, ``map_dir`` (``./tmgwr up`` passes the run's directory; default
 ``$ROS_HOME/tmgwr/domain<ID>[_<namespace>]``), held by this learner alone. The private
 ``~/save_map`` and ``~/load_map`` services take a map *name* (``NAME`` -> ``NAME.npz`` in
@@ -167,7 +167,7 @@ class MapLearnerNode(LifecycleNode):
         # delivery, i.e. in the composed graph (one participant), once the preprocessor's
         # writer is past 5000 samples; while the ring waits it writes one sample per
         # resend_period (1 s): a subscription made at activate waited ~10 s. Separate
-        # processes are not affected. README, The map learner's lifecycle;
+        # processes are not affected. docs/graph.md, The map learner's lifecycle;
         # test/repro_late_reader.py reproduces it with std_msgs alone.
         self.features_sub = subscribe_decoded(self, Features, topics.FEATURES,
                                               self.on_features, STEP_QOS)
