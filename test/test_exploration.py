@@ -60,8 +60,7 @@ def test_block_finds_the_detour_at_once(seed):
     ep = run_episode(world, agent)
     # walk 7 to the block, bump, 1 back, detour of 14 from there at best: 22; the agent
     # may bump a few times while the blocked link's E falls, and maps what it never saw:
-    # within twice the oracle (over seeds 0-7 the steps are 15-56, mean 35; before the
-    # stale rule of Eq. 5' counted episodes, 28-56, mean 37)
+    # within twice the oracle
     assert ep.reached_goal and ep.steps <= 2 * 22, ep.steps
     for _ in range(3):
         run_episode(world, agent)
