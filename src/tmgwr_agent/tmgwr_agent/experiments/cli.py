@@ -1,4 +1,4 @@
-"""``./tmgwr experiment | demo | bench | tune`` (docs/experiments.md, Tuning).
+"""``./tmgwr experiment | demo | bench | tune`` (docs/experiments.md, docs/tuning.md).
 
 ``experiment SCENARIO --maze FILE --agents LIST --trials N --seed S --json OUT
 [--plot OUT.png] [--jobs J] [--params FILE | AGENT=FILE ...]`` with ``--goals``,

@@ -159,8 +159,9 @@ def table_headline(root: Path) -> str:
     header = ["agent",
               f"steps after event a (oracle {ra['oracle_steps']}, {ra['trials']} trials)",
               f"steps after event b (oracle {rb['oracle_steps']}, {rb['trials']} trials)",
-              f"goal change {','.join(rg['goals'])}: % at the current goal "
-              f"({rg['episodes']} episodes per goal, {rg['trials']} trials)"]
+              f"goal change {','.join(rg['goals'])}: % of episodes at the current goal, "
+              f"mean over transitions (worst transition) ({rg['episodes']} episodes per "
+              f"goal, {rg['trials']} trials)"]
     return _md(header, rows) + "\n\n" + _source(a, b, gc)
 
 
