@@ -162,7 +162,8 @@ def table_headline(root: Path) -> str:
               f"goal change {','.join(rg['goals'])}: % of episodes at the current goal, "
               f"mean over transitions (worst transition) ({rg['episodes']} episodes per "
               f"goal, {rg['trials']} trials)"]
-    return _md(header, rows) + "\n\n" + _source(a, b, gc)
+    return (_md(header, rows) + "\n\nMean ± std over trials; `never`: every trial hit its "
+            "cap. " + _source(a, b, gc))
 
 
 def table_env_change(root: Path) -> str:
@@ -180,6 +181,19 @@ def table_env_change(root: Path) -> str:
               "episodes to optimal", "training episodes"]
     return (_md(header, rows) + f"\n\nMean ± std over {'/'.join(map(str, trials))} trials; "
             "`never`: every trial hit its cap. " + _source(*docs))
+
+
+def table_ablation(root: Path) -> str:
+    """Our additions off (``+paper``): steps after events a and b per agent spec."""
+    docs = [load(n, root) for n in ("ablation_a", "ablation_b")]
+    agents = list(docs[0]["result"]["agents"])
+    rows = [[f"`{a}`"] + [_steps(d["result"]["agents"][a]["steps"]) for d in docs]
+            for a in agents]
+    header = ["agent"] + [f"steps after event {d['result']['event']} (oracle "
+                          f"{d['result']['oracle_steps']}, {d['result']['trials']} trials)"
+                          for d in docs]
+    return (_md(header, rows) + "\n\nMean ± std; `(k failed)`: trials that hit their cap. "
+            + _source(*docs))
 
 
 def table_goal_change(root: Path) -> str:
@@ -280,6 +294,7 @@ def table_bench(root: Path) -> str:
 TABLES: dict[str, Callable[[Path], str]] = {
     "headline": table_headline,
     "env-change": table_env_change,
+    "ablation": table_ablation,
     "goal-change": table_goal_change,
     "sample-complexity": table_sample_complexity,
     "suite": table_suite,
