@@ -227,7 +227,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from maze_sim.maze import ACTION_VECTORS
 from tmgwr_agent.core import kernels
 from tmgwr_agent.core.outcome import Outcome
 from tmgwr_agent.core.sensorimotor_map import Links, SensorimotorMap
@@ -238,9 +237,6 @@ V_FLOOR = 1e-150
 #: A node with R_i = sim(i, g) at least this represents the goal (a source of the
 #: reachability test; never absorbing).
 GOAL_R = 0.5
-#: Motor primitives (the action map's codebook).
-N_PRIMITIVES = len(ACTION_VECTORS)
-_PRIMITIVES = np.ascontiguousarray(ACTION_VECTORS, dtype=float)
 
 
 @dataclass(frozen=True)
@@ -305,9 +301,15 @@ class MotivationEstimator:
     """Holds the goal, the potentials V and the outcome memory of Eq. 5'; :meth:`record`
     notes what an action did, :meth:`update` re-solves Eq. 4-5'."""
 
-    def __init__(self, config: MotivationConfig = MotivationConfig()):
+    def __init__(self, config: MotivationConfig = MotivationConfig(), *,
+                 primitives: np.ndarray):
+        """``primitives``: the motor vector of each action (:class:`~tmgwr_agent.core.
+        senses.Senses`): an option's action label; their number sizes the outcome
+        memory."""
         kernels.announce_compilation()
         self.config = config
+        self.primitives = np.ascontiguousarray(primitives, dtype=float)
+        P = self.n_primitives = len(self.primitives)
         self.gamma, self.beta = config.gamma, config.beta
         self.goal_sigma, self.goal_sim_floor = config.goal_sigma, config.goal_sim_floor
         self.vi_tol, self.vi_max_sweeps = config.vi_tol, config.vi_max_sweeps
@@ -327,14 +329,14 @@ class MotivationEstimator:
         self._scale_version = -1      # map version the cached link scale belongs to
         self._scale = 1.0
         # outcome memory (Eq. 5'): per node slot and primitive
-        self.tried = np.zeros((64, N_PRIMITIVES), dtype=bool)
-        self.bump_t = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)
-        self.closed_t = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)  # first bump of a run
-        self.bump_e = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)    # episode of a bump
-        self.succ = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)   # where a move led
+        self.tried = np.zeros((64, P), dtype=bool)
+        self.bump_t = np.full((64, P), -1, dtype=np.int64)
+        self.closed_t = np.full((64, P), -1, dtype=np.int64)  # first bump of a run
+        self.bump_e = np.full((64, P), -1, dtype=np.int64)    # episode of a bump
+        self.succ = np.full((64, P), -1, dtype=np.int64)   # where a move led
         self.closed_e = np.full(64, -1, dtype=np.int64)   # episode a node's cell closed
-        self.sel = np.ones((64, N_PRIMITIVES), dtype=bool)  # this episode's re-tests
-        self.chain = np.zeros((64, N_PRIMITIVES), dtype=bool)  # its untried chain
+        self.sel = np.ones((64, P), dtype=bool)  # this episode's re-tests
+        self.chain = np.zeros((64, P), dtype=bool)  # its untried chain
         self._closed: np.ndarray | None = None   # its trusted marks (derived, cached)
         self.clock = 0                # learning steps recorded
         self.episode = 0              # episodes started
@@ -345,13 +347,13 @@ class MotivationEstimator:
         self.broken = False           # a move made before bumped this episode
         self._route_due = False       # the route is read off V0 at the episode's first solve
         self._stuck = False           # stuck when the last update solved Eq. 5'
-        self.delta = np.zeros((N_PRIMITIVES, 2))     # mean sensed displacement per primitive
-        self.moves = np.zeros(N_PRIMITIVES, dtype=np.int64)
-        self.U = np.zeros((64, N_PRIMITIVES))
-        self.rho = np.zeros((64, N_PRIMITIVES))
-        self.osucc = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)   # option successors
-        self.onb = np.full((64, N_PRIMITIVES, N_PRIMITIVES), -1, dtype=np.int64)
-        self.ong = np.zeros((64, N_PRIMITIVES, N_PRIMITIVES))   # their discounts
+        self.delta = np.zeros((P, 0))     # mean sensed displacement per primitive
+        self.moves = np.zeros(P, dtype=np.int64)
+        self.U = np.zeros((64, P))
+        self.rho = np.zeros((64, P))
+        self.osucc = np.full((64, P), -1, dtype=np.int64)   # option successors
+        self.onb = np.full((64, P, P), -1, dtype=np.int64)
+        self.ong = np.zeros((64, P, P))   # their discounts
         self._grid = np.full((0, 0), -1, dtype=np.int64)
         self._origin = np.zeros(2)
         self.R = np.zeros(1)
@@ -411,8 +413,7 @@ class MotivationEstimator:
         top = max(node, winner) + 1
         if top > len(self.tried):
             self._grow_memory(top)
-        if self.delta.shape[1] != w.shape[1]:
-            self.delta = np.zeros((N_PRIMITIVES, w.shape[1]))
+        self._size_forward_model(w.shape[1])
         if inserted and winner >= 0:
             self._dirty.add(winner)
         if 0 <= node and self.bump_t[node, outcome.action] >= 0:
@@ -495,7 +496,7 @@ class MotivationEstimator:
         self._route_due = bool(d.get("route_due", 0))
         self.sel = grown(np.array(d["sel"], dtype=bool), len(self.succ), True) \
             if "sel" in d else np.ones(self.succ.shape, dtype=bool)   # older: every one
-        self.chain = grown(np.array(d.get("chain", np.zeros((0, N_PRIMITIVES))), dtype=bool),
+        self.chain = grown(np.array(d.get("chain", np.zeros((0, self.n_primitives))), dtype=bool),
                            len(self.succ), False)                      # older: none
         self.delta = np.array(d["delta"], dtype=float)
         self.moves = np.array(d["moves"], dtype=np.int64)
@@ -518,9 +519,15 @@ class MotivationEstimator:
                              self.goal_sim_floor, R)
         return R
 
+    def _size_forward_model(self, dim: int) -> None:
+        """The forward model ``delta`` for sensations of ``dim`` values (zero: unknown)."""
+        if self.delta.shape != (self.n_primitives, dim):
+            self.delta = np.zeros((self.n_primitives, dim))
+
     def _prepare(self, m: SensorimotorMap) -> int:
         """Sizes, goal node and rewards of this map; returns n."""
         n = m.n
+        self._size_forward_model(m.w.shape[1])
         if len(self.V) != n + 1:                      # the map grew: extend, keep values
             self.V = self._extended(self.V, n)
             self.V0 = self._extended(self.V0, n)
@@ -641,12 +648,12 @@ class MotivationEstimator:
         (:meth:`budget_spent`) of those that would save the most steps on the known route
         (``route`` link steps; ``ds``, ``dg``: link steps from the start and to the goal)
         if they opened (:func:`kernels.stale_savings`; ties: the nearest first)."""
-        ri, ra, rs = (np.empty(n * N_PRIMITIVES, dtype=np.int64) for _ in range(3))
+        ri, ra, rs = (np.empty(n * self.n_primitives, dtype=np.int64) for _ in range(3))
         c = kernels.stale_savings(m.w, m.alive, n, self.delta, self._scale, self.gamma, grid,
                                   origin, self.tried, self.bump_e, self.succ, self.episode,
                                   self.stale_horizon, ds, dg, route,
-                                  np.full((n, N_PRIMITIVES, N_PRIMITIVES), -1, np.int64),
-                                  np.zeros((n, N_PRIMITIVES, N_PRIMITIVES)), ri, ra, rs)
+                                  np.full((n, self.n_primitives, self.n_primitives), -1, np.int64),
+                                  np.zeros((n, self.n_primitives, self.n_primitives)), ri, ra, rs)
         budget = math.ceil(max(1.0, self.stale_budget * (self.route or n)))
         ri, ra, rs = ri[:c], ra[:c], rs[:c]
         cost = np.maximum(ds[ri] + 1 + dg[ri] - route, 1)   # steps lost if it stays shut
@@ -779,7 +786,7 @@ class MotivationEstimator:
                 kernels.value_iteration(                     # Eq. 4-5, no option
                     m.out, m.E, self.R, self.V0, n, self.beta, self.gamma, self.vi_tol,
                     V_FLOOR, self.vi_max_sweeps, self._absorbing(m, n), m.alive,
-                    self.U[:n], np.zeros((n, N_PRIMITIVES)), self.osucc[:n], self.onb[:n],
+                    self.U[:n], np.zeros((n, self.n_primitives)), self.osucc[:n], self.onb[:n],
                     self.ong[:n])
             self._v0_fresh = True
         return self.V0
@@ -795,7 +802,7 @@ class MotivationEstimator:
         return Links(*kernels.option_links(links.targets, links.E, links.actions, self.V, i,
                                            self.U, self.rho, self.osucc, self.onb,
                                            self.ong, R_i,
-                                           self.gamma, _PRIMITIVES))
+                                           self.gamma, self.primitives))
 
     def links_of(self, m: SensorimotorMap, i: int) -> Links:
         """:meth:`options_of` node i's links in map m (what Eq. 6 ranks in-process)."""

@@ -18,6 +18,8 @@ import numpy as np
 
 from maze_sim.maze import Maze
 from tmgwr_agent.core.protocol import Agent
+from tmgwr_agent.core.senses import Senses
+from tmgwr_agent.world_senses import maze_senses
 
 AGENT_NAMES = ("tmgwr", "q_learning", "model_based", "dyna_q_plus")
 
@@ -47,11 +49,14 @@ def parse_spec(spec: str) -> tuple[str, dict[str, Any]]:
 
 
 def make_agent(spec: str, maze: Maze, rng: np.random.Generator,
-               overrides: Mapping[str, Any] | None = None) -> Agent:
+               overrides: Mapping[str, Any] | None = None, senses: Senses | None = None
+               ) -> Agent:
+    """``senses``: what the TMGWR agent senses and acts with (default: the grid world's,
+    :func:`~tmgwr_agent.world_senses.maze_senses`); the tabular agents read cells."""
     name, options = parse_spec(spec)
     if name == "tmgwr":
         from tmgwr_agent.core.agent import TMGWRAgent
-        return TMGWRAgent(maze, rng, {**(overrides or {}), **options})
+        return TMGWRAgent(senses or maze_senses(), rng, {**(overrides or {}), **options})
     if name == "q_learning":
         from tmgwr_agent.baselines.q_learning import QLearningAgent
         return QLearningAgent(maze, rng, overrides)
