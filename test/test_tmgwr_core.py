@@ -168,7 +168,7 @@ def test_value_iteration_matches_fixed_point_on_a_chain():
     m = chain_map()
     mo = MotivationEstimator(MotivationConfig(gamma=0.97, beta=0.8, goal_sigma=0.3,
                                               goal_sim_floor=1e-3, vi_tol=1e-10,
-                                              vi_max_sweeps=100000, value_unknown=False),
+                                              vi_max_sweeps=100000, unknown="none"),
 primitives=ACTION_VECTORS)
     mo.set_goal(np.array([0.0, 0.2]))
     V = mo.update(m)
@@ -185,7 +185,7 @@ def test_node_where_an_episode_ended_short_of_the_goal_is_absorbing(tmp_path):
     m = chain_map()
     m.mark_terminal(1)                  # an episode ended on node 1 without the goal
     mo = MotivationEstimator(MotivationConfig(vi_tol=1e-10, vi_max_sweeps=100000,
-                                              value_unknown=False), primitives=ACTION_VECTORS)
+                                              unknown="none"), primitives=ACTION_VECTORS)
     mo.set_goal(np.array([0.0, 0.2]))
     R1 = np.exp(-0.01 / (2 * 0.03 ** 2))
     # node 1 has no successor: V(1) = R_1, and node 0 only sees that through it
@@ -196,7 +196,7 @@ def test_node_where_an_episode_ended_short_of_the_goal_is_absorbing(tmp_path):
     assert list(m2.terminal[:3]) == [False, True, False]
     off = MotivationEstimator(MotivationConfig(vi_tol=1e-10, vi_max_sweeps=100000,
                                                absorbing_terminals=False,
-                                               value_unknown=False), primitives=ACTION_VECTORS)
+                                               unknown="none"), primitives=ACTION_VECTORS)
     off.set_goal(np.array([0.0, 0.2]))
     np.testing.assert_allclose(off.update(m)[1], R1 + 0.97, rtol=1e-8)   # Eq. 5 as printed
     # walking on from node 1 within an episode clears the flag: it is not an end any more
@@ -242,7 +242,7 @@ def test_agent_marks_episode_ends_and_the_current_goal_is_not_absorbing():
 
 def test_value_iteration_without_a_path_gives_no_motivation():
     m = chain_map()
-    mo = MotivationEstimator(MotivationConfig(value_unknown=False), primitives=ACTION_VECTORS)
+    mo = MotivationEstimator(MotivationConfig(unknown="none"), primitives=ACTION_VECTORS)
     mo.set_goal(np.array([0.0, 0.0]))                    # goal at node 0: nothing leads there
     V = mo.update(m)
     R1 = np.exp(-0.01 / (2 * 0.03 ** 2))
@@ -256,7 +256,7 @@ def test_no_route_to_the_goal_gives_exactly_zero_at_once():
     """When the last link to the goal goes, every node cut off has V = 0 exactly in the
     same update (the fixed point), not warm-started dust that decays over many steps."""
     m = chain_map()
-    mo = MotivationEstimator(MotivationConfig(value_unknown=False), primitives=ACTION_VECTORS)
+    mo = MotivationEstimator(MotivationConfig(unknown="none"), primitives=ACTION_VECTORS)
     mo.set_goal(np.array([0.0, 0.2]))
     assert (mo.update(m)[:2] > 0.5).all()
     slot = int(np.flatnonzero(m.out[0] == 1)[0])

@@ -74,7 +74,7 @@ class SelectorConfig(ExplorationConfig):
 
     goal_search: bool = param(False, "random walk for the rest of an episode once the agent "
                               "stood on the goal node without reaching the goal (superseded "
-                              "by value_unknown; action_selector.py)")
+                              "by the value of the unknown; action_selector.py)")
     try_untried: bool = param(True, "Eq. 6 also ranks the options of Eq. 5' (untried or "
                               "stale primitives, virtual self-links of the winner; "
                               "action_selector.py; false: the paper's Eq. 6 selector)")

@@ -2,8 +2,10 @@
 
 ``make_agent("tmgwr:credit", maze, rng)``: a name, optionally followed by ``:options``
 joined by ``+``. TMGWR options: ``literal`` / ``credit`` choose the sensorimotor-link rule
-(plain ``tmgwr`` uses the default of ``MapConfig.link_rule``); ``paper`` turns our
-additions off (``absorbing_terminals``; ``value_unknown`` and ``try_untried``, the options
+(plain ``tmgwr`` uses the default of ``MapConfig.link_rule``); ``grid`` measures the value
+of the unknown on the sensor's axes (``unknown`` grid: it is told the sensation is a grid
+cell's coordinates; plain ``tmgwr`` learns its frame, core/frame.py); ``paper`` turns our
+additions off (``absorbing_terminals``; ``unknown`` none and ``try_untried``, the options
 of Eq. 5' and Eq. 6; ``goal_search``; ``walk_while_novel``: the agent of Eq. 1-7 as
 printed), e.g.
 ``tmgwr:literal+paper``. The baselines take no option. Options are parameter overrides,
@@ -27,7 +29,8 @@ AGENT_NAMES = ("tmgwr", "q_learning", "model_based", "dyna_q_plus")
 TMGWR_OPTIONS = {
     "literal": {"link_rule": "literal"},
     "credit": {"link_rule": "credit"},
-    "paper": {"absorbing_terminals": False, "value_unknown": False, "goal_search": False,
+    "grid": {"unknown": "grid"},
+    "paper": {"absorbing_terminals": False, "unknown": "none", "goal_search": False,
               "try_untried": False, "walk_while_novel": False, "eps_min": 0.1},
 }
 
