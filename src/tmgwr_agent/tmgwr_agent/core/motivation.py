@@ -36,7 +36,9 @@ Gaussian is cut below ``goal_sim_floor`` (1e-3: beyond about 1.9 link lengths).
 or ``none`` = the paper's Eq. 5). Every place, distance and length below (``w``,
 ``delta``, ``x_g``, ``L``) is measured in the frame of :mod:`tmgwr_agent.core.frame`:
 the sensor's own axes for ``grid``, the learnt forward model's primitive steps for
-``learnt`` (then ``L`` = 1). Eq. 5 only knows the links the agent has made: where the map knows no way
+``learnt`` (then ``L`` = 1).
+
+Eq. 5 only knows the links the agent has made: where the map knows no way
 to the goal every potential is 0 and the agent can only random-walk; a side corridor never
 entered, or a wall that has since opened, never enters the plan. R-max style, every
 (node i, motor primitive a) pair whose outcome the map does not know gets a virtual
