@@ -107,6 +107,8 @@ class SensedWorld:
         self.state: Hashable = world.cell
 
     def __getattr__(self, name: str):
+        if name == "world":              # not set yet (copy, unpickling): no recursion
+            raise AttributeError(name)
         return getattr(self.world, name)
 
     def _sensed(self, raw: np.ndarray) -> np.ndarray:
