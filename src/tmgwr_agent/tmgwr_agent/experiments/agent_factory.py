@@ -52,19 +52,21 @@ def parse_spec(spec: str) -> tuple[str, dict[str, Any]]:
 
 
 def make_agent(spec: str, maze: Maze, rng: np.random.Generator,
-               overrides: Mapping[str, Any] | None = None, senses: Senses | None = None
-               ) -> Agent:
+               overrides: Mapping[str, Any] | None = None, senses: Senses | None = None,
+               sensed: bool = False) -> Agent:
     """``senses``: what the TMGWR agent senses and acts with (default: the grid world's,
-    :func:`~tmgwr_agent.world_senses.maze_senses`); the tabular agents read cells."""
+    :func:`~tmgwr_agent.world_senses.maze_senses`); ``sensed``: the world is seen through
+    a sensor transform (:mod:`.sensing`): a tabular agent then keys on sensed states, not
+    cells."""
     name, options = parse_spec(spec)
     if name == "tmgwr":
         from tmgwr_agent.core.agent import TMGWRAgent
         return TMGWRAgent(senses or maze_senses(), rng, {**(overrides or {}), **options})
     if name == "q_learning":
         from tmgwr_agent.baselines.q_learning import QLearningAgent
-        return QLearningAgent(maze, rng, overrides)
+        return QLearningAgent(maze, rng, overrides, sensed_states=sensed)
     if name == "model_based":
         from tmgwr_agent.baselines.model_based import ModelBasedAgent
         return ModelBasedAgent(maze, rng, overrides)
     from tmgwr_agent.baselines.dyna_q_plus import DynaQPlusAgent
-    return DynaQPlusAgent(maze, rng, overrides)
+    return DynaQPlusAgent(maze, rng, overrides, sensed_states=sensed)
