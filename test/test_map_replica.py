@@ -35,6 +35,7 @@ from tmgwr_agent.map_replica import (
     MapChange,
     Replica,
 )
+from tmgwr_agent.world_senses import maze_senses
 
 OPEN = """\
 ##########
@@ -67,7 +68,7 @@ def evolve(maze: Maze, steps: int, seed: int, goals=(), events=(), config=None,
     ``goals`` / ``events``: {step: goal} / {step: event} applied on the way; ``config``:
     the agent's parameter overrides, ``noise``: the simulator's sensor noise."""
     world = GridWorld(maze, goal="G", seed=seed, sensor_noise=noise)
-    agent = TMGWRAgent(maze, np.random.default_rng(seed), config)
+    agent = TMGWRAgent(maze_senses(), np.random.default_rng(seed), config)
     agent.set_goal(world.goal, world.goal_observation())
     obs, _ = world.reset()
     agent.begin_episode(obs, world.cell)
@@ -125,7 +126,9 @@ def test_replica_equals_the_map_after_every_step(case):
         assert (replica.run_id, replica.step_id) == (1, k)
         # Eq. 4-5 on the replica: what they give on the map itself, bit for bit
         if estimators is None:
-            estimators = [MotivationEstimator(agent.motivation.config) for _ in range(2)]
+            estimators = [MotivationEstimator(agent.motivation.config,
+                                              primitives=agent.senses.primitives)
+                          for _ in range(2)]
         V = []
         for est, on in zip(estimators, (m, replica.snapshot())):
             est.follow_goal(agent.motivation.goal_x)

@@ -13,7 +13,7 @@ resume with those before the kill and with a fresh start; then starts the run's 
 the very parameters ``up`` gives them, SIGKILLs the map learner alone and restarts it: it
 rejoins with its own checkpoint. No assertion depends on timing.
 
-The graph runs with the paper's Eq. 5 and Eq. 6 (``value_unknown`` and ``try_untried``
+The graph runs with the paper's Eq. 5 and Eq. 6 (``unknown`` none and ``try_untried``
 off): the graph's estimator does not record the outcome memory that the default Eq. 5'
 reads yet, and without it the default graph does not converge on this maze.
 """
@@ -40,7 +40,7 @@ from tmgwr_common.checkpoint import (
     split_state,
 )
 
-PAPER_EQ56 = "/**:\n  ros__parameters:\n    value_unknown: false\n    try_untried: false\n"
+PAPER_EQ56 = "/**:\n  ros__parameters:\n    unknown: none\n    try_untried: false\n"
 NODES = ("maze_sim", "map_learner", "motivation_estimator", "action_selector")
 
 

@@ -22,12 +22,15 @@ rewards; the model-based agent is also handed the original maze as its transitio
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
-from maze_sim.maze import Cell
-from maze_sim.world import StepInfo
+#: The tabular agents' state: a world's cell index (the TMGWR agent never reads it).
+Cell = Any
+#: What a step did besides the observation: ``action``, ``bumped``, ``reached_goal``,
+#: ``terminated`` (the simulator's ``maze_sim.world.StepInfo``, or any object with them).
+StepInfo = Any
 
 
 class Agent(Protocol):

@@ -208,6 +208,7 @@ class MapLearnerNode(LifecycleNode):
             self.store.path(self.p["map_name"])          # a bad name stops us now, not later
         if self.p["initial_map"]:
             self.map, last_step, run_id = self.read_initial_map(self.p["initial_map"])
+            self.map.primitives = ACTION_VECTORS          # the simulator's motor primitives
             self.get_logger().info(f"started from {self.p['initial_map']}: {self.map.size} nodes, "
                                    f"{self.map.link_count()} links, step {last_step} "
                                    f"(run {run_id or 'unknown'})")
@@ -371,7 +372,7 @@ class MapLearnerNode(LifecycleNode):
         x = np_f64(f.features)
         if self.map is None:
             self.map = SensorimotorMap(dim=len(x), action_dim=ACTION_VECTORS.shape[1],
-                                       config=self.config)
+                                       config=self.config, primitives=ACTION_VECTORS)
         self.gain = f.gain or 1.0
         outcome = outcome_of(f)
         self.prev_winner = -1 if outcome.episode_start else int(self.map.prev)
@@ -566,6 +567,7 @@ class MapLearnerNode(LifecycleNode):
             self.get_logger().warning(resp.message)
             return resp
         self.map = m
+        self.map.primitives = ACTION_VECTORS
         self.lockstep.forget(self.lockstep.last_step)   # the cached state is of the old map
         resp.success = True
         resp.message = (f"loaded {self.map.size} nodes, {self.map.link_count()} links from "
@@ -583,7 +585,8 @@ class MapLearnerNode(LifecycleNode):
             validate_state({**ck.arrays, "step_id": np.array(ck.step_id),
                             "run_id": np.array(ck.run_id, dtype=np.uint64)}, str(ck.path))
             m = SensorimotorMap(dim=ck.arrays["w"].shape[1],
-                                action_dim=ck.arrays["a"].shape[2], config=self.config)
+                                action_dim=ck.arrays["a"].shape[2], config=self.config,
+                                primitives=ACTION_VECTORS)
             m.load_state_dict(ck.arrays)
         except (MapStoreError, KeyError, ValueError, IndexError) as exc:
             raise CheckpointError(str(exc)) from None

@@ -48,6 +48,7 @@ from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
 from tmgwr_agent.core.sensorimotor_map import Links
 from tmgwr_agent.map_replica import APPLIED, GAP, Replica
 from tmgwr_agent.nodes.step_messages import change_of, outcome_of
+from tmgwr_agent.world_senses import maze_senses
 from tmgwr_common import topics
 from tmgwr_common.cdr import codec
 from tmgwr_common.checkpoint import (
@@ -93,7 +94,7 @@ class MotivationEstimatorNode(Node):
     def __init__(self):
         super().__init__("motivation_estimator", **NODE_OPTIONS)
         config, self.p = declare_parameters(self, MotivationConfig, NODE_SPECS)
-        self.core = MotivationEstimator(config)
+        self.core = MotivationEstimator(config, primitives=maze_senses().primitives)
         self._ids = np.zeros(0, dtype=np.int32)
         pub = self.create_publisher(MotivationField, topics.MOTIVATION, STEP_QOS)
         self.lockstep = Lockstep(pub, logger=self.get_logger(), what="state")
