@@ -78,9 +78,9 @@ def solve(out: np.ndarray, E: np.ndarray, R: np.ndarray, V: np.ndarray, beta: fl
         if options is not None:                                # max_a O(i, a), Eq. 5'
             rho = options.rho[:n]
             stay = (R + gamma * best)[:, None]                 # a failed test stays
-            O = np.where(rho > 0.0, rho * successor_values(V, options, gamma)[:n]
+            opt = np.where(rho > 0.0, rho * successor_values(V, options, gamma)[:n]
                          + (1.0 - rho) * stay, 0.0)
-            best = np.maximum(best, O.max(axis=1))
+            best = np.maximum(best, opt.max(axis=1))
         best[absorbing] = 0.0                                  # a terminal state
         step = beta * (R + gamma * best - V[:n])               # beta Delta_V(i), Eq. 4
         new = np.where(live, V[:n] + step, 0.0)
