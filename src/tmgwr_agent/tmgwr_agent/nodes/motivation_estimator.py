@@ -132,8 +132,16 @@ class MotivationEstimatorNode(Node):
 
     # ------------------------------------------------------------------ per step
     def on_action(self, a):
-        if self.heard is not None and (a.run_id, a.step_id) < self.heard[:2]:
-            return                  # an older step answered again (a resend): not news
+        """The selector's answer to a step: news only when it answers the newest step this
+        node computed (a state may wait for it) or the one before (a state solved without
+        it, provisional). Anything else is a resent answer, or a stray (another run, a
+        step this node never computed): kept, it would hold every state of the real ring
+        until the simulator's resend, for good (issue 24)."""
+        ls = self.lockstep
+        if a.run_id != ls.run_id or a.step_id not in (ls.last_step, ls.last_step - 1) or (
+                self.heard is not None and (a.run_id, a.step_id) < self.heard[:2]
+                and self.heard[0] == ls.run_id and self.heard[1] <= ls.last_step):
+            return
         self.heard = (a.run_id, a.step_id, a.walk_next)
         self.settle(a)
         w = self.waiting
@@ -181,8 +189,22 @@ class MotivationEstimatorNode(Node):
 
     def follow(self, s) -> bool:
         """Bring the replica to the map of state ``s``; False (``s`` held, a whole map
-        asked for) when its change does not follow the replica."""
-        c = change_of(s)
+        asked for) when its change does not follow the replica; False (``s`` dropped) when
+        ``s`` cannot be a learner's (a stray message must not wipe the replica or crash the
+        node: the simulator's resend brings the real step)."""
+        try:
+            c = change_of(s)
+            why = c.problem()
+        except ValueError as exc:           # array lengths that do not fit the sizes
+            why = str(exc)
+        if why is None and self.replica.status(c) != GAP and not (
+                -1 <= s.winner < max(c.n, self.replica.n)):
+            why = f"winner {s.winner}"
+        if why is not None:
+            self.get_logger().warning(
+                f"dropped a state of step {s.step_id} (run {s.run_id}) that no learner sent: "
+                f"{why}", throttle_duration_sec=5.0)
+            return False
         if self.replica.apply(c) != GAP:
             return True
         r = self.replica
