@@ -181,6 +181,7 @@ def _run_settings(args) -> tuple[dict, Path | None, Path | None]:
         return given, run_dir, run_dir
     run_dir = resume.find_run(args.resume)
     settings = resume.merged_settings(run_dir, given)
+    resume.check_checkpoints(run_dir)
     bag = None if args.no_record else Path(args.record_dir or resume.resumed_bag_dir(run_dir))
     return settings, run_dir, bag
 
