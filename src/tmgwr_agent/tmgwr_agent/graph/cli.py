@@ -149,9 +149,10 @@ def cmd_cell(args) -> int:
 def cmd_event(args) -> int:
     from tmgwr_agent.graph.clients import fire_event_request
     from tmgwr_common import topics
+    from tmgwr_common.text import shown
     return _service(args, lambda: fire_event_request(args.name),
                     _name(args, topics.FIRE_EVENT, topics.SIMULATOR),
-                    f"event {args.name!r}")
+                    f"event {shown(args.name)}")
 
 
 def cmd_reset(args) -> int:
