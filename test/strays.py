@@ -69,6 +69,11 @@ def strays(run: int) -> list[Stray]:
                   subscribers=2),
             Stray("/features", "tmgwr_interfaces/msg/Features",
                   {"run_id": run - 1, "step_id": 5}),
+            # well-formed (the paper maze's 2-d features): the learner learns it, and the
+            # ring answers it down to an action of step 999999999 (test_lockstep_graph's)
+            Stray("/features", "tmgwr_interfaces/msg/Features",
+                  {"run_id": run, "step_id": 999999999, "features": [0.1, 0.1],
+                   "goal_features": [0.1, 1.1], "gain": 0.1, "episode_start": True}),
             Stray("/observation", "tmgwr_interfaces/msg/Observation",
                   {"run_id": run, "step_id": 0}, subscribers=2),
             Stray("/action", "tmgwr_interfaces/msg/Action",
