@@ -207,6 +207,23 @@ def test_gaps_are_detected_and_a_whole_map_resynchronises():
     assert r.equals(m2) and r.map_id == 12
 
 
+def test_a_change_no_learner_sends_is_named():
+    """Issue 24: a stray SensorimotorState with default fields (map id 0, base 0: a whole
+    map of no slots) wiped the estimator's replica, then crashed it."""
+    _, changes = some_changes(5)
+    assert all(c.problem() is None for c in changes)
+    empty = MapChange.of_fields(SimpleNamespace(
+        map_id=0, base_sequence=0, sequence=0, n_slots=0, degree=0, dim=0, slots=[],
+        alive=[], terminal_nodes=[], weights=[], link_targets=[], link_reliability=[]), 0)
+    assert "map id 0" in empty.problem()
+    c = changes[-1]
+    for change, why in ((dict(n=0), "a slot outside [0, 0)"),
+                        (dict(alive=c.alive[:-1]), "alive"),
+                        (dict(out=np.full_like(c.out, c.n)), "a link target outside"),
+                        (dict(sequence=-1), "state -1")):
+        assert why in MapChange(**{**c.__dict__, **change}).problem(), (change, why)
+
+
 def test_changes_only_list_what_changed_and_shrinking_sends_the_whole_map():
     m = SensorimotorMap(dim=2)
     enc = ChangeEncoder(map_id=1)

@@ -216,7 +216,7 @@ def small_maze(tmp_path_factory):
     ("noise=-1", "'noise=-1': sigma must be >= 0"),
     ("scale=1", "'scale=1': expected scale=SX:SY"),
     ("blur=2", "'blur=2': unknown key 'blur'"),
-    ("view=1", "agent 'tmgwr' takes a 2-D sensation"),
+    ("view=1,noise=0.1", "sensor part 'view=1' takes no other part"),
 ])
 def test_cli_refuses_a_bad_spec_with_exit_2(small_maze, spec, message):
     proc = tmgwr("experiment", "env-change", "--maze", small_maze, "--trials", 1,

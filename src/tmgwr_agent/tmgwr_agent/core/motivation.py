@@ -8,7 +8,9 @@ the nodes' weights, and the motivation potentials are iterated to a fixed point:
     V(i) <- V(i) + beta * Delta_V(i)                               (Eq. 4)
     Delta_V(i) = sim(i, g) + gamma * max_k E[i, k] V(k) - V(i)     (Eq. 5)
 
-over the sensorimotor neighbourhood ``k`` of ``i`` (its outgoing links). The sweep is
+over the sensorimotor neighbourhood ``k`` of ``i`` (its outgoing links): read it in
+:mod:`tmgwr_agent.core.value_iteration`, the numpy reference of the compiled solver this
+module calls (:func:`kernels.value_iteration`, tested equal). The sweep is
 synchronous (all nodes from the previous V) and stops when every node's change ``|beta
 Delta_V(i)|`` is below ``vi_tol * V(i)`` (a relative tolerance: potentials fall
 geometrically with the distance to the goal and the choice between two far neighbours needs

@@ -51,7 +51,8 @@ Lifecycle (a managed node, ``rclpy.lifecycle.LifecycleNode`` as in ros2/demos
   checkpoint; ``activate`` goes on from the same map and step;
 * ``cleanup``: drop the map, the publishers and services, release the directory;
 * ``shutdown`` (from any state; Ctrl-C and SIGTERM take it too): save as on deactivate
-  (atomic), release everything.
+  (atomic), release everything, and end the process (a finalized learner never steps
+  again: ``./tmgwr up`` then stops the graph naming it, never a silent stall).
 
 ``autostart`` (default true) configures and activates the node as soon as it is built, so
 ``ros2 run``, ``ros2 launch``, ``./tmgwr up`` and the composed graph step by themselves; a
@@ -174,6 +175,7 @@ class MapLearnerNode(LifecycleNode):
         self.map_timer = None
         self.refusal = ""                  # why the last transition failed ("" = none)
         self.exit_code = 0
+        self.finished = False              # finalized: the process ends (tmgwr_common.node)
         self.motivation_raw: bytes | None = None
         if self.p["autostart"]:
             autostart(self)                 # ValueError: exit code 2 with the reason
@@ -292,6 +294,14 @@ class MapLearnerNode(LifecycleNode):
                 ok = False
         wait_for_acknowledgments(self)       # subscribers get our last messages first
         self.release(final=True)
+        # A finalized learner never steps again: its process ends, so that whoever runs the
+        # graph sees it go (./tmgwr up stops the graph naming it) instead of a ring that
+        # waits for ever on a node that is still there (issue 24).
+        if not self.finished:
+            self.finished = True
+            print("map_learner: finalized: the process ends", flush=True)
+        if not ok:
+            self.exit_code = 1
         return TransitionCallbackReturn.SUCCESS if ok else TransitionCallbackReturn.FAILURE
 
     def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
