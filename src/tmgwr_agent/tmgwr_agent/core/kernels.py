@@ -4,8 +4,8 @@ Each kernel is the loop form of an equation the calling module states in numpy t
 exist because a step of the agent is a few dozen tiny array operations, and numpy's
 per-call overhead (microseconds) would dominate it. Dead node slots are skipped through the
 ``alive`` mask; link slots hold -1 when empty. Callers pass the arguments positionally:
-numba's dispatcher takes keyword arguments through a slow path (2-4 us a call, more than
-most kernels' work).
+numba's dispatcher takes keyword arguments through a slow path (microseconds a call, more
+than most kernels' work).
 
 Compilation is lazy (for the argument types of the first call) and cached on disk
 (``cache=True``: ``__pycache__`` next to this file, or under ``NUMBA_CACHE_DIR``).

@@ -64,12 +64,11 @@ successor, an *option*, in the max of Eq. 5::
   no route is known), its untried moves have ``rho = 1`` this episode, planned as open as
   the re-tests below are (:func:`kernels.untried_chain`). Each hop's odds alone make a
   way of ``k`` untried moves worth about ``rho^k`` of its saving, and a short cut along
-  cells known but never walked in that direction was never taken: one trial of a
-  generated large maze (1300 cells, suite seed 1) kept a greedy path of 80 steps against
-  78 for good. With a route as short as any such way (a converged agent) there is no
-  chain. With the bound (``rho = 1``) the agent tried almost every untried pair whose L1
-  heuristic beat the route (default maze b: 85.6 steps against 80.5; held-out suite seed
-  1, blocks median 1.33 x the oracle against 1.18, worst trial 6.8 x against 4.5). 1 also
+  cells known but never walked in that direction was never taken (a generated large
+  maze kept a greedy path two steps longer than its shortest for good). With a route as
+  short as any such way (a converged agent) there is no chain. With the bound (``rho =
+  1``) for every untried move the agent tried almost every untried pair whose L1
+  heuristic beat the route, and detours after blocks grew. 1 also
   for a move whose link the map has since deleted (GWR ageing: a forgotten piece of a
   route is walked again when it may be worth it); when the node it led to is gone, or no
   longer within ``L / 2`` of the predicted cell (its slot reused), the cell is looked up
@@ -84,7 +83,7 @@ successor, an *option*, in the max of Eq. 5::
   this one, so the one-episode odds of Eq. 5' are not what decides it (with ``rho`` =
   1/2, as before the re-tests were chosen, an opening that saves two steps a cell off the
   route never paid for its way there and back within the episode, and such openings were
-  never found: fresh suite seed 5, open fields 17 % within 10 episodes). The others have
+  never found). The others have
   no option. A failed test leaves the agent where it was after one step, hence the ``(1 -
   rho)`` term.
 * *A cell that closed*: when a move made before bumps now, the cell it led to has
@@ -112,14 +111,11 @@ successor, an *option*, in the max of Eq. 5::
   re-tested waits, a long-unchecked one rises, so no wall waits for ever behind others
   (with the re-tests chosen as Eq. 5' ranked them from where the agent stood, more than
   ``T`` times ``B`` walls near the route starved one further off: a generated braided
-  maze, dev seed 0, never found its opening); the cost keeps a far wall from sending the
-  agent on a long excursion in an episode that meets a block (default maze b, 10 trials:
-  78.7 -> 71.1 steps, worst 92 -> 78). With the runs below, suite seeds 0, 1, 4 and 5
-  (104 openings x 5 trials): within 10 episodes 89.2 % before these changes, 95.8 % with
-  the runs alone (but default b 81.8, two block trials over 5 x the oracle), 96.0 % with
-  the runs and these re-tests. An episode in which a move made before has bumped (the
-  known route broke) re-tests none from then on: the agent is finding its way round, and
-  an old wall re-tested on the way costs steps the detour needs. A re-test is an action
+  maze never found its opening); the cost keeps a far wall from sending the agent on a
+  long excursion in an episode that meets a block. An episode in which a move made
+  before has bumped (the known route broke) re-tests none from then on: the agent is
+  finding its way round, and an old wall re-tested on the way costs steps the detour
+  needs. A re-test is an action
   at a pair known closed while not *stuck* (below). ``stale_rank`` off: every stale wall
   has ``rho = stale_prior`` until ``B`` re-tests are used up, Eq. 5' ranking them from
   where the agent stands.
@@ -135,9 +131,8 @@ successor, an *option*, in the max of Eq. 5::
   first cell next to known space and at the known extent of the world (the maze's outer
   wall never leads round). It pays to re-test only a wall whose far side is known and
   nearer the goal; with no exit, no option. (With the exits next to the cell and
-  straight on only, an opened strip entered from its end was worth nothing: suite seed
-  5, open fields 17 -> 83 % of trials within 10 episodes; seeds 0, 1, 4, 5 with these
-  re-tests: 58 -> 93 %.)
+  straight on only, an opened strip entered from its end was worth nothing, and such
+  openings in open fields were rarely found.)
   Unknown space:
   ``U = V* gamma^h``, ``h = |w_i + delta_a - x_g|_1 / L``, the fewest steps of length L
   from the predicted successor to the goal sensation ``x_g`` (the four primitives move
@@ -166,9 +161,9 @@ successor, an *option*, in the max of Eq. 5::
   its last bump (from the first bump of its current run of bumps): each failed re-test
   is evidence the wall stays, so the re-tests back off and the agent goes farther afield.
   Without it the nearest wall on the lost route (the block itself) was re-tested every
-  few dozen steps and the agent never got far from it (one held-out suite trial: 5318
-  steps, 130 x the oracle). While stuck the clock is the step (the task is impossible
-  now, not in a few episodes) and the re-test budget does not apply.
+  few dozen steps and the agent never got far from it (one held-out suite trial took
+  over a hundred times the oracle's steps). While stuck the clock is the step (the task
+  is impossible now, not in a few episodes) and the re-test budget does not apply.
 * *The goal when the route broke*: an episode ends at the goal, so the agent never moves
   from a goal node, and its potential in Eq. 5' is ``R_g`` plus what its own untried
   moves promise (about 10 here, against the ``V* = 17`` the unknown is scaled to: a goal
@@ -176,15 +171,12 @@ successor, an *option*, in the max of Eq. 5::
   than unknown space at the same distance, and a neighbour's untried move can outrank
   the step into the goal. In a training episode that look round pays, since the map
   learns the goal's surroundings (with the goal a terminal state worth ``V*`` in every
-  episode, six suite seeds: blocks median 1.17-1.30 x the oracle against 1.04-1.13,
-  openings within 10 episodes 92.3 % against 95.9 %). In an episode whose known route
+  episode, both blocks and openings were handled worse). In an episode whose known route
   broke (a move made before bumped: ``broken``) the agent is finding its way round and
   the look only delays it: there the goal nodes are what the task makes them, terminal
-  states worth ``V*`` (:meth:`MotivationEstimator._goal_terminal`): blocks median
-  1.04-1.13 -> 1.03-1.10 x the oracle, worst trial 4.3 -> 3.3 x; one generated large
-  maze (suite seed 3, large-00, trial 2) had stood beside the goal 273 steps into the
-  episode after the block and then searched the unknown for 1500 steps: now 195 steps
-  in all.
+  states worth ``V*`` (:meth:`MotivationEstimator._goal_terminal`): without it a
+  generated large maze's agent stood beside the goal after the block and then searched
+  the unknown for many times the route's length.
 * The goal node exists only once the map represents the goal (a node within ``L / 2`` of
   the goal sensation, i.e. the goal has been sensed): before that ``R = 0`` everywhere and
   the options alone lead the agent, by the nearest plausible unknown, towards the goal
@@ -202,8 +194,8 @@ stuck, a tick of the step clock), the stuck state or the re-test budget changes,
 on the rows whose outcome memory changed; the reachability pass and the option loop are a
 few linear passes over the map. Reading the route costs one solve of Eq. 5 without
 options per episode, choosing its re-tests two breadth-first searches over the links and
-the exits of every stale wall (51 x 51 maze: mean step 181 -> 211 us, median unchanged),
-its untried chain one more (over the links and the untried moves).
+the exits of every stale wall (it raises the mean step, not the median), its untried
+chain one more (over the links and the untried moves).
 
 Terminal nodes (``absorbing_terminals``, our addition, on by default; off = Eq. 5 on every
 node). The agent notices when an episode ends: it is moved back to the start instead of
@@ -628,8 +620,8 @@ class MotivationEstimator:
         """This episode's re-tests of stale walls are used up: at most ``stale_budget``
         times the steps of the known route from the episode's start (the number of nodes
         before a route is known), rounded up, and at least one, unless ``stale_budget`` is
-        0. (Rounded down instead, six suite seeds: openings within 10 episodes 95.9 ->
-        83.3 %, no block won more.)"""
+        0. (Rounded down instead, fewer openings were found within 10 episodes and no
+        block was won more.)"""
         return self.stale_budget <= 0.0 or self.broken or \
             self.retests >= max(1.0, self.stale_budget * (self.route or n))
 

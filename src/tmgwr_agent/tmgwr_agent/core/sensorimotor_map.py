@@ -1,7 +1,7 @@
 """The TMGWR sensorimotor map (section 3.1, Fig. 1b, Eq. 1-2).
 
 Growth and adaptation follow GWR (Marsland et al. 2002) with the temporal context of
-Merge-GNG (Strickert & Hammer 2005; README, Interpretation choices), as the 2019 TMGWR
+Merge-GNG (Strickert & Hammer 2005; docs/interpretation.md), as the 2019 TMGWR
 paper is not public:
 
 * context of the input    ``C_t = (1 - beta_c) w_{prev} + beta_c c_{prev}``
@@ -23,7 +23,7 @@ reliability ``E[i, j]`` updated by Eq. 1-2::
 with ``sim`` a Gaussian of width ``sigma_a`` (0.3 unit moves: two orthogonal unit moves,
 ``|a - b|^2 = 2``, match by ``exp(-2 / (2 * 0.09)) = 1.5e-5``, so under the credit rule
 below an action blames only the links labelled with that action; with 0.5 each action
-blamed the links of the orthogonal ones by 0.9 % a step, and the links out of a
+blamed the links of the orthogonal ones by about a hundredth a step, and the links out of a
 junction the agent passes often wore down, E 0.86 after a training, which Eq. 5-6 read
 as several steps of detour). A new link starts at ``E_init`` (1: the
 binary link of the original TMGWR, "E[i, j] = 1 if a possible transition"; with 0 a
@@ -32,7 +32,7 @@ chance). After the update the link's action vector
 moves towards the action that traversed it, ``a_ij += eta_a (a - a_ij)`` (the map "learns
 the possible action vectors linking" nodes, section 3.1): a node that drifted while the map
 formed would otherwise keep a link labelled with an action that no longer leads there.
-Link rules (an open question; README, Interpretation choices):
+Link rules (an open question; docs/interpretation.md):
 
 * ``literal``: Eq. 1-2 as written; only the traversed link ``i -> j`` is updated (a self
   transition ``i -> i``, a bump, drives ``E[i, i]`` to 0 and is not stored).
@@ -111,7 +111,8 @@ class MapConfig(Config):
                          low=0.0, high=1.0)
     eta_a: float = param(1.0, "rate at which a link's action vector a_ij follows the action "
                          "that traversed it (0 = fixed at creation)", low=0.0, high=1.0)
-    link_rule: str = param("credit", "Eq. 1-2 reading: 'literal' or 'credit' (README)",
+    link_rule: str = param("credit", "Eq. 1-2 reading: 'literal' or 'credit' "
+                           "(docs/interpretation.md)",
                            choices=("literal", "credit"))
 
 
