@@ -290,6 +290,45 @@ def table_bench(root: Path) -> str:
     return _md(list(RATIO_HEADER), rows) + "\n\n" + _source(d)
 
 
+#: The sensors of the sensing table, and the results file of each.
+SENSORS = (("identity", "sensing_identity"), ("scale=1:2", "sensing_scale-1_2"),
+           ("scale=1:5", "sensing_scale-1_5"), ("rotate=30", "sensing_rotate-30"),
+           ("noise=0.1", "sensing_noise-0p1"))
+
+
+def table_sensing(root: Path) -> str:
+    """How it senses: the same suite's blocks under each sensor transform, per agent: the
+    median over mazes of steps / oracle and the worst trial, and the training episodes
+    to convergence (mean, max, trials that never converged)."""
+    docs = [(spec, load(name, root)) for spec, name in SENSORS]
+    agents = list(docs[0][1]["result"]["agents"])
+    rows = []
+    for spec, d in docs:
+        s = d["result"]["suite"]
+        row = [f"`{spec}`"]
+        for a in agents:
+            ratio, worst = s["overall"]["oracle_ratio"][a]["median"], \
+                s["overall"]["worst_trial_ratio"][a]
+            train = [v for m in s["mazes"] for v in m["agents"][a]["train_episodes"]["values"]]
+            done = [v for v in train if v is not None]
+            never = len(train) - len(done)
+            row += [("never" if ratio is None else f"{ratio:.2f}")
+                    + ("" if worst is None else f" / {worst:.1f}"),
+                    (f"{sum(done) / len(done):.1f} (max {max(done)})" if done else "-")
+                    + (f", {never} never" if never else "")]
+        rows.append(row)
+    header = ["sensor"] + [h for a in agents
+                           for h in (f"`{a}` blocks median / worst", f"`{a}` training episodes")]
+    s0, r0 = docs[0][1]["result"]["suite"], docs[0][1]["result"]
+    return (_md(header, rows)
+            + "\n\nSteps of the first episode after the block over `oracle_steps` (median over "
+            "mazes of each maze's median trial, then the worst trial), and the episodes each "
+            "trial trained until ten greedy rollouts in a row took a shortest path. "
+            f"Suite `{s0['spec']}`, suite seed {s0['seed']}, {r0['trials']} trials per maze, "
+            "the same mazes and seeds under every sensor. "
+            + _source(*(d for _, d in docs)))
+
+
 #: Marked table name -> the function that generates it from results/.
 TABLES: dict[str, Callable[[Path], str]] = {
     "headline": table_headline,
@@ -300,6 +339,7 @@ TABLES: dict[str, Callable[[Path], str]] = {
     "suite": table_suite,
     "suite-openings": table_suite_openings,
     "bench": table_bench,
+    "sensing": table_sensing,
 }
 
 
