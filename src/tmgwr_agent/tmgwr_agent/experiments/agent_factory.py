@@ -6,12 +6,13 @@ joined by ``+``. TMGWR options: ``literal`` / ``credit`` choose the sensorimotor
 additions off (``absorbing_terminals``; ``value_unknown`` and ``try_untried``, the options
 of Eq. 5' and Eq. 6; ``goal_search``; ``walk_while_novel``: the agent of Eq. 1-7 as
 printed), e.g.
-``tmgwr:literal+paper``. The baselines take no option. Options are parameter overrides,
-checked like any other (an unknown name is refused).
+``tmgwr:literal+paper``. The baselines (:data:`BASELINES`) take no option. Options are
+parameter overrides, checked like any other (an unknown name is refused).
 """
 
 from __future__ import annotations
 
+from importlib import import_module
 from typing import Any, Mapping
 
 import numpy as np
@@ -19,7 +20,16 @@ import numpy as np
 from maze_sim.maze import Maze
 from tmgwr_agent.core.protocol import Agent
 
-AGENT_NAMES = ("tmgwr", "q_learning", "model_based", "dyna_q_plus")
+AGENT_NAMES = ("tmgwr", "q_learning", "model_based", "dyna_q_plus", "rmax", "freespace")
+
+#: The baseline agents: name -> (module, class); each class has ``Config``, its parameters.
+BASELINES = {
+    "q_learning": ("tmgwr_agent.baselines.q_learning", "QLearningAgent"),
+    "model_based": ("tmgwr_agent.baselines.model_based", "ModelBasedAgent"),
+    "dyna_q_plus": ("tmgwr_agent.baselines.dyna_q_plus", "DynaQPlusAgent"),
+    "rmax": ("tmgwr_agent.baselines.rmax", "RMaxAgent"),
+    "freespace": ("tmgwr_agent.baselines.freespace", "FreeSpaceAgent"),
+}
 
 
 TMGWR_OPTIONS = {
@@ -46,17 +56,16 @@ def parse_spec(spec: str) -> tuple[str, dict[str, Any]]:
     return name, overrides
 
 
+def baseline_class(name: str) -> type:
+    """The agent class of a baseline name (imported on first use)."""
+    module, cls = BASELINES[name]
+    return getattr(import_module(module), cls)
+
+
 def make_agent(spec: str, maze: Maze, rng: np.random.Generator,
                overrides: Mapping[str, Any] | None = None) -> Agent:
     name, options = parse_spec(spec)
     if name == "tmgwr":
         from tmgwr_agent.core.agent import TMGWRAgent
         return TMGWRAgent(maze, rng, {**(overrides or {}), **options})
-    if name == "q_learning":
-        from tmgwr_agent.baselines.q_learning import QLearningAgent
-        return QLearningAgent(maze, rng, overrides)
-    if name == "model_based":
-        from tmgwr_agent.baselines.model_based import ModelBasedAgent
-        return ModelBasedAgent(maze, rng, overrides)
-    from tmgwr_agent.baselines.dyna_q_plus import DynaQPlusAgent
-    return DynaQPlusAgent(maze, rng, overrides)
+    return baseline_class(name)(maze, rng, overrides)
