@@ -23,6 +23,10 @@ during the last H episodes is believed free again, so the planner re-tests it wh
 on a shorter believed route. Without forgetting the agent never finds a wall that opened
 (it never plans through a believed wall). The default is measured (report of issue 28).
 
+Stuck: when no believed path leads from the agent's cell to the goal, the belief must be
+wrong (the world keeps the goal reachable): every believed wall is forgotten and the
+search redone (the usual reset of a free-space planner that finds no path).
+
 Exploration: the planner needs none beyond its optimism about unknown cells; the shared
 epsilon-greedy random walk of section 5.1 is kept (its parameters are tuned like every
 agent's) but starts at 0.
@@ -140,6 +144,10 @@ class FreeSpaceAgent:
         if s < 0 or self.goal < 0:
             return None
         if self.dirty:
+            self.plan()
+        if self.d[s] == UNREACHABLE and self.walls:
+            for t in list(self.walls):
+                self.believe_free(t)
             self.plan()
         d, walls = self.d, self.walls
         vals = [d[t] if t >= 0 and t not in walls else UNREACHABLE

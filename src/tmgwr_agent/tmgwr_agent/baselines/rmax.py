@@ -36,7 +36,11 @@ A changing world:
   a bump into a move, and nothing else can hide one; a free move that becomes blocked is
   found when the route tries it (contradiction). The default is measured (report of issue
   28): forgetting finds openings at the price of re-testing every remembered bump within
-  reach of the optimism each H episodes.
+  reach of the optimism each H episodes;
+* *stuck*: when no known path leads from the agent's cell to the goal or to an unknown
+  pair, the model must be wrong (the world keeps the goal reachable), so every known bump
+  becomes unknown and the model is solved again (plain R-max would loop for ever: in the
+  blocking family the detour runs through a wall that opened with the block).
 
 Exploration: R-max explores by its optimism; the shared epsilon-greedy random walk of
 section 5.1 is kept (its parameters are tuned like every agent's) but starts at 0.
@@ -174,12 +178,35 @@ class RMaxAgent:
         self.Q_rows = Q.tolist()
         self.dirty = False
 
+    def hopeful(self) -> np.ndarray:
+        """The states from which a known path leads to the goal or to an unknown pair."""
+        known = self.known()
+        r, terminal = self.rewards()
+        into_goal = known & (self.next == self.goal) & ~self.bumped
+        pair_ok = ~known | into_goal
+        state_ok = pair_ok.any(axis=1)
+        onward = known & ~terminal
+        while True:
+            pair_ok = pair_ok | (onward & state_ok[self.next])
+            new = pair_ok.any(axis=1)
+            if (new == state_ok).all():
+                return state_ok
+            state_ok = new
+
+    def doubt_bumps(self) -> None:
+        """Stuck: every known bump becomes unknown (see the module docstring)."""
+        self.count[self.bumped] = 0
+        self.dirty = True
+
     def greedy(self, s: int) -> int | None:
         """argmax_a Q(s, a), ties broken by the generator; None before a goal is set."""
         if s < 0 or self.goal < 0:
             return None
         if self.dirty:
             self.solve()
+            if not self.hopeful()[s] and (self.bumped & self.known()).any():
+                self.doubt_bumps()
+                self.solve()
         q = self.Q_rows[s]
         top = max(q)
         best = [a for a in range(N_ACTIONS) if q[a] == top]
