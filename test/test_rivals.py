@@ -34,6 +34,14 @@ TWO_ROWS = ("#######\n"
             "#.....#\n"
             "#######\n")
 
+#: Sutton & Barto's blocking maze in small: event ``a`` blocks the top row at (1, 3) and
+#: opens (2, 1) (``A``), the only way left to the row below and up to G.
+BLOCKING = ("#######\n"
+            "#S.a.G#\n"
+            "#A###.#\n"
+            "#.....#\n"
+            "#######\n")
+
 
 def info(cell, action, bumped=False, goal=False, terminated=None):
     return StepInfo(cell=cell, action=action, bumped=bumped, reached_goal=goal,
@@ -168,6 +176,43 @@ def test_freespace_learns_a_shortest_path_and_detours_in_the_oracles_steps():
     world.fire_event("a")
     assert run_episode(world, agent).reached_goal
     assert greedy_optimal(world, agent)
+
+
+# ------------------------------------------------------------------ stuck: doubt the walls
+class RMaxNeverDoubts(RMaxAgent):
+    def doubt_bumps(self):
+        pass
+
+
+@pytest.mark.parametrize("cls, finds", [(RMaxAgent, True), (RMaxNeverDoubts, False),
+                                        (FreeSpaceAgent, True)])
+def test_a_rival_without_a_believed_path_doubts_its_walls(cls, finds):
+    """After the block the learnt model has no path to G: the rivals doubt what they
+    bumped into and find the opened cell; R-max without the rule loops (eps 0)."""
+    maze = Maze.from_text(BLOCKING)
+    caps = Caps.for_maze(maze)
+    world = make_world(maze, "G", caps)
+    agent = cls(maze, np.random.default_rng(0))
+    set_goal(world, agent, "G")
+    assert train_until_converged(world, agent, caps).episodes is not None
+    if cls is not FreeSpaceAgent:               # R-max knows (2, 1) as a bump from S
+        assert agent.bumped[1 * 7 + 1, DOWN] and agent.known()[1 * 7 + 1, DOWN]
+    world.fire_event("a")
+    ep = run_episode(world, agent, max_steps=300)
+    assert ep.reached_goal is finds
+    if finds:
+        assert ep.steps < 60
+
+
+def test_freespace_walled_in_forgets_every_wall():
+    maze = Maze.from_text(CORRIDOR)
+    ag = FreeSpaceAgent(maze, np.random.default_rng(0))
+    ag.set_goal((1, 5))
+    ag.begin_episode(obs((1, 2)), (1, 2))
+    for a in (UP, DOWN, LEFT, RIGHT):
+        ag.observe(obs((1, 2)), info((1, 2), a, bumped=True))
+    assert len(ag.walls) == 4
+    assert ag.greedy(ag.state) == RIGHT and ag.walls == set()
 
 
 # ------------------------------------------------------------------ Dyna-Q+ relabel
