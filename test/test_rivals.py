@@ -22,7 +22,7 @@ from tmgwr_agent.experiments.runner import (
     set_goal,
     train_until_converged,
 )
-from tmgwr_agent.experiments.tune import SEARCH, describe_space, search_space
+from tmgwr_agent.experiments.tune import SEARCH, describe_space, search_space, tuned_sections
 from tmgwr_common.params import ParamError
 
 UP, DOWN, LEFT, RIGHT = range(4)
@@ -282,6 +282,18 @@ def test_rivals_are_agents_with_tune_spaces(name):
     dims = search_space(name)
     assert [d.name for d in dims] == list(SEARCH[name]) and "forget_after" in SEARCH[name]
     assert "forget_after" in describe_space(name)
+
+
+def test_a_tuned_file_of_the_rivals_is_read_and_checked(tmp_path):
+    f = tmp_path / "rivals.yaml"
+    f.write_text("rmax:\n  ros__parameters:\n    m_known: 2\n"
+                 "freespace:\n  ros__parameters:\n    forget_after: 7\n")
+    assert tuned_sections(f) == {"rmax": {"m_known": 2}, "freespace": {"forget_after": 7}}
+    f.write_text("freespace:\n  ros__parameters:\n    m_known: 2\n")
+    with pytest.raises(ParamError, match="'m_known'"):
+        tuned_sections(f)
+    with pytest.raises(ValueError, match="takes no option"):
+        make_agent("rmax:grid", Maze.from_text(SMALL), np.random.default_rng(0))
 
 
 @pytest.mark.parametrize("name, overrides, word", [
