@@ -27,12 +27,11 @@ from tmgwr_common.params import ParamError
 
 UP, DOWN, LEFT, RIGHT = range(4)
 
-#: Two rows: the route is the top row; event ``a`` blocks it, the detour is the row below
-#: (S (1,1), G (1,5); old shortest path 4, oracle after the block 1 + 1 + 5 = 7).
-TWO_ROWS = ("#######\n"
-            "#S.a.G#\n"
-            "#.....#\n"
-            "#######\n")
+#: Two rows, the whole grid (no border: a move off it bumps): the route is the top row;
+#: event ``a`` blocks it, every detour runs along the row below (S (0, 0), G (0, 4); old
+#: shortest path 4, oracle after the block 1 + 1 + 5 = 7).
+TWO_ROWS = ("S.a.G\n"
+            ".....\n")
 
 #: Sutton & Barto's blocking maze in small: event ``a`` blocks the top row at (1, 3) and
 #: opens (2, 1) (``A``), the only way left to the row below and up to G.
@@ -132,7 +131,7 @@ def test_rmax_learns_a_shortest_path_and_walks_the_oracle_detour_after_a_block()
 
 # ------------------------------------------------------------------ free-space planner
 def test_freespace_plans_through_unknown_cells_and_replans_after_a_bump():
-    maze = Maze.from_text(TWO_ROWS)
+    maze = Maze.from_text("#######\n#S.a.G#\n#.....#\n#######\n")
     ag = FreeSpaceAgent(maze, np.random.default_rng(0))
     ag.set_goal((1, 5))
     ag.begin_episode(obs((1, 2)), (1, 2))
@@ -175,7 +174,13 @@ def test_freespace_learns_a_shortest_path_and_detours_in_the_oracles_steps():
     assert conv.episodes is not None
     world.fire_event("a")
     assert run_episode(world, agent).reached_goal
-    assert greedy_optimal(world, agent)
+    # the detour's unknown cells are tested as the planner meets them: optimal within 10
+    for _ in range(10):
+        if greedy_optimal(world, agent):
+            break
+        assert run_episode(world, agent).reached_goal
+    else:
+        pytest.fail("the greedy path is not the new shortest path after 10 episodes")
 
 
 # ------------------------------------------------------------------ stuck: doubt the walls

@@ -12,7 +12,11 @@ random walk can try one) marks it free again.
 
 Planning: a breadth-first search from the goal over the believed-free cells gives
 ``d(c)``, the believed number of steps from every cell to the goal; the greedy action moves
-to the neighbour with the least ``d`` (ties broken by the agent's generator). The search is
+to the neighbour with the least ``d``. Ties are broken by a fixed order of the four actions
+per cell, drawn once from the agent's generator: a tie broken afresh at every visit lets
+the experimenter's greedy probe (which learns nothing) take another believed-shortest
+route than the training episode before it, into a wall training never met, so the probes
+of a large maze kept failing and training ran into its caps. The search is
 redone whenever the belief changes (a new wall after a bump, a wall found open, a wall
 forgotten) and when the goal changes. D* Lite repairs ``d`` incrementally instead of
 searching again; the paths are the same, only the cost differs (a BFS over the grid is a
@@ -88,6 +92,8 @@ class FreeSpaceAgent:
         # neighbours[s][a]: the cell index action a leads to, -1 off the grid
         self.neighbours = [[self._step(s, a) for a in range(N_ACTIONS)] for s in range(n)]
         self.d = [UNREACHABLE] * n       # believed steps to the goal
+        # the order in which ties between actions are broken, fixed per cell
+        self.tie_order = [[int(a) for a in rng.permutation(N_ACTIONS)] for _ in range(n)]
         self.goal = -1
         self.dirty = False               # the belief changed since the last search
         self.replans = 0                 # searches done (for tests and reports)
@@ -144,7 +150,8 @@ class FreeSpaceAgent:
 
     def greedy(self, s: int) -> int | None:
         """The move to the neighbour with the least believed distance to the goal (ties
-        broken by the generator); None before a goal is set or when none is reachable."""
+        broken by the cell's fixed order); None before a goal is set or when none is
+        reachable."""
         if s < 0 or self.goal < 0:
             return None
         if self.dirty:
@@ -159,10 +166,7 @@ class FreeSpaceAgent:
         top = min(vals)
         if top == UNREACHABLE:
             return None
-        best = [a for a in range(N_ACTIONS) if vals[a] == top]
-        if len(best) == 1:
-            return best[0]
-        return best[int(self.rng.integers(len(best)))]
+        return next(a for a in self.tie_order[s] if vals[a] == top)
 
     # -------------------------------------------------------------- Agent protocol
     @property
