@@ -38,10 +38,11 @@ A changing world:
   split of the suite (seed 0) among 0, 3, 6, 10 and 12 by the tuning objective (blocks
   and openings; figures in the report of issue 28): forgetting finds openings at the price
   of re-testing every remembered bump within reach of the optimism each H episodes;
-* *stuck*: when no known path leads from the agent's cell to the goal or to an unknown
-  pair, the model must be wrong (the world keeps the goal reachable), so every known bump
-  becomes unknown and the model is solved again (plain R-max would loop for ever: in the
-  blocking family the detour runs through a wall that opened with the block).
+* *stuck*: when, after a contradiction or a goal change, no known path leads from the
+  agent's cell to the goal or to an unknown pair, the model must be wrong (the world
+  keeps the goal reachable), so every known bump becomes unknown and the model is solved
+  again (plain R-max would loop for ever: in the blocking family the detour runs through
+  a wall that opened with the block).
 
 Exploration: R-max explores by its optimism; the shared epsilon-greedy random walk of
 section 5.1 is kept (its parameters are tuned like every agent's) but starts at 0.
@@ -116,6 +117,7 @@ class RMaxAgent:
         self.Q_rows: list[list[float]] = self.Q.tolist()
         self.goal = -1                   # index of the goal cell, -1 before set_goal
         self.dirty = True                # the model changed since the last solve
+        self.recheck = False             # a path may have been lost: check for one
         self.sweeps = 0                  # sweeps of the last solve
         self.episode = 0                 # learning episodes begun
         self.state = -1
@@ -146,6 +148,7 @@ class RMaxAgent:
             self.dirty |= n + 1 == m               # crossed the known-ness threshold
             return
         self.dirty |= n >= m or m == 1             # a known pair changed, or one became known
+        self.recheck |= n > 0                      # an outcome changed
         self.count[s, a] = 1
         self.next[s, a], self.bumped[s, a], self.ended[s, a] = s2, bumped, ended
 
@@ -205,6 +208,8 @@ class RMaxAgent:
             return None
         if self.dirty:
             self.solve()
+        if self.recheck:
+            self.recheck = False
             if not self.hopeful()[s] and (self.bumped & self.known()).any():
                 self.doubt_bumps()
                 self.solve()
@@ -225,7 +230,7 @@ class RMaxAgent:
         from the old goal are forgotten: the next experience re-teaches them)."""
         self.goal = self.index(goal_cell)
         self.ended[:] = False
-        self.dirty = True
+        self.dirty = self.recheck = True
 
     def begin_episode(self, obs: np.ndarray, cell: Cell, learn: bool = True) -> None:
         if learn:
