@@ -27,9 +27,9 @@ during the last H episodes is believed free again, so the planner re-tests it wh
 on a shorter believed route. Without forgetting the agent never finds a wall that opened
 (it never plans through a believed wall). The default (20) was chosen on the tuning split
 of the suite (seed 0) among 0, 2, 5, 10 and 20 by the tuning objective (blocks and
-openings; figures in the report of issue 28): below about 10 episodes the greedy probes
-of training keep meeting forgotten walls (their ties break otherwise than the training
-episode's) and training runs into its caps.
+openings; figures in the report of issue 28): at 5 or 10 episodes some trainings never
+converge (a greedy probe, which learns nothing, keeps meeting a forgotten wall that the
+training episode before it went round) and run into their caps.
 
 Stuck: when no believed path leads from the agent's cell to the goal, the belief must be
 wrong (the world keeps the goal reachable): every believed wall is forgotten and the
