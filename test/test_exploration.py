@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from maze_sim import GridWorld, Maze
+from maze_sim.maze import ACTION_VECTORS
 from tmgwr_agent.core.agent import TMGWRAgent
 from tmgwr_agent.experiments.agent_factory import make_agent
 from tmgwr_agent.experiments.runner import (
@@ -17,6 +18,7 @@ from tmgwr_agent.experiments.runner import (
     set_goal,
     train_until_converged,
 )
+from tmgwr_agent.world_senses import maze_senses
 
 # A block on the only short way; the detour over the top (14 steps against 10).
 BLOCK = ("#########\n"
@@ -142,7 +144,7 @@ def test_paper_agent_has_no_value_of_the_unknown():
 
 def test_state_dict_continues_a_run_exactly():
     maze = Maze.from_text(BLOCK)
-    a = TMGWRAgent(maze, np.random.default_rng(5))
+    a = TMGWRAgent(maze_senses(), np.random.default_rng(5))
     wa = GridWorld(maze, "G")
     a.set_goal(wa.goal, wa.goal_observation())
     for _ in range(3):
@@ -150,7 +152,7 @@ def test_state_dict_continues_a_run_exactly():
     st = a.state_dict()
     for part in st.values():
         assert all(isinstance(v, (np.ndarray, int, float)) for v in part.values())
-    b = TMGWRAgent(maze, np.random.default_rng(0))
+    b = TMGWRAgent(maze_senses(), np.random.default_rng(0))
     b.map.load_state_dict(a.map.state_dict())
     b.load_state_dict(st)
     b.selector.rng.bit_generator.state = a.selector.rng.bit_generator.state
@@ -170,7 +172,8 @@ def test_walk_is_held_once_the_last_n_steps_found_nothing_new():
     goal the paper's Eq. 7 runs (never held)."""
     from tmgwr_agent.core.action_selector import ActionSelector, SelectorConfig
     from tmgwr_agent.core.outcome import Outcome
-    sel = ActionSelector(np.random.default_rng(0), SelectorConfig())   # eps_start 1
+    sel = ActionSelector(np.random.default_rng(0), SelectorConfig(),
+                         primitives=ACTION_VECTORS)   # eps_start 1
     move = Outcome(action=0)
     for node in (0, 1, 2):                  # three new nodes: N = 3, last new at step 3
         sel.record(node, move)
@@ -195,7 +198,8 @@ def test_walk_is_held_once_the_last_n_steps_found_nothing_new():
     assert sel.walk_stalled()               # N = 5 steps without a new node: held
     sel.record(0, Outcome(action=0, goal_reached=True, episode_over=True))
     assert not sel.walk_stalled()           # after the first goal: Eq. 7 as printed
-    paper = ActionSelector(np.random.default_rng(0), SelectorConfig(walk_while_novel=False))
+    paper = ActionSelector(np.random.default_rng(0), SelectorConfig(walk_while_novel=False),
+                           primitives=ACTION_VECTORS)
     for node in (0, 0, 0, 0):
         paper.record(node, move)
     assert paper.policy.hold is None and paper.policy.explores()
@@ -206,7 +210,7 @@ def test_a_held_step_is_fixed_with_its_draw_made_ahead():
     changes in between (a new node recorded after the draw)."""
     from tmgwr_agent.core.action_selector import ActionSelector, SelectorConfig
     from tmgwr_agent.core.outcome import Outcome
-    sel = ActionSelector(np.random.default_rng(0), SelectorConfig())
+    sel = ActionSelector(np.random.default_rng(0), SelectorConfig(), primitives=ACTION_VECTORS)
     move = Outcome(action=0)
     for node in (0, 1, 1, 0):               # N = 2, two steps without a new node
         sel.record(node, move)

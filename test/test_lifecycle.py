@@ -22,7 +22,15 @@ import time
 
 import numpy as np
 import pytest
-from ros_helpers import RosProcess, require_ros2, ros2_cli, ros2_run, spawn_python
+from ros_helpers import (
+    RosProcess,
+    graph_up_pids,
+    require_ros2,
+    ros2_cli,
+    ros2_run,
+    spawn_module,
+    spawn_python,
+)
 from test_nodes import goals_reached
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -167,14 +175,17 @@ def test_autostart_false_waits_unconfigured_until_configure_and_activate(ros_dom
              "--spin-time", "2")
         wait_goals(sim, 1, procs)
         # cleanup needs inactive: deactivate, cleanup (the map dropped), then shutdown
-        for transition, goal in (("deactivate", "inactive"), ("cleanup", "unconfigured"),
-                                 ("shutdown", "finalized")):
+        for transition, goal in (("deactivate", "inactive"), ("cleanup", "unconfigured")):
             ros2(ros_domain, "lifecycle", "set", LEARNER, transition, "--no-daemon",
                  "--spin-time", "2")
             assert state(ros_domain) == goal, transition
         assert learner.running()
-        learner.stop()
-        assert learner.proc.returncode == 0, learner.describe("exit")
+        # finalized, the learner never steps again: its process ends (issue 24)
+        out = ros2(ros_domain, "lifecycle", "set", LEARNER, "shutdown", "--no-daemon",
+                   "--spin-time", "2")
+        assert "Transitioning successful" in out, out
+        learner.wait(timeout=30)
+        assert "map_learner: finalized: the process ends" in learner.output, learner.output
         assert "Traceback" not in learner.output, learner.output
     finally:
         for p in procs.values():
@@ -314,3 +325,21 @@ def test_map_timer_event_after_cleanup_is_harmless(ros_domain, tmp_path):
     with proc:
         out = proc.wait(timeout=200)
     assert "CYCLES 20" in out and "Traceback" not in out, proc.describe("cycles")
+
+
+@pytest.mark.timeout(240)
+def test_a_lifecycle_shutdown_under_up_ends_the_graph_naming_the_learner(ros_domain):
+    """Issue 24: under ./tmgwr up, a finalized learner stayed up and the ring waited for
+    ever; only maze_sim's resend line said so."""
+    require_ros2()
+    up = spawn_module("tmgwr_agent.cli", "up", "--no-record", domain=ros_domain,
+                      name="tmgwr up")
+    with up:
+        graph_up_pids(up)
+        up.wait_for_line(r"\[maze_sim\].*the ring answered step 0", timeout=120)
+        ros2(ros_domain, "lifecycle", "set", LEARNER, "shutdown", "--no-daemon",
+             "--spin-time", "2")
+        up.wait(timeout=60, check=False)
+    assert up.proc.returncode == 1, up.output
+    assert re.search(r"up: node 'map_learner' died \(exit code 0\)", up.output), up.output
+    assert "map_learner: finalized: the process ends" in up.output, up.output

@@ -35,6 +35,7 @@ from tmgwr_agent.map_replica import (
     MapChange,
     Replica,
 )
+from tmgwr_agent.world_senses import maze_senses
 
 OPEN = """\
 ##########
@@ -67,7 +68,7 @@ def evolve(maze: Maze, steps: int, seed: int, goals=(), events=(), config=None,
     ``goals`` / ``events``: {step: goal} / {step: event} applied on the way; ``config``:
     the agent's parameter overrides, ``noise``: the simulator's sensor noise."""
     world = GridWorld(maze, goal="G", seed=seed, sensor_noise=noise)
-    agent = TMGWRAgent(maze, np.random.default_rng(seed), config)
+    agent = TMGWRAgent(maze_senses(), np.random.default_rng(seed), config)
     agent.set_goal(world.goal, world.goal_observation())
     obs, _ = world.reset()
     agent.begin_episode(obs, world.cell)
@@ -125,7 +126,9 @@ def test_replica_equals_the_map_after_every_step(case):
         assert (replica.run_id, replica.step_id) == (1, k)
         # Eq. 4-5 on the replica: what they give on the map itself, bit for bit
         if estimators is None:
-            estimators = [MotivationEstimator(agent.motivation.config) for _ in range(2)]
+            estimators = [MotivationEstimator(agent.motivation.config,
+                                              primitives=agent.senses.primitives)
+                          for _ in range(2)]
         V = []
         for est, on in zip(estimators, (m, replica.snapshot())):
             est.follow_goal(agent.motivation.goal_x)
@@ -202,6 +205,23 @@ def test_gaps_are_detected_and_a_whole_map_resynchronises():
     # ... until its whole map, which the first change of a map is
     assert first.full and r.apply(first) == APPLIED and r.apply(second) == APPLIED
     assert r.equals(m2) and r.map_id == 12
+
+
+def test_a_change_no_learner_sends_is_named():
+    """Issue 24: a stray SensorimotorState with default fields (map id 0, base 0: a whole
+    map of no slots) wiped the estimator's replica, then crashed it."""
+    _, changes = some_changes(5)
+    assert all(c.problem() is None for c in changes)
+    empty = MapChange.of_fields(SimpleNamespace(
+        map_id=0, base_sequence=0, sequence=0, n_slots=0, degree=0, dim=0, slots=[],
+        alive=[], terminal_nodes=[], weights=[], link_targets=[], link_reliability=[]), 0)
+    assert "map id 0" in empty.problem()
+    c = changes[-1]
+    for change, why in ((dict(n=0), "a slot outside [0, 0)"),
+                        (dict(alive=c.alive[:-1]), "alive"),
+                        (dict(out=np.full_like(c.out, c.n)), "a link target outside"),
+                        (dict(sequence=-1), "state -1")):
+        assert why in MapChange(**{**c.__dict__, **change}).problem(), (change, why)
 
 
 def test_changes_only_list_what_changed_and_shrinking_sends_the_whole_map():

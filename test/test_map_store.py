@@ -25,10 +25,12 @@ from __future__ import annotations
 import os
 import re
 import time
+import zipfile
 from pathlib import Path
 
 import numpy as np
 import pytest
+from crafted_npz import crafted_npz
 from ros_helpers import allocate_domain, release_domain, ros2_cli, ros2_run
 from test_nodes import call
 
@@ -43,6 +45,7 @@ from tmgwr_agent.map_store import (
     read_map,
     validate_state,
 )
+from tmgwr_common.checkpoint import CheckpointError, decode
 
 RIGHT, DOWN = np.array([0.0, 1.0]), np.array([1.0, 0.0])
 
@@ -219,11 +222,37 @@ def test_load_validates_the_whole_content_first(tmp_path):
             write_npz(tmp_path / f"{name}.npz", state)
     with open(tmp_path / "pickled.npz", "wb") as f:
         np.savez(f, **arrays(m, w=obj))
-    cases["pickled"] = ({}, "not a saved map")
+    cases["pickled"] = ({}, "dtype object (only bool, integers and floats")
     for name, (_, why) in cases.items():
         with pytest.raises(MapStoreError, match=re.escape(why)):
             store.load(name)
     validate_state(arrays(m))                                         # the real one passes
+
+
+def test_crafted_array_headers_are_refused_before_anything_is_allocated(tmp_path):
+    """Issue 24: a 21 kB map whose header declares 10**12 float64 raised MemoryError (the
+    learner died). Every header is read first (tmgwr_common.npz_check)."""
+    live = arrays(small_map())
+    cases = {  # file -> what the refusal says
+        crafted_npz(tmp_path / "huge.npz", live, "w"): "member 'w.npy' declares shape "
+                                                        "(1000000000000,)",
+        crafted_npz(tmp_path / "lie.npz", live, "w", shape=(3, 2), pad=0): "(48 bytes) but holds",
+        crafted_npz(tmp_path / "pickle.npz", live, "meta", shape=(3,), descr="|O"):
+            "dtype object",
+        crafted_npz(tmp_path / "complex.npz", live, "w", descr="<c16"): "dtype complex128",
+        crafted_npz(tmp_path / "record.npz", live, "w", descr=[("a", "<f8")]): "dtype",
+    }
+    with zipfile.ZipFile(tmp_path / "text.npz", "w") as z:
+        z.writestr("w.txt", "not an array")
+    cases[tmp_path / "text.npz"] = "member 'w.txt' is not an array"
+    for path, why in cases.items():
+        assert path.stat().st_size < 25_000
+        with pytest.raises(MapStoreError, match=re.escape(why)) as info:
+            read_map(path)
+        assert str(path) in str(info.value) and "refused" in str(info.value)
+    # a checkpoint goes through the same reader
+    with pytest.raises(CheckpointError, match=r"declares shape \(1000000000000,\)"):
+        decode((tmp_path / "huge.npz").read_bytes(), "maze_sim.ckpt.npz")
 
 
 def test_one_directory_one_learner(tmp_path):
@@ -395,6 +424,20 @@ def test_load_map_validates_before_replacing_the_live_map(graph):
     assert_running_and_stepping(graph)
 
 
+@pytest.mark.ros
+@pytest.mark.timeout(240)
+def test_load_map_of_a_crafted_header_is_refused_and_the_graph_steps_on(graph):
+    """Issue 24: this file killed the learner (MemoryError) and with it the graph."""
+    domain, run_dir, procs = graph
+    with np.load(run_dir / "probe.npz") as d:
+        live = {k: d[k] for k in d.files}
+    crafted_npz(run_dir / "huge.npz", live, "w")
+    ok, message = service_call(domain, LOAD, "tmgwr_interfaces/srv/LoadMap", "{name: 'huge'}")
+    assert not ok and str(run_dir / "huge.npz") in message, message
+    assert "declares shape (1000000000000,)" in message, message
+    assert_running_and_stepping(graph)
+
+
 def start_learner(domain, *args, env=None):
     return ros2_run("tmgwr_agent", "map_learner", "--ros-args", *args, domain=domain,
                     env=env)
@@ -438,8 +481,10 @@ def test_a_bad_initial_map_stops_the_learner_at_start_saying_why(ros_domain, tmp
     nan_w = m.state_dict()["w"].copy()
     nan_w[0, 0] = np.nan
     write_npz(tmp_path / "nan.npz", arrays(m, w=nan_w))
+    crafted_npz(tmp_path / "huge.npz", arrays(m), "w")      # issue 24: exit 2, no reason
     cases = {"~nosuchuser/x.npz": "nosuchuser", str(tmp_path / "fifo.npz"): "FIFO",
-             str(tmp_path / "nan.npz"): "not finite", "nosuchmap": "no such map"}
+             str(tmp_path / "nan.npz"): "not finite", "nosuchmap": "no such map",
+             str(tmp_path / "huge.npz"): "declares shape (1000000000000,)"}
     procs = {k: start_learner(ros_domain, "-p", f"initial_map:={k}", "-p",
                               f"map_dir:={tmp_path / 'maps'}" + str(i))
              for i, k in enumerate(cases)}

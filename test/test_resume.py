@@ -13,7 +13,7 @@ resume with those before the kill and with a fresh start; then starts the run's 
 the very parameters ``up`` gives them, SIGKILLs the map learner alone and restarts it: it
 rejoins with its own checkpoint. No assertion depends on timing.
 
-The graph runs with the paper's Eq. 5 and Eq. 6 (``value_unknown`` and ``try_untried``
+The graph runs with the paper's Eq. 5 and Eq. 6 (``unknown`` none and ``try_untried``
 off): the graph's estimator does not record the outcome memory that the default Eq. 5'
 reads yet, and without it the default graph does not converge on this maze.
 """
@@ -28,10 +28,12 @@ import time
 
 import numpy as np
 import pytest
-from ros_helpers import RosProcess, graph_up_pids, ros_env, spawn_module
+from crafted_npz import crafted_npz
+from ros_helpers import RosProcess, graph_up_pids, ros2_run, ros_env, spawn_module
 
 from tmgwr_agent.graph import resume
 from tmgwr_common.checkpoint import (
+    META_KEY,
     Checkpointer,
     CheckpointError,
     CheckpointStore,
@@ -40,7 +42,7 @@ from tmgwr_common.checkpoint import (
     split_state,
 )
 
-PAPER_EQ56 = "/**:\n  ros__parameters:\n    value_unknown: false\n    try_untried: false\n"
+PAPER_EQ56 = "/**:\n  ros__parameters:\n    unknown: none\n    try_untried: false\n"
 NODES = ("maze_sim", "map_learner", "motivation_estimator", "action_selector")
 
 
@@ -309,3 +311,63 @@ def test_resume_of_something_that_is_not_a_run_is_refused(tmp_path, ros_domain):
         p.wait(timeout=60, check=False)
     assert p.proc.returncode == 2 and "not a run to resume" in p.output, p.output
 
+
+
+# --------------------------------------------------------------------------- issue 24
+def crafted_checkpoint(directory, node: str = "maze_sim"):
+    """A real checkpoint of ``node`` whose metadata member declares 10**12 float64 (the
+    file is 21 kB: it killed maze_sim with MemoryError under --resume)."""
+    members = CheckpointStore(directory, node).contents(5, 1, {})
+    return crafted_npz(directory / f"{node}.ckpt.npz", members, META_KEY)
+
+
+def test_a_kill_during_a_write_leaves_a_folder_the_next_start_removes(tmp_path):
+    store = CheckpointStore(tmp_path, "maze_sim")
+    store.save(1, 1, {})
+    left = tmp_path / ".ckpt-maze_sim-x1y2z3"        # what a kill -9 mid-write leaves
+    left.mkdir()
+    (left / "maze_sim.ckpt.npz").write_bytes(b"half")
+    other = tmp_path / ".ckpt-map_learner-abc"        # another node's: not ours to remove
+    other.mkdir()
+    CheckpointStore(tmp_path, "maze_sim")
+    assert not left.exists() and other.is_dir()
+    assert CheckpointStore(tmp_path, "maze_sim").load().step_id == 1
+
+
+def test_resume_refuses_a_crafted_checkpoint_saying_which_and_why(tmp_path, ros_domain):
+    run = tmp_path / "run"
+    run.mkdir()
+    resume.write_settings(run, {"maze": None, "goal": "2", "seed": 1})
+    crafted_checkpoint(run)
+    assert (run / "maze_sim.ckpt.npz").stat().st_size < 25_000
+    p = up(ros_domain, "--resume", str(run))
+    with p:
+        p.wait(timeout=60, check=False)
+    assert p.proc.returncode == 2, p.output
+    assert f"{run / 'maze_sim.ckpt.npz'}: member '{META_KEY}.npy' declares shape " \
+           "(1000000000000,)" in p.output, p.output
+    assert "Traceback" not in p.output, p.output
+
+
+@pytest.mark.ros
+@pytest.mark.timeout(120)
+def test_a_node_resumed_from_a_crafted_checkpoint_refuses_it_and_runs_on(tmp_path,
+                                                                         ros_domain):
+    crafted_checkpoint(tmp_path)
+    sim = ros2_run("maze_sim", "maze_sim", "--ros-args", "-p", "resume:=true", "-p",
+                   f"checkpoint_dir:={tmp_path}", domain=ros_domain)
+    with sim:
+        sim.wait_for_line(r"maze_sim\.ckpt\.npz: member .* declares shape "
+                          r"\(1000000000000,\).*starting fresh", timeout=60)
+        sim.wait_for_line("maze_sim ready", timeout=30)
+        assert sim.running(), sim.output
+    assert "Traceback" not in sim.output, sim.output
+
+
+def test_resume_refuses_a_seed_on_a_run_started_without_one(tmp_path, ros_domain):
+    run = tmp_path / "run"
+    resume.write_settings(run, {"maze": None, "goal": "2", "seed": None})
+    p = up(ros_domain, "--resume", str(run), "--seed", "5")
+    with p:
+        p.wait(timeout=60, check=False)
+    assert p.proc.returncode == 2 and "started without a seed" in p.output, p.output

@@ -76,6 +76,7 @@ def test_suite_json_keys_oracle_and_skipped(block_run):
     agents = AGENTS.split(",")
     assert res["scenario"] == "env-change" and res["trials"] == TRIALS
     assert res["seed"] == 0 and res["maze"] is None and res["event"] == "block"
+    assert res["sensor"] == "identity"
     assert list(res["agents"]) == agents
     s = res["suite"]
     assert {"spec", "seed", "first", "event", "mazes", "skipped", "families",
@@ -99,12 +100,14 @@ def test_suite_json_keys_oracle_and_skipped(block_run):
         assert list(m["agents"]) == agents
         for a in agents:
             assert set(m["agents"][a]) == {"steps", "episodes_to_optimal",
-                                           "train_episodes"}
+                                           "train_episodes", "learning_steps"}
             assert len(m["agents"][a]["steps"]["values"]) == TRIALS
+            assert len(m["agents"][a]["learning_steps"]["values"]) == TRIALS
     # top-level agents: every trial of every maze, maze by maze
     for a in agents:
-        flat = [v for m in s["mazes"] for v in m["agents"][a]["steps"]["values"]]
-        assert res["agents"][a]["steps"]["values"] == flat
+        for key in ("steps", "learning_steps"):
+            flat = [v for m in s["mazes"] for v in m["agents"][a][key]["values"]]
+            assert res["agents"][a][key]["values"] == flat
         ratios = [None if v is None else v / m["oracle_steps"] for m in s["mazes"]
                   for v in m["agents"][a]["steps"]["values"]]
         assert res["agents"][a]["oracle_ratio"]["values"] == pytest.approx(ratios)

@@ -16,6 +16,7 @@ from tmgwr_agent.core.exploration import EpsilonSchedule, RandomWalk
 from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
 from tmgwr_agent.core.outcome import EPISODE_START, Outcome
 from tmgwr_agent.core.sensorimotor_map import Links, MapConfig, SensorimotorMap
+from tmgwr_agent.world_senses import maze_senses
 from tmgwr_common.params import ParamError, make_config
 
 UP, DOWN, LEFT, RIGHT = range(4)
@@ -167,7 +168,8 @@ def test_value_iteration_matches_fixed_point_on_a_chain():
     m = chain_map()
     mo = MotivationEstimator(MotivationConfig(gamma=0.97, beta=0.8, goal_sigma=0.3,
                                               goal_sim_floor=1e-3, vi_tol=1e-10,
-                                              vi_max_sweeps=100000, value_unknown=False))
+                                              vi_max_sweeps=100000, unknown="none"),
+primitives=ACTION_VECTORS)
     mo.set_goal(np.array([0.0, 0.2]))
     V = mo.update(m)
     assert mo.goal_node == 2
@@ -183,7 +185,7 @@ def test_node_where_an_episode_ended_short_of_the_goal_is_absorbing(tmp_path):
     m = chain_map()
     m.mark_terminal(1)                  # an episode ended on node 1 without the goal
     mo = MotivationEstimator(MotivationConfig(vi_tol=1e-10, vi_max_sweeps=100000,
-                                              value_unknown=False))
+                                              unknown="none"), primitives=ACTION_VECTORS)
     mo.set_goal(np.array([0.0, 0.2]))
     R1 = np.exp(-0.01 / (2 * 0.03 ** 2))
     # node 1 has no successor: V(1) = R_1, and node 0 only sees that through it
@@ -194,7 +196,7 @@ def test_node_where_an_episode_ended_short_of_the_goal_is_absorbing(tmp_path):
     assert list(m2.terminal[:3]) == [False, True, False]
     off = MotivationEstimator(MotivationConfig(vi_tol=1e-10, vi_max_sweeps=100000,
                                                absorbing_terminals=False,
-                                               value_unknown=False))
+                                               unknown="none"), primitives=ACTION_VECTORS)
     off.set_goal(np.array([0.0, 0.2]))
     np.testing.assert_allclose(off.update(m)[1], R1 + 0.97, rtol=1e-8)   # Eq. 5 as printed
     # walking on from node 1 within an episode clears the flag: it is not an end any more
@@ -219,7 +221,7 @@ def test_agent_marks_episode_ends_and_the_current_goal_is_not_absorbing():
             if term:
                 return inf
 
-    ag = TMGWRAgent(maze, np.random.default_rng(0))
+    ag = TMGWRAgent(maze_senses(), np.random.default_rng(0))
     ag.set_goal(world.goal, world.goal_observation())
     assert walk_right(ag).reached_goal                  # ends at the goal: flagged ...
     goal_node = ag.winner
@@ -240,7 +242,7 @@ def test_agent_marks_episode_ends_and_the_current_goal_is_not_absorbing():
 
 def test_value_iteration_without_a_path_gives_no_motivation():
     m = chain_map()
-    mo = MotivationEstimator(MotivationConfig(value_unknown=False))
+    mo = MotivationEstimator(MotivationConfig(unknown="none"), primitives=ACTION_VECTORS)
     mo.set_goal(np.array([0.0, 0.0]))                    # goal at node 0: nothing leads there
     V = mo.update(m)
     R1 = np.exp(-0.01 / (2 * 0.03 ** 2))
@@ -254,7 +256,7 @@ def test_no_route_to_the_goal_gives_exactly_zero_at_once():
     """When the last link to the goal goes, every node cut off has V = 0 exactly in the
     same update (the fixed point), not warm-started dust that decays over many steps."""
     m = chain_map()
-    mo = MotivationEstimator(MotivationConfig(value_unknown=False))
+    mo = MotivationEstimator(MotivationConfig(unknown="none"), primitives=ACTION_VECTORS)
     mo.set_goal(np.array([0.0, 0.2]))
     assert (mo.update(m)[:2] > 0.5).all()
     slot = int(np.flatnonzero(m.out[0] == 1)[0])
@@ -273,7 +275,7 @@ def test_value_of_the_unknown_by_hand():
     m = chain_map()
     mo = MotivationEstimator(MotivationConfig(vi_tol=1e-12, vi_max_sweeps=100000,
                                               stale_prior=0.5, stale_horizon=1.0,
-                                              untried_rho=1.0))
+                                              untried_rho=1.0), primitives=ACTION_VECTORS)
     mo.set_goal(np.array([0.0, 0.5]))
     for i in (0, 1):                                     # the two moves the map was built from
         mo.record(i, i + 1, i == 1, Outcome(action=RIGHT), m.w)
@@ -306,7 +308,8 @@ def test_value_of_a_remembered_wall_by_hand():
     slot = int(np.flatnonzero(m.out[0] == 1)[0])
     m.out[0, slot], m.E[0, slot] = -1, 0.0
     m.version += 1
-    mo = MotivationEstimator(MotivationConfig(vi_tol=1e-12, vi_max_sweeps=100000))
+    mo = MotivationEstimator(MotivationConfig(vi_tol=1e-12, vi_max_sweeps=100000),
+                             primitives=ACTION_VECTORS)
     mo.set_goal(np.array([0.0, 0.2]))
     st = mo.state_dict()
     st["clock"] = 10
@@ -365,7 +368,8 @@ def known_estimator(m, moves, goal, episode, **cfg):
     (node, primitive, successor) led on, every other pair bumped in ``episode`` (a wall
     trusted now), the forward model from the moves; the agent stands on node 0 at the
     start of episode ``episode`` + 1."""
-    mo = MotivationEstimator(MotivationConfig(vi_tol=1e-12, vi_max_sweeps=100000, **cfg))
+    mo = MotivationEstimator(MotivationConfig(vi_tol=1e-12, vi_max_sweeps=100000, **cfg),
+                             primitives=ACTION_VECTORS)
     mo.set_goal(0.1 * np.array(goal, dtype=float))
     st = mo.state_dict()
     n = m.n
@@ -503,8 +507,10 @@ def test_outcome_memory_grows_with_the_map_whichever_comes_first():
     killing the graph's estimator, when only the record grew the closed cells' array."""
     cells = [(0, k) for k in range(80)]
     m = path_map(cells, [RIGHT] * 79)
-    mo = MotivationEstimator(MotivationConfig())
-    mo.load_state_dict(MotivationEstimator(MotivationConfig()).state_dict())   # 64 slots
+    mo = MotivationEstimator(MotivationConfig(),
+                             primitives=ACTION_VECTORS)
+    mo.load_state_dict(MotivationEstimator(MotivationConfig(),
+                                           primitives=ACTION_VECTORS).state_dict())   # 64 slots
     mo.set_goal(np.array([0.0, 7.9]))
     mo.update(m)
     mo.record(78, 79, False, Outcome(action=RIGHT, bumped=False), m.w)
@@ -727,7 +733,7 @@ def test_the_goal_is_terminal_at_v_star_once_the_route_broke_by_hand():
     links = mo.links_of(m, 2)
     [slot] = best(links)
     assert links.targets[slot] == 3
-    assert ActionSelector.action_index(links.actions[slot]) == RIGHT
+    assert int(kernels.nearest_row(ACTION_VECTORS, links.actions[slot])) == RIGHT
     mo.record(-1, 0, False, EPISODE_START, m.w)     # a new episode: the goal keeps Eq. 5'
     assert not mo.broken and mo.update(m)[3] < 0.6 * vs     # (stuck now: its walls doubted)
 
@@ -779,7 +785,7 @@ def test_eq6_picks_link_with_highest_E_times_V_and_breaks_ties_by_rng():
     assert m.size == 3
     V = np.zeros(m.n + 1)
     V[1], V[2] = 0.5, 0.9
-    sel = ActionSelector(np.random.default_rng(0))
+    sel = ActionSelector(np.random.default_rng(0), primitives=ACTION_VECTORS)
     assert sel.greedy(m.links_of(0), V) == DOWN
     m.E[0, 1] = 0.5                                      # 0.5 * 0.9 < 1.0 * 0.5? no: 0.45
     assert sel.greedy(m.links_of(0), V) == RIGHT
@@ -798,7 +804,7 @@ def test_goal_search_walks_for_the_rest_of_the_episode_after_the_goal_node():
     V = np.array([0.5, 0.9, 0.0])                         # node 1 is the most motivating
     sel = ActionSelector(np.random.default_rng(0),
                          SelectorConfig(eps_start=0.0, eps_min=0.0, try_untried=False,
-                                        goal_search=True))
+                                        goal_search=True), primitives=ACTION_VECTORS)
     assert sel.select(m.links_of, 0, V, goal_node=1) == (RIGHT, False)   # Eq. 6 off the goal node
     # standing on the goal node with the episode still running: the map does not know
     # the way, the random walk acts, also back on node 0, until the episode ends
@@ -810,7 +816,7 @@ def test_goal_search_walks_for_the_rest_of_the_episode_after_the_goal_node():
     assert sel.select(m.links_of, 0, V, goal_node=1) == (RIGHT, False)
     off = ActionSelector(np.random.default_rng(0),     # the paper's selector
                          SelectorConfig(eps_start=0.0, eps_min=0.0, goal_search=False,
-                                        try_untried=False))
+                                        try_untried=False), primitives=ACTION_VECTORS)
     off.select(m.links_of, 1, V, goal_node=1)
     assert off.select(m.links_of, 0, V, goal_node=1) == (RIGHT, False)
 
@@ -829,13 +835,15 @@ def test_eq6_ranks_options_as_virtual_self_links():
                   np.concatenate((m.E[0], [0.0, 0.0, 0.7 / 0.8, 0.0])),
                   np.concatenate((m.a[0], ACTION_VECTORS)))
     assert links.targets[K + LEFT] == 0
-    sel = ActionSelector(np.random.default_rng(0), SelectorConfig(eps_start=0.0, eps_min=0.0))
+    sel = ActionSelector(np.random.default_rng(0), SelectorConfig(eps_start=0.0, eps_min=0.0),
+                         primitives=ACTION_VECTORS)
     assert sel.select(lambda i: links, 0, V, goal_node=-1) == (LEFT, True)   # 0.7 > 0.5
     V[1] = 0.9
     assert sel.select(lambda i: links, 0, V, goal_node=-1) == (RIGHT, False)
     V[1] = 0.5
     paper = ActionSelector(np.random.default_rng(0),
-                           SelectorConfig(eps_start=0.0, eps_min=0.0, try_untried=False))
+                           SelectorConfig(eps_start=0.0, eps_min=0.0, try_untried=False),
+primitives=ACTION_VECTORS)
     assert paper.select(lambda i: links, 0, V, goal_node=-1) == (RIGHT, False)
 
 
@@ -908,7 +916,8 @@ def test_defaults_are_declared_once_in_the_config_dataclasses():
     for cls in (SensorimotorMap, MotivationEstimator, ActionSelector, EpsilonGreedy,
                 SensoryPreprocessor):
         for name, par in inspect.signature(cls).parameters.items():
-            assert name in ("rng", "dim", "action_dim", "config"), (cls, name)
+            assert name in ("rng", "dim", "action_dim", "config", "primitives",
+                                "n_actions"), (cls, name)   # the senses, not parameters
 
 
 # ---------------------------------------------------------------- behaviour on mazes
@@ -943,7 +952,7 @@ def run_episode(world, agent, learn=True, cap=20000, seen=None):
 
 
 def trained(maze, goal="G", seed=0, episodes=30, seen=None, **params):
-    agent = TMGWRAgent(maze, np.random.default_rng(seed), params)
+    agent = TMGWRAgent(maze_senses(), np.random.default_rng(seed), params)
     world = GridWorld(maze, goal)
     agent.set_goal(world.goal, world.goal_observation())
     for _ in range(episodes):
@@ -1024,8 +1033,8 @@ def test_save_and_load_restore_the_same_map_and_decisions(tmp_path):
     maze = Maze.from_text(SMALL)
     agent, world = trained(maze, episodes=10)
     path = agent.map.save(tmp_path / "map.npz")
-    other = TMGWRAgent(maze, np.random.default_rng(99))
-    other.map, _ = SensorimotorMap.load(path)
+    other = TMGWRAgent(maze_senses(), np.random.default_rng(99))
+    other.map, _ = SensorimotorMap.load(path, primitives=ACTION_VECTORS)
     for name in ("w", "c", "h", "alive", "out", "E", "a", "age"):
         np.testing.assert_array_equal(getattr(other.map, name)[: other.map.n],
                                       getattr(agent.map, name)[: agent.map.n])
@@ -1041,7 +1050,7 @@ def test_same_seed_same_trajectory():
     maze = Maze.from_text(SMALL)
     runs = []
     for _ in range(2):
-        agent = TMGWRAgent(maze, np.random.default_rng(7))
+        agent = TMGWRAgent(maze_senses(), np.random.default_rng(7))
         world = GridWorld(maze, "G")
         agent.set_goal(world.goal, world.goal_observation())
         runs.append([run_episode(world, agent)[0] for _ in range(5)])

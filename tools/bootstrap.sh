@@ -13,7 +13,7 @@
 #      contents are not part of it: tools/env.sh puts src/tmgwr_common, src/maze_sim and src/tmgwr_agent first
 #      on PYTHONPATH, so editing core code never needs a rebuild.
 #   4. The numba kernels (src/tmgwr_agent/tmgwr_agent/core/kernels.py) compiled into their
-#      on-disk cache (python -m tmgwr_agent.core.warmup: "compiling the numba kernels (once,
+#      on-disk cache (python -m tmgwr_agent.warmup: "compiling the numba kernels (once,
 #      about N s)"), so that a node's first start loads them instead of compiling. Re-run
 #      when kernels.py changed (numba's own key: its mtime and size), the cache is gone, or
 #      the venv changed; a run that finds them cached takes about a second.
@@ -260,8 +260,8 @@ if need_warm; then
     rm -f "$KERNELS_STAMP"
     ( cd "$ROOT" && env -u _ROS_WHEELS_BOOTSTRAP_COMPLETE \
         "PYTHONPATH=$ROOT/src/tmgwr_common:$ROOT/src/maze_sim:$ROOT/src/tmgwr_agent" \
-        "$VENV/bin/python" -m tmgwr_agent.core.warmup --quiet --prefix "tmgwr bootstrap: " \
-        >&2 ) || die "compiling the numba kernels failed (python -m tmgwr_agent.core.warmup)"
+        "$VENV/bin/python" -m tmgwr_agent.warmup --quiet --prefix "tmgwr bootstrap: " \
+        >&2 ) || die "compiling the numba kernels failed (python -m tmgwr_agent.warmup)"
     kernels_key >"$KERNELS_STAMP"
 fi
 exit 0

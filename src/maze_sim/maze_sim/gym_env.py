@@ -45,6 +45,10 @@ class MazeEnv(gymnasium.Env):
         with the experiments' rule: a step that reaches a goal is never also truncated.
         ``gymnasium.make(..., max_episode_steps=N)`` adds a ``TimeLimit`` wrapper instead.
     render_mode : None or "ansi" (the grid as text, ``@`` = agent)
+    world : an existing :class:`GridWorld` to adapt instead of a new one (``maze``, ``goal``,
+        ``sensor_noise`` and ``max_episode_steps`` are then the world's): the experiments
+        step their world themselves and put the sensor wrappers of
+        :mod:`maze_sim.sensors` over it
 
     ``reset`` options (both optional): ``{"goal": "2" or (r, c)}`` moves the goal from this
     episode on; ``{"start": (r, c)}`` starts this episode at another free cell. Events persist
@@ -55,13 +59,15 @@ class MazeEnv(gymnasium.Env):
 
     def __init__(self, maze: Maze | str | Path = DEFAULT_MAZE, goal: str | Cell = "G",
                  sensor_noise: float = 0.0, max_episode_steps: int | None = None,
-                 render_mode: str | None = None):
+                 render_mode: str | None = None, *, world: GridWorld | None = None):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or one of "
                              f"{self.metadata['render_modes']}, got {render_mode!r}")
-        if not isinstance(maze, Maze):
+        if world is not None:
+            maze = world.maze
+        elif not isinstance(maze, Maze):
             maze = Maze.from_file(maze_file(maze))
-        self.world = GridWorld(maze, goal, sensor_noise, max_episode_steps)
+        self.world = world or GridWorld(maze, goal, sensor_noise, max_episode_steps)
         self.render_mode = render_mode
         margin = NOISE_BOUND_SIGMAS * self.world.sensor_noise
         rows, cols = maze.shape

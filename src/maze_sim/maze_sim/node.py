@@ -18,8 +18,9 @@ step ids count from 0 within the run. The agent nodes follow the newest run, so 
 restarted simulator is followed from its first observation. An action of another run
 (a simulator that was replaced, a stray ``ros2 topic pub`` with run_id 0) is ignored.
 
-Goal changes (``/maze_sim/set_goal``, called by the motivation estimator's ``/set_goal``)
-are validated at once and applied at the next observation the simulator publishes: that
+Goal changes (``/set_goal``, the graph's, and ``/maze_sim/set_goal``: one service under
+two names) are validated at once (inside, free, reachable: the answer says so, so
+"accepted" means applied) and applied at the next observation the simulator publishes: that
 observation already carries the new goal sensation, which is how the goal reaches the
 agent (the agent never receives the goal's cell); until then cell and event edits keep the
 requested goal free. Cell and event changes apply at once. Every edit keeps the task
@@ -66,6 +67,7 @@ from tmgwr_common.node import (
 )
 from tmgwr_common.params import Param, ParamError
 from tmgwr_common.share import DataFileError
+from tmgwr_common.text import shown
 from tmgwr_interfaces.msg import Action, Observation
 from tmgwr_interfaces.srv import FireEvent, SetCell, SetGoal
 
@@ -144,8 +146,8 @@ class MazeSimNode(Node):
         self.event_pub = self.create_publisher(String, topics.EVENTS, LATCHED_QOS)
         subscribe_decoded(self, Action, topics.ACTION, self.on_action, STEP_QOS)
         services = MutuallyExclusiveCallbackGroup()
-        self.create_service(SetGoal, topics.SIM_SET_GOAL, self.on_set_goal,
-                            callback_group=services)
+        for name in (topics.SET_GOAL, topics.SIM_SET_GOAL):   # the graph's goal, and ours
+            self.create_service(SetGoal, name, self.on_set_goal, callback_group=services)
         self.create_service(SetCell, topics.SET_CELL, self.on_set_cell, callback_group=services)
         self.create_service(FireEvent, topics.FIRE_EVENT, self.on_fire_event,
                             callback_group=services)
@@ -430,17 +432,28 @@ class MazeSimNode(Node):
         self.event(f"step {self.step_id}: goal -> row {cell[0]}, col {cell[1]}")
 
     def on_set_goal(self, req, resp):
+        """``/set_goal`` (the graph's goal) and ``/maze_sim/set_goal``: the answer is this
+        simulator's own check (inside, free, reachable: :meth:`GridWorld.check_goal`), so
+        "accepted" means the goal applies from the next observation."""
         x, y = req.goal.x, req.goal.y
+        asked = f"goal (x={x:.6g}, y={y:.6g})"      # never 301 digits for x = 1e300
+        rows, cols = self.world.walls.shape
+        replaced, refusal = self.pending_goal, None
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(req.goal.z)):
-            resp.accepted, resp.message = False, f"goal (x={x}, y={y}) is not finite"
-            return resp
-        col, row = int(math.floor(x + 0.5)), int(math.floor(y + 0.5))
-        replaced = self.pending_goal
-        try:
-            # checked now and kept free by cell and event edits until it applies
-            self.pending_goal = self.world.request_goal((row, col))
-        except MazeError as exc:
-            resp.accepted, resp.message = False, f"goal (x={x}, y={y}) refused: {exc}"
+            refusal = "not finite"
+        elif not (-0.5 <= x < cols - 0.5 and -0.5 <= y < rows - 0.5):
+            refusal = (f"outside the {rows}x{cols} maze (x in 0..{cols - 1}, "
+                       f"y in 0..{rows - 1})")
+        else:
+            col, row = int(math.floor(x + 0.5)), int(math.floor(y + 0.5))
+            try:
+                # checked now and kept free by cell and event edits until it applies
+                self.pending_goal = self.world.request_goal((row, col))
+            except MazeError as exc:
+                refusal = str(exc)
+        if refusal is not None:
+            resp.accepted, resp.message = False, f"{asked} refused: {refusal}"
+            self.get_logger().warning(resp.message)
             return resp
         resp.accepted = True
         resp.message = (f"goal set to row {row}, col {col} (x={col}, y={row}); it applies "
@@ -468,7 +481,7 @@ class MazeSimNode(Node):
         name = req.event.strip()
         if len(name) != 1 or not name.islower():
             resp.accepted = False
-            resp.message = f"event {req.event!r}: expected one lowercase letter a-z"
+            resp.message = f"event {shown(req.event)}: expected one lowercase letter a-z"
             return resp
         try:
             self.world.fire_event(name)

@@ -89,6 +89,21 @@ class MapChange:
                    E=_array(m.link_reliability, np.float64).reshape(k, degree),
                    run_id=int(run_id), step_id=int(step_id))
 
+    def problem(self) -> str | None:
+        """Why this change cannot be of a learner (a stray message), or None."""
+        k = len(self.slots)
+        if self.map_id <= 0:
+            return f"map id {self.map_id} (a learner's map ids are positive)"
+        if min(self.n, self.degree, self.dim) < 0 or self.sequence < 0:
+            return f"{self.n} slots, degree {self.degree}, dim {self.dim}, state {self.sequence}"
+        if len(self.alive) != k or len(self.terminal) != k:
+            return f"{k} slots but {len(self.alive)} alive and {len(self.terminal)} terminal flags"
+        if k and (self.slots.min() < 0 or self.slots.max() >= self.n):
+            return f"a slot outside [0, {self.n})"
+        if self.out.size and (self.out.min() < -1 or self.out.max() >= self.n):
+            return f"a link target outside [-1, {self.n})"
+        return None
+
     def nbytes(self) -> int:
         """Bytes of its arrays as a message carries them (slot ids and targets int32)."""
         k = len(self.slots)

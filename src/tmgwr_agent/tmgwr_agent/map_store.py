@@ -14,11 +14,13 @@
 * Writes (:meth:`MapStore.save`) go through :meth:`SensorimotorMap.save` into a private
   temporary directory inside the store, are stamped with :data:`FORMAT_VERSION`, synced,
   then moved over the target with ``os.replace`` (atomic; a crash leaves the old file or
-  the new one). The target must be absent or a regular file that is a map of ours: a
+  the new one, and a temporary folder that the next learner's :meth:`MapStore.lock`
+  removes). The target must be absent or a regular file that is a map of ours: a
   symbolic link, a directory, a FIFO or any other file is never replaced.
 * Reads (:func:`read_map`) open the file without following a final symbolic link and
   without blocking (a FIFO or device is refused, not waited on), accept only a regular
-  file of at most :data:`MAX_BYTES`, and validate the whole content
+  file of at most :data:`MAX_BYTES`, check every array header before any array is
+  allocated (:mod:`tmgwr_common.npz_check`), and validate the whole content
   (:func:`validate_state`: format version, keys, dtypes, array shapes, index ranges,
   finite values) before :meth:`SensorimotorMap.load` builds the map from those very bytes.
 
@@ -28,7 +30,6 @@ running.
 
 from __future__ import annotations
 
-import io
 import os
 import re
 import shutil
@@ -42,6 +43,7 @@ import numpy as np
 from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap
 from tmgwr_common import safe_files
 from tmgwr_common.checkpoint import graph_dir
+from tmgwr_common.npz_check import read_npz
 
 FORMAT_VERSION = 1
 """Version of the map file layout this module reads and writes: the arrays of
@@ -53,6 +55,7 @@ SUFFIX = ".npz"
 MAX_NAME = 100                       # characters of a map name
 MAX_BYTES = 256 << 20                # a map file, and its arrays uncompressed
 NAME_RULE = re.compile(r"[A-Za-z0-9_.-]+")
+SAVING = ".saving-"                  # temporary folders of saves (removed by lock())
 
 _ARRAYS = {           # name -> (dtype kind, number of dimensions)
     "w": ("f", 2), "c": ("f", 2), "h": ("f", 1), "alive": ("b", 1), "out": ("i", 2),
@@ -106,20 +109,10 @@ def _read_regular(path: str, dir_fd: int | None = None) -> bytes:
 
 
 def load_arrays(data: bytes, what: str) -> dict[str, np.ndarray]:
-    """The arrays of a map file's bytes (no pickles; the uncompressed size bounded)."""
-    try:
-        with zipfile.ZipFile(io.BytesIO(data)) as z:
-            size = sum(i.file_size for i in z.infolist())
-    except zipfile.BadZipFile:
-        raise MapStoreError(f"{what}: not a saved map (not an .npz archive)") from None
-    if size > MAX_BYTES:
-        raise MapStoreError(f"{what}: its arrays hold {size} bytes uncompressed, more than "
-                            f"a map may ({MAX_BYTES})")
-    try:
-        with np.load(io.BytesIO(data), allow_pickle=False) as npz:
-            return {k: npz[k] for k in npz.files}
-    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
-        raise MapStoreError(f"{what}: not a saved map ({exc})") from None
+    """The arrays of a map file's bytes, every array header checked before anything is
+    allocated (:func:`tmgwr_common.npz_check.read_npz`: no pickles, plain dtypes, sizes
+    within :data:`MAX_BYTES`)."""
+    return read_npz(data, what, MAX_BYTES, MapStoreError, "map")
 
 
 def validate_state(s: dict[str, np.ndarray], what: str = "map") -> None:
@@ -245,6 +238,9 @@ class MapStore:
         os.ftruncate(fd, 0)
         os.write(fd, f"{os.getpid()}\n".encode())
         self._lock_fd = fd
+        for tmp in self.directory.glob(SAVING + "*"):   # a kill in the middle of a save
+            if tmp.is_dir() and not tmp.is_symlink():
+                shutil.rmtree(tmp, ignore_errors=True)
 
     def path(self, name: str) -> Path:
         return self.directory / map_file_name(name)
@@ -274,7 +270,7 @@ class MapStore:
             if not is_our_map(fname, self._dir_fd):
                 raise MapStoreError(f"{target} exists and is not a tmgwr map: not replaced "
                                     "(choose another name)")
-        tmp = tempfile.mkdtemp(prefix=".saving-", dir=self.directory)    # mode 0700
+        tmp = tempfile.mkdtemp(prefix=SAVING, dir=self.directory)    # mode 0700
         try:
             written = m.save(Path(tmp) / "map.npz", step_id, run_id)
             with zipfile.ZipFile(written, "a") as z:             # the format version

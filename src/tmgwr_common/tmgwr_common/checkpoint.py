@@ -17,13 +17,16 @@ here (``maze_sim`` may not import ``tmgwr_agent``).
   learner's ``map_dir`` for the learner and, for every node, the graph's directory
   ``$ROS_HOME/tmgwr/domain<ID>[_<namespace>]`` (:func:`graph_dir`, the default ``map_dir``).
   One file per node, ``<node>.ckpt.npz`` (a node name, never a path).
-* **How.** Written in a private temporary directory inside that directory, synced, then
-  renamed over the target (``os.replace``: a kill leaves the old checkpoint or the new
-  one, never half of one). A target that is a link, a FIFO, a directory or any file that is
-  not this node's checkpoint is never replaced. Read without following a final link and
-  without blocking, regular files only, size bounded, no pickles, then checked completely
-  (format version, node, fingerprint such as the maze or the map's dimensions, arrays and
-  their dtypes, finite values) before the node uses it. Every refusal raises
+* **How.** Written in a private temporary directory inside that directory
+  (``.ckpt-<node>-*``: one a kill leaves behind is removed when the node starts again),
+  synced, then renamed over the target (``os.replace``: a kill leaves the old checkpoint
+  or the new one, never half of one). A target that is a link, a FIFO, a directory or
+  any file that is not this node's checkpoint is never replaced. Read without following a
+  final link and without blocking, regular files only, size bounded, every array header
+  checked before anything is allocated (:mod:`tmgwr_common.npz_check`: no pickles, plain
+  dtypes, sizes), then checked completely (format version, node, fingerprint such as the
+  maze or the map's dimensions, arrays and their dtypes, finite values) before the node
+  uses it. Every refusal raises
   :class:`CheckpointError` saying why; :class:`Checkpointer` logs it and the node runs on
   (a refused checkpoint is not overwritten: its node then keeps no checkpoint).
 * **Resuming.** With ``resume`` true a node starts from its own checkpoint when there is
@@ -37,7 +40,6 @@ here (``maze_sim`` may not import ``tmgwr_agent``).
 from __future__ import annotations
 
 import contextlib
-import io
 import json
 import os
 import queue
@@ -48,7 +50,6 @@ import stat
 import tempfile
 import threading
 import time
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping
@@ -56,6 +57,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from tmgwr_common import safe_files
+from tmgwr_common.npz_check import read_npz
 from tmgwr_common.params import Param
 
 FORMAT_VERSION = 1
@@ -120,20 +122,10 @@ def read_regular(path: str, dir_fd: int | None = None) -> bytes:
 
 
 def decode(data: bytes, what: str) -> tuple[dict, dict[str, np.ndarray]]:
-    """(metadata, arrays) of a checkpoint file's bytes (no pickles; sizes bounded)."""
-    try:
-        with zipfile.ZipFile(io.BytesIO(data)) as z:
-            size = sum(i.file_size for i in z.infolist())
-    except zipfile.BadZipFile:
-        raise CheckpointError(f"{what}: not a checkpoint (not an .npz archive)") from None
-    if size > MAX_BYTES:
-        raise CheckpointError(f"{what}: its arrays hold {size} bytes uncompressed, more "
-                              f"than a checkpoint may ({MAX_BYTES})")
-    try:
-        with np.load(io.BytesIO(data), allow_pickle=False) as npz:
-            arrays = {k: npz[k] for k in npz.files}
-    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
-        raise CheckpointError(f"{what}: not a checkpoint ({exc})") from None
+    """(metadata, arrays) of a checkpoint file's bytes, every array header checked before
+    anything is allocated (:func:`tmgwr_common.npz_check.read_npz`: no pickles, plain
+    dtypes, sizes within :data:`MAX_BYTES`)."""
+    arrays = read_npz(data, what, MAX_BYTES, CheckpointError, "checkpoint")
     raw = arrays.pop(META_KEY, None)
     if raw is None or raw.dtype != np.uint8 or raw.ndim != 1:
         raise CheckpointError(f"{what}: not a checkpoint (no {META_KEY} member)")
@@ -203,6 +195,18 @@ class CheckpointStore:
         except (OSError, RuntimeError) as exc:       # RuntimeError: ~nosuchuser
             raise CheckpointError(f"checkpoint directory {directory}: {exc}") from None
         self._written: tuple[int, int, int] | None = None   # (ino, mtime_ns, size) we wrote
+        self._remove_stale()
+
+    @property
+    def _tmp_prefix(self) -> str:
+        return f".ckpt-{self.node}-"
+
+    def _remove_stale(self) -> None:
+        """Remove this node's temporary folders a kill left in the middle of a write (no
+        other process writes this node's checkpoint here: the names say whose they are)."""
+        for tmp in self.directory.glob(self._tmp_prefix + "*"):
+            if tmp.is_dir() and not tmp.is_symlink():
+                shutil.rmtree(tmp, ignore_errors=True)
 
     @property
     def path(self) -> Path:
@@ -292,7 +296,7 @@ class CheckpointStore:
     def write(self, members: Mapping[str, np.ndarray]) -> Path:
         """Write :meth:`contents` atomically (see the module docstring); returns the path."""
         self._ours()
-        tmp = tempfile.mkdtemp(prefix=".ckpt-", dir=self.directory)    # mode 0700
+        tmp = tempfile.mkdtemp(prefix=self._tmp_prefix, dir=self.directory)   # mode 0700
         try:
             written = Path(tmp) / self.fname
             with open(written, "wb") as f:

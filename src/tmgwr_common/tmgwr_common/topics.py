@@ -37,9 +37,8 @@ AGENT_POSE = "agent_pose"             # geometry_msgs/msg/PoseStamped
 EVENTS = "maze_events"                # std_msgs/msg/String: goal changes, cell/event changes
 
 # Services: the graph's goal (relative), then the nodes' own (private, "~/": node/name)
-SET_GOAL = "set_goal"                 # tmgwr_interfaces/srv/SetGoal, motivation_estimator
-SIM_SET_GOAL = "~/set_goal"           # tmgwr_interfaces/srv/SetGoal, maze_sim (validates the
-                                      # cell, moves the terminal cell; called by set_goal)
+SET_GOAL = "set_goal"                 # tmgwr_interfaces/srv/SetGoal, maze_sim (the graph's)
+SIM_SET_GOAL = "~/set_goal"           # tmgwr_interfaces/srv/SetGoal, maze_sim (the same)
 SET_CELL = "~/set_cell"               # tmgwr_interfaces/srv/SetCell, maze_sim
 FIRE_EVENT = "~/fire_event"           # tmgwr_interfaces/srv/FireEvent, maze_sim
 RESET = "~/reset"                     # std_srvs/srv/Trigger, maze_sim

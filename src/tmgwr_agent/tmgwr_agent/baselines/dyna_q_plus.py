@@ -84,8 +84,9 @@ class DynaQPlusAgent(QLearningAgent):
     Config = DynaQPlusConfig
 
     def __init__(self, maze: Maze, rng: np.random.Generator,
-                 config: DynaQPlusConfig | Mapping[str, Any] | None = None):
-        super().__init__(maze, rng, config)
+                 config: DynaQPlusConfig | Mapping[str, Any] | None = None,
+                 sensed_states: bool = False):
+        super().__init__(maze, rng, config, sensed_states)
         self.n_planning = self.config.n_planning
         self.kappa = self.config.kappa
         n = self.rows * self.cols * N_ACTIONS
@@ -100,6 +101,16 @@ class DynaQPlusAgent(QLearningAgent):
         self.t = 0                     # global clock: real learning steps
         # bonus-free twin of Q (Dyna-Q), read by act(explore=False)
         self.Q0: list[list[float]] = [[0.0] * N_ACTIONS for _ in range(self.rows * self.cols)]
+
+    def grow(self) -> None:
+        super().grow()
+        self.m_next.extend([-1] * N_ACTIONS)
+        self.m_reward.extend([0.0] * N_ACTIONS)
+        self.m_terminal.extend([False] * N_ACTIONS)
+        self.m_bumped.extend([False] * N_ACTIONS)
+        self.m_time.extend([0] * N_ACTIONS)
+        self.is_visited.append(False)
+        self.Q0.append([0.0] * N_ACTIONS)
 
     def set_goal(self, goal_cell: Cell, goal_obs: np.ndarray | None = None) -> None:
         """The new goal, and the model's rewards and terminals relabelled for it."""

@@ -21,6 +21,11 @@ Acting: the greedy action is ``argmax_a Q(s, a)`` with ties broken by the agent'
 generator; a state from which no action has been tried yet gives no greedy opinion and the
 random walk acts (as for the TMGWR agent on a node without links). Per step the work is
 O(1): Q is a list of 4-float lists indexed by ``row * cols + col``.
+
+Under ``--sensor`` (``sensed_states=True``) the state handed to the agent is not a cell but
+the discretised sensation (:func:`tmgwr_agent.experiments.sensing.discretise`, any hashable
+key): states are then numbered in the order first seen and the tables grow as new ones
+appear (:meth:`QLearningAgent.index`).
 """
 
 from __future__ import annotations
@@ -61,8 +66,10 @@ class QLearningAgent:
     Config = QLearningConfig
 
     def __init__(self, maze: Maze, rng: np.random.Generator,
-                 config: QLearningConfig | Mapping[str, Any] | None = None):
-        """``config``: the agent's config, or a dict of parameter overrides."""
+                 config: QLearningConfig | Mapping[str, Any] | None = None,
+                 sensed_states: bool = False):
+        """``config``: the agent's config, or a dict of parameter overrides;
+        ``sensed_states``: states are sensed keys, not cells (module docstring)."""
         if not isinstance(config, self.Config):
             config = make_config(self.Config, config, where=self.name)
         self.config = c = config
@@ -74,13 +81,32 @@ class QLearningAgent:
         n = self.rows * self.cols
         self.Q: list[list[float]] = [[0.0] * N_ACTIONS for _ in range(n)]
         self.tried = [False] * n       # some action has been tried from the state
+        self.sensed: dict | None = {} if sensed_states else None   # key -> state index
         self.goal: Cell | None = None
         self.state = -1                # index of the current cell, -1 before an episode
         self.last_explored = False
 
     # -------------------------------------------------------------- helpers
     def index(self, cell: Cell) -> int:
-        return int(cell[0]) * self.cols + int(cell[1])
+        """The state index of a cell (``row * cols + col``) or, with sensed states, of a
+        sensed key (numbered when first seen)."""
+        if self.sensed is None:
+            return int(cell[0]) * self.cols + int(cell[1])
+        s = self.sensed.get(cell)
+        if s is None:
+            s = self.sensed[cell] = len(self.sensed)
+            if s >= len(self.tried):
+                self.grow()
+        return s
+
+    def grow(self) -> None:
+        """One more state in every per-state table."""
+        self.Q.append([0.0] * N_ACTIONS)
+        self.tried.append(False)
+
+    def states_seen(self) -> int:
+        """States from which some action has been tried."""
+        return sum(self.tried)
 
     def reward(self, info: StepInfo) -> float:
         """Eq. 8 for the step just taken (the previous goal is an empty cell)."""
@@ -116,6 +142,10 @@ class QLearningAgent:
         return self.policy.epsilon
 
     def set_goal(self, goal_cell: Cell, goal_obs: np.ndarray | None = None) -> None:
+        """The goal's state: a cell, or with sensed states the goal sensation's key."""
+        if self.sensed is not None:
+            self.goal = goal_cell
+            return
         self.goal = (int(goal_cell[0]), int(goal_cell[1]))
 
     def begin_episode(self, obs: np.ndarray, cell: Cell, learn: bool = True) -> None:

@@ -8,7 +8,8 @@ We rank neighbours by ``E[i, k] V(k)``, the term that Eq. 5 maximises, so the se
 follows the same neighbour the motivation estimator credited (with a plain ``V(k)`` a
 link that has become unreliable, e.g. into a new wall, would keep being chosen). Ties are
 broken by the agent's generator. The chosen action vector is mapped to the nearest motor
-primitive of the action map (the four unit moves). A node with no outgoing link, or whose
+primitive of the action map (the world's primitives, :class:`~tmgwr_agent.core.senses.
+Senses`). A node with no outgoing link, or whose
 neighbours have no motivation yet, has no greedy opinion: the random walk acts.
 
 Options (``try_untried``, our addition, on by default; off = the paper's selector). The
@@ -52,7 +53,6 @@ from typing import Callable
 
 import numpy as np
 
-from maze_sim.maze import ACTION_VECTORS
 from tmgwr_agent.core import kernels
 from tmgwr_agent.core.exploration import EpsilonGreedy, ExplorationConfig
 from tmgwr_agent.core.motivation import grown
@@ -74,7 +74,7 @@ class SelectorConfig(ExplorationConfig):
 
     goal_search: bool = param(False, "random walk for the rest of an episode once the agent "
                               "stood on the goal node without reaching the goal (superseded "
-                              "by value_unknown; action_selector.py)")
+                              "by the value of the unknown; action_selector.py)")
     try_untried: bool = param(True, "Eq. 6 also ranks the options of Eq. 5' (untried or "
                               "stale primitives, virtual self-links of the winner; "
                               "action_selector.py; false: the paper's Eq. 6 selector)")
@@ -85,11 +85,15 @@ class SelectorConfig(ExplorationConfig):
 
 
 class ActionSelector:
-    def __init__(self, rng: np.random.Generator, config: SelectorConfig = SelectorConfig()):
+    def __init__(self, rng: np.random.Generator, config: SelectorConfig = SelectorConfig(),
+                 *, primitives: np.ndarray):
+        """``primitives``: the motor vector of each action (:class:`~tmgwr_agent.core.
+        senses.Senses`)."""
         kernels.announce_compilation()
         self.rng = rng
         self.config = config
-        self.policy = EpsilonGreedy(rng, config)
+        self.primitives = np.ascontiguousarray(primitives, dtype=float)
+        self.policy = EpsilonGreedy(rng, config, len(self.primitives))
         self.goal_search = config.goal_search
         self.searching = False      # stood on the goal node this episode, goal not there
         self.try_untried = config.try_untried
@@ -144,10 +148,9 @@ class ActionSelector:
         self.took_option = node >= 0 and targets[slot] == node
         return self.action_index(links.actions[slot])
 
-    @staticmethod
-    def action_index(a: np.ndarray) -> int:
+    def action_index(self, a: np.ndarray) -> int:
         """The motor primitive nearest the action vector (the action map's codebook)."""
-        return int(kernels.nearest_row(ACTION_VECTORS, a))
+        return int(kernels.nearest_row(self.primitives, a))
 
     def select(self, links_of: Callable[[int], Links], node: int, V: np.ndarray,
                goal_node: int, explore: bool = True) -> tuple[int, bool]:

@@ -13,8 +13,10 @@ not solved for that step, as work that cannot change the next action need not be
 the graph's estimator knows the same from the selector's last ``Action``
 (``walk_next``). A greedy probe
 (``act(explore=False)``) climbs the potentials of Eq. 5 without options: the learnt
-policy. The agent sees only the sensed coordinates, its touch sensor (``bumped``) and the
-goal's sensation: no reward, no cell index, no transition model (Table 1).
+policy. The agent sees only its sensation (a vector of the dimension its
+:class:`~tmgwr_agent.core.senses.Senses` declare), its touch sensor (``bumped``) and the
+goal's sensation, and acts with the world's motor primitives: no reward, no cell index, no
+geometry, no transition model (Table 1).
 
 The ROS nodes run exactly these four pieces in separate processes, in the same order, so
 a seed gives the same trajectory in-process and over the graph.
@@ -27,12 +29,11 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from maze_sim.maze import ACTION_VECTORS, Cell, Maze
-from maze_sim.world import StepInfo
 from tmgwr_agent.core.action_selector import ActionSelector, SelectorConfig
 from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
 from tmgwr_agent.core.outcome import EPISODE_START, Outcome
 from tmgwr_agent.core.preprocessor import PreprocessorConfig, SensoryPreprocessor
+from tmgwr_agent.core.senses import Senses
 from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap
 from tmgwr_common.params import make_config, resolve, specs
 
@@ -71,17 +72,23 @@ def tmgwr_config(overrides: Mapping[str, Any] | None = None, where: str = "") ->
 class TMGWRAgent:
     name = "tmgwr"
 
-    def __init__(self, maze: Maze | None, rng: np.random.Generator,
+    def __init__(self, senses: Senses, rng: np.random.Generator,
                  config: TMGWRConfig | Mapping[str, Any] | None = None):
-        """``config``: a TMGWRConfig, or a flat dict of parameter overrides."""
+        """``senses``: what the world gives the agent to sense and act with;
+        ``config``: a TMGWRConfig, or a flat dict of parameter overrides."""
+        if not isinstance(senses, Senses):
+            raise TypeError(f"TMGWRAgent takes the world's Senses (the sensation's dimension "
+                            f"and motor primitives), got {type(senses).__name__}")
         if not isinstance(config, TMGWRConfig):
             config = tmgwr_config(config)
         self.config = config
+        self.senses = senses
         self.preprocessor = SensoryPreprocessor(config.preprocessor)
-        self.map = SensorimotorMap(dim=2, action_dim=ACTION_VECTORS.shape[1],
-                                   config=config.map)
-        self.motivation = MotivationEstimator(config.motivation)
-        self.selector = ActionSelector(rng, config.selector)
+        self.map = SensorimotorMap(dim=senses.dim, action_dim=senses.action_dim,
+                                   config=config.map, primitives=senses.primitives)
+        self.motivation = MotivationEstimator(config.motivation,
+                                              primitives=senses.primitives)
+        self.selector = ActionSelector(rng, config.selector, primitives=senses.primitives)
         self.winner = -1
         self.last_action = -1
         self.last_explored = False
@@ -93,15 +100,17 @@ class TMGWRAgent:
     def epsilon(self) -> float:
         return self.selector.policy.epsilon
 
-    def set_goal(self, goal_cell: Cell | None, goal_obs: np.ndarray) -> None:
+    def set_goal(self, goal_cell: Any, goal_obs: np.ndarray) -> None:
+        """The goal as the agent senses it, ``goal_obs`` (``goal_cell`` is for the tabular
+        agents: the TMGWR agent ignores it)."""
         self.motivation.set_goal(self.preprocessor.goal_features(goal_obs))
         self.motivation.update(self.map, skip=self.walk_next)
 
-    def begin_episode(self, obs: np.ndarray, cell: Cell | None = None,
+    def begin_episode(self, obs: np.ndarray, cell: Any = None,
                       learn: bool = True) -> None:
         self.step(obs, EPISODE_START, learn)
 
-    def observe(self, obs: np.ndarray, info: StepInfo, learn: bool = True) -> None:
+    def observe(self, obs: np.ndarray, info: Any, learn: bool = True) -> None:
         self.step(obs, Outcome.of_step(info), learn)
 
     def act(self, explore: bool = True) -> int:

@@ -1,8 +1,8 @@
 """Exploration shared by every agent, so the comparison is fair (section 5.1, Eq. 7).
 
-* :class:`RandomWalk`: keep the current direction; after a bump pick one of the other three
-  actions (probability 1); otherwise turn to one of the other three with probability
-  ``p_turn`` (0.3 in the paper).
+* :class:`RandomWalk`: keep the current direction; after a bump pick one of the other
+  actions (probability 1); otherwise turn to one of the others with probability
+  ``p_turn`` (0.3 in the paper, four actions).
 * :class:`EpsilonSchedule`: Eq. 7, ``eps = max(eps - decay, eps_min)`` each time the goal
   is attained, starting from ``eps_start`` (1.0, 0.1, 0.1 in the paper).
 * :class:`EpsilonGreedy`: with probability ``eps`` the random walk acts, otherwise the
@@ -25,8 +25,6 @@ from typing import Callable
 import numpy as np
 
 from tmgwr_common.params import Config, ParamError, param
-
-N_ACTIONS = 4
 
 
 @dataclass(frozen=True)
@@ -51,14 +49,18 @@ class ExplorationConfig(Config):
 class RandomWalk:
     """The random-walk exploration policy of section 5.1."""
 
-    def __init__(self, rng: np.random.Generator, p_turn: float):
+    def __init__(self, rng: np.random.Generator, p_turn: float, n_actions: int = 4):
         self.rng = rng
         self.p_turn = p_turn
-        self.direction = int(rng.integers(N_ACTIONS))
+        self.n_actions = int(n_actions)
+        self.direction = int(rng.integers(self.n_actions))
         self.bumped = False
 
     def _other(self) -> int:
-        return int((self.direction + 1 + self.rng.integers(N_ACTIONS - 1)) % N_ACTIONS)
+        if self.n_actions == 1:
+            return 0
+        n = self.n_actions
+        return int((self.direction + 1 + self.rng.integers(n - 1)) % n)
 
     def action(self) -> int:
         if self.bumped or self.rng.random() < self.p_turn:
@@ -89,9 +91,9 @@ class EpsilonGreedy:
     """Choose between the random walk and a greedy action (one draw per step)."""
 
     def __init__(self, rng: np.random.Generator,
-                 config: ExplorationConfig = ExplorationConfig()):
+                 config: ExplorationConfig = ExplorationConfig(), n_actions: int = 4):
         self.rng = rng
-        self.walk = RandomWalk(rng, config.p_turn)
+        self.walk = RandomWalk(rng, config.p_turn, n_actions)
         self.schedule = EpsilonSchedule(config.eps_start, config.eps_decay, config.eps_min)
         self.ahead: float | None = None     # the next step's draw, made ahead (draw_ahead)
         self.hold: Callable[[], bool] | None = None  # the agent holds the walk (no walk)

@@ -9,7 +9,7 @@ most kernels' work).
 
 Compilation is lazy (for the argument types of the first call) and cached on disk
 (``cache=True``: ``__pycache__`` next to this file, or under ``NUMBA_CACHE_DIR``).
-``tools/bootstrap.sh`` fills the cache once (:mod:`tmgwr_agent.core.warmup`); a process
+``tools/bootstrap.sh`` fills the cache once (:mod:`tmgwr_agent.warmup`); a process
 that finds it empty says so (:func:`announce_compilation`) before compiling (tens of seconds).
 """
 

@@ -8,7 +8,9 @@ the nodes' weights, and the motivation potentials are iterated to a fixed point:
     V(i) <- V(i) + beta * Delta_V(i)                               (Eq. 4)
     Delta_V(i) = sim(i, g) + gamma * max_k E[i, k] V(k) - V(i)     (Eq. 5)
 
-over the sensorimotor neighbourhood ``k`` of ``i`` (its outgoing links). The sweep is
+over the sensorimotor neighbourhood ``k`` of ``i`` (its outgoing links): read it in
+:mod:`tmgwr_agent.core.value_iteration`, the numpy reference of the compiled solver this
+module calls (:func:`kernels.value_iteration`, tested equal). The sweep is
 synchronous (all nodes from the previous V) and stops when every node's change ``|beta
 Delta_V(i)|`` is below ``vi_tol * V(i)`` (a relative tolerance: potentials fall
 geometrically with the distance to the goal and the choice between two far neighbours needs
@@ -32,8 +34,13 @@ sensorimotor neighbours whatever the map's scale, so a node that is near the goa
 sensor space but far from it along the map (behind a wall) is not a rival attractor. The
 Gaussian is cut below ``goal_sim_floor`` (1e-3: beyond about 1.9 link lengths).
 
-**The value of the unknown** (``value_unknown``, our addition, on by default; off = the
-paper's Eq. 5). Eq. 5 only knows the links the agent has made: where the map knows no way
+**The value of the unknown** (``unknown``, our addition: ``learnt`` by default, ``grid``,
+or ``none`` = the paper's Eq. 5). Every place, distance and length below (``w``,
+``delta``, ``x_g``, ``L``) is measured in the frame of :mod:`tmgwr_agent.core.frame`:
+the sensor's own axes for ``grid``, the learnt forward model's primitive steps for
+``learnt`` (then ``L`` = 1).
+
+Eq. 5 only knows the links the agent has made: where the map knows no way
 to the goal every potential is 0 and the agent can only random-walk; a side corridor never
 entered, or a wall that has since opened, never enters the plan. R-max style, every
 (node i, motor primitive a) pair whose outcome the map does not know gets a virtual
@@ -227,8 +234,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from maze_sim.maze import ACTION_VECTORS
 from tmgwr_agent.core import kernels
+from tmgwr_agent.core.frame import Frame, make_frame
 from tmgwr_agent.core.outcome import Outcome
 from tmgwr_agent.core.sensorimotor_map import Links, SensorimotorMap
 from tmgwr_common.params import Config, param
@@ -238,9 +245,6 @@ V_FLOOR = 1e-150
 #: A node with R_i = sim(i, g) at least this represents the goal (a source of the
 #: reachability test; never absorbing).
 GOAL_R = 0.5
-#: Motor primitives (the action map's codebook).
-N_PRIMITIVES = len(ACTION_VECTORS)
-_PRIMITIVES = np.ascontiguousarray(ACTION_VECTORS, dtype=float)
 
 
 @dataclass(frozen=True)
@@ -261,10 +265,10 @@ class MotivationConfig(Config):
                                integer=True)
     absorbing_terminals: bool = param(True, "nodes where an episode ended have no successor "
                                       "in Eq. 5 (false: the paper's Eq. 5 on every node)")
-    value_unknown: bool = param(True, "Eq. 5': untried and stale (node, primitive) pairs "
-                                "are options worth the unknown; the goal node exists once "
-                                "the goal is sensed (motivation.py; false: the paper's "
-                                "Eq. 5)")
+    unknown: str = param("learnt", "Eq. 5': the value of what the map does not know: "
+                         "'none' (the paper's Eq. 5), 'grid' (measured on the sensor's "
+                         "axes), 'learnt' (measured in the learnt forward model's frame; "
+                         "frame.py)", choices=("none", "grid", "learnt"))
     stale_prior: float = param(1.0, "Eq. 5': rho of a stale remembered wall the episode "
                                "re-tests (1: planned as open, the test decided by the "
                                "ranking; 1/2: as likely open as closed)", low=0.0,
@@ -305,14 +309,23 @@ class MotivationEstimator:
     """Holds the goal, the potentials V and the outcome memory of Eq. 5'; :meth:`record`
     notes what an action did, :meth:`update` re-solves Eq. 4-5'."""
 
-    def __init__(self, config: MotivationConfig = MotivationConfig()):
+    def __init__(self, config: MotivationConfig = MotivationConfig(), *,
+                 primitives: np.ndarray):
+        """``primitives``: the motor vector of each action (:class:`~tmgwr_agent.core.
+        senses.Senses`): an option's action label; their number sizes the outcome
+        memory."""
         kernels.announce_compilation()
         self.config = config
+        self.primitives = np.ascontiguousarray(primitives, dtype=float)
+        P = self.n_primitives = len(self.primitives)
         self.gamma, self.beta = config.gamma, config.beta
         self.goal_sigma, self.goal_sim_floor = config.goal_sigma, config.goal_sim_floor
         self.vi_tol, self.vi_max_sweeps = config.vi_tol, config.vi_max_sweeps
         self.absorbing_terminals = config.absorbing_terminals
-        self.value_unknown = config.value_unknown
+        self.value_unknown = config.unknown != "none"
+        self.frame = make_frame(config.unknown)     # where places are measured (frame.py)
+        self._frame_episode = -1      # the episode the frame's basis was chosen in
+        self._F: Frame | None = None  # the frame's coordinates of the last _prepare
         self.stale_prior, self.stale_horizon = config.stale_prior, config.stale_horizon
         self.stale_budget = config.stale_budget
         self.stale_rank = config.stale_rank
@@ -327,14 +340,14 @@ class MotivationEstimator:
         self._scale_version = -1      # map version the cached link scale belongs to
         self._scale = 1.0
         # outcome memory (Eq. 5'): per node slot and primitive
-        self.tried = np.zeros((64, N_PRIMITIVES), dtype=bool)
-        self.bump_t = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)
-        self.closed_t = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)  # first bump of a run
-        self.bump_e = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)    # episode of a bump
-        self.succ = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)   # where a move led
+        self.tried = np.zeros((64, P), dtype=bool)
+        self.bump_t = np.full((64, P), -1, dtype=np.int64)
+        self.closed_t = np.full((64, P), -1, dtype=np.int64)  # first bump of a run
+        self.bump_e = np.full((64, P), -1, dtype=np.int64)    # episode of a bump
+        self.succ = np.full((64, P), -1, dtype=np.int64)   # where a move led
         self.closed_e = np.full(64, -1, dtype=np.int64)   # episode a node's cell closed
-        self.sel = np.ones((64, N_PRIMITIVES), dtype=bool)  # this episode's re-tests
-        self.chain = np.zeros((64, N_PRIMITIVES), dtype=bool)  # its untried chain
+        self.sel = np.ones((64, P), dtype=bool)  # this episode's re-tests
+        self.chain = np.zeros((64, P), dtype=bool)  # its untried chain
         self._closed: np.ndarray | None = None   # its trusted marks (derived, cached)
         self.clock = 0                # learning steps recorded
         self.episode = 0              # episodes started
@@ -345,13 +358,13 @@ class MotivationEstimator:
         self.broken = False           # a move made before bumped this episode
         self._route_due = False       # the route is read off V0 at the episode's first solve
         self._stuck = False           # stuck when the last update solved Eq. 5'
-        self.delta = np.zeros((N_PRIMITIVES, 2))     # mean sensed displacement per primitive
-        self.moves = np.zeros(N_PRIMITIVES, dtype=np.int64)
-        self.U = np.zeros((64, N_PRIMITIVES))
-        self.rho = np.zeros((64, N_PRIMITIVES))
-        self.osucc = np.full((64, N_PRIMITIVES), -1, dtype=np.int64)   # option successors
-        self.onb = np.full((64, N_PRIMITIVES, N_PRIMITIVES), -1, dtype=np.int64)
-        self.ong = np.zeros((64, N_PRIMITIVES, N_PRIMITIVES))   # their discounts
+        self.delta = np.zeros((P, 0))     # mean sensed displacement per primitive
+        self.moves = np.zeros(P, dtype=np.int64)
+        self.U = np.zeros((64, P))
+        self.rho = np.zeros((64, P))
+        self.osucc = np.full((64, P), -1, dtype=np.int64)   # option successors
+        self.onb = np.full((64, P, P), -1, dtype=np.int64)
+        self.ong = np.zeros((64, P, P))   # their discounts
         self._grid = np.full((0, 0), -1, dtype=np.int64)
         self._origin = np.zeros(2)
         self.R = np.zeros(1)
@@ -411,8 +424,7 @@ class MotivationEstimator:
         top = max(node, winner) + 1
         if top > len(self.tried):
             self._grow_memory(top)
-        if self.delta.shape[1] != w.shape[1]:
-            self.delta = np.zeros((N_PRIMITIVES, w.shape[1]))
+        self._size_forward_model(w.shape[1])
         if inserted and winner >= 0:
             self._dirty.add(winner)
         if 0 <= node and self.bump_t[node, outcome.action] >= 0:
@@ -450,8 +462,10 @@ class MotivationEstimator:
         predicted cell; a map loaded or rebuilt since may hold fewer nodes than ``succ``
         remembers)."""
         j = self.succ[node, a]
-        if j != node and j < len(w) and \
-                np.abs(w[j] - w[node] - self.delta[a]).max() < 0.5 * self._scale:
+        if j == node or j >= len(w):
+            return
+        F = self.frame.of(w[[node, j]], np.zeros(w.shape[1]), self.delta[[a]], self._scale)
+        if np.abs(F.w[1] - F.w[0] - F.delta[0]).max() < 0.5 * F.L:
             self._mark_closed(j, self.episode)
 
     def _mark_closed(self, j: int, episode: int) -> None:
@@ -495,7 +509,7 @@ class MotivationEstimator:
         self._route_due = bool(d.get("route_due", 0))
         self.sel = grown(np.array(d["sel"], dtype=bool), len(self.succ), True) \
             if "sel" in d else np.ones(self.succ.shape, dtype=bool)   # older: every one
-        self.chain = grown(np.array(d.get("chain", np.zeros((0, N_PRIMITIVES))), dtype=bool),
+        self.chain = grown(np.array(d.get("chain", np.zeros((0, self.n_primitives))), dtype=bool),
                            len(self.succ), False)                      # older: none
         self.delta = np.array(d["delta"], dtype=float)
         self.moves = np.array(d["moves"], dtype=np.int64)
@@ -511,16 +525,23 @@ class MotivationEstimator:
         d = m.w[src] - m.w[m.out[src, tgt]]
         return float(np.median(np.sqrt(np.einsum("ij,ij->i", d, d))))
 
-    def rewards(self, m: SensorimotorMap, g: int, scale: float) -> np.ndarray:
-        """Eq. 10: R_i = sim(i, g) = exp(-|w_i - w_g|^2 / (2 sigma_g^2)), 0 for dead slots."""
+    def rewards(self, F: Frame, m: SensorimotorMap, g: int) -> np.ndarray:
+        """Eq. 10: R_i = sim(i, g) = exp(-|w_i - w_g|^2 / (2 sigma_g^2)), 0 for dead slots
+        (the weights in the frame ``F``, ``sigma_g = goal_sigma L``)."""
         R = np.empty(m.n)
-        kernels.goal_rewards(m.w, m.alive, m.n, g, self.goal_sigma * scale,
+        kernels.goal_rewards(F.w, m.alive, m.n, g, self.goal_sigma * F.L,
                              self.goal_sim_floor, R)
         return R
+
+    def _size_forward_model(self, dim: int) -> None:
+        """The forward model ``delta`` for sensations of ``dim`` values (zero: unknown)."""
+        if self.delta.shape != (self.n_primitives, dim):
+            self.delta = np.zeros((self.n_primitives, dim))
 
     def _prepare(self, m: SensorimotorMap) -> int:
         """Sizes, goal node and rewards of this map; returns n."""
         n = m.n
+        self._size_forward_model(m.w.shape[1])
         if len(self.V) != n + 1:                      # the map grew: extend, keep values
             self.V = self._extended(self.V, n)
             self.V0 = self._extended(self.V0, n)
@@ -532,20 +553,34 @@ class MotivationEstimator:
             self.onb = grown(self.onb, n, -1)
             self.ong = grown(self.ong, n, 0.0)
         self.goal_node = -1
+        if self._scale_version != m.version:          # links only change with the version
+            self._scale = self.link_scale(m) or 1.0
+            self._scale_version = m.version
+        F = self._in_frame(m)
         g = m.nearest_by_weight(self.goal_x) if self.goal_x is not None and n else -1
         if g < 0:
             self.R = np.zeros(n)
             return n
-        if self._scale_version != m.version:          # links only change with the version
-            self._scale = self.link_scale(m) or 1.0
-            self._scale_version = m.version
         if self.value_unknown:                        # represented only once sensed
-            if math.dist(m.w[g], self.goal_x) > 0.5 * self._scale:
+            if math.dist(F.w[g], F.goal) > 0.5 * F.L:
                 self.R = np.zeros(n)
                 return n
         self.goal_node = g
-        self.R = self.rewards(m, g, self._scale)
+        self.R = self.rewards(F, m, g)
         return n
+
+    def _in_frame(self, m: SensorimotorMap) -> Frame:
+        """The map's weights, the goal and the forward model in the frame of the value of
+        the unknown (frame.py; the sensor's own for ``grid`` and ``none``), its basis
+        chosen afresh at an episode's first solve and, within an episode, only when it
+        gains a direction."""
+        again = self._frame_episode != self.episode
+        if again or not self.frame.complete:
+            self.frame.refresh(self.delta, self.moves, self._scale, again)
+            self._frame_episode = self.episode
+        goal = self.goal_x if self.goal_x is not None else np.zeros(m.w.shape[1])
+        self._F = self.frame.of(m.w, goal, self.delta, self._scale)
+        return self._F
 
     @staticmethod
     def _extended(V: np.ndarray, n: int) -> np.ndarray:
@@ -626,12 +661,13 @@ class MotivationEstimator:
         ds, dg = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
         kernels.link_steps(m.out, Eb, n, m.alive, absorbing, start, False, ds)
         kernels.link_steps(m.out, Eb, n, m.alive, absorbing, self.goal_node, True, dg)
-        grid, origin = kernels.cell_grid(m.w, m.alive, n, self._scale)
+        F = self._F
+        grid, origin = kernels.cell_grid(F.w, m.alive, n, F.L)
         route = int(dg[start])
         if route >= 0 and self.stale_rank and self.stale_budget > 0.0 \
                 and self.stale_horizon > 0.0:
             self._select_retests(m, n, ds, dg, route, grid, origin)
-        kernels.untried_chain(m.out, Eb, n, m.alive, absorbing, m.w, self.delta, self._scale,
+        kernels.untried_chain(m.out, Eb, n, m.alive, absorbing, F.w, F.delta, F.L,
                               grid, origin, self.tried, start, self.goal_node,
                               route if route >= 0 else n + 1, self.chain)
 
@@ -641,12 +677,13 @@ class MotivationEstimator:
         (:meth:`budget_spent`) of those that would save the most steps on the known route
         (``route`` link steps; ``ds``, ``dg``: link steps from the start and to the goal)
         if they opened (:func:`kernels.stale_savings`; ties: the nearest first)."""
-        ri, ra, rs = (np.empty(n * N_PRIMITIVES, dtype=np.int64) for _ in range(3))
-        c = kernels.stale_savings(m.w, m.alive, n, self.delta, self._scale, self.gamma, grid,
+        ri, ra, rs = (np.empty(n * self.n_primitives, dtype=np.int64) for _ in range(3))
+        F = self._F
+        c = kernels.stale_savings(F.w, m.alive, n, F.delta, F.L, self.gamma, grid,
                                   origin, self.tried, self.bump_e, self.succ, self.episode,
                                   self.stale_horizon, ds, dg, route,
-                                  np.full((n, N_PRIMITIVES, N_PRIMITIVES), -1, np.int64),
-                                  np.zeros((n, N_PRIMITIVES, N_PRIMITIVES)), ri, ra, rs)
+                                  np.full((n, self.n_primitives, self.n_primitives), -1, np.int64),
+                                  np.zeros((n, self.n_primitives, self.n_primitives)), ri, ra, rs)
         budget = math.ceil(max(1.0, self.stale_budget * (self.route or n)))
         ri, ra, rs = ri[:c], ra[:c], rs[:c]
         cost = np.maximum(ds[ri] + 1 + dg[ri] - route, 1)   # steps lost if it stays shut
@@ -668,10 +705,12 @@ class MotivationEstimator:
         clock, T = self.stuck_clock(nodes)
         spent = not stuck and self.budget_spent(nodes)
         rho_max = self.wall_prior() if stuck else 0.0 if spent else self.stale_prior
-        key = (m.version, clock if stuck else self.episode, n, stuck, spent, rho_max)
+        F = self._F
+        key = ((m.version, self.frame.version), clock if stuck else self.episode, n, stuck,
+               spent, rho_max)
         if key != self._options_key:
             if self._options_key[:1] != key[:1]:
-                self._grid, self._origin = kernels.cell_grid(m.w, m.alive, n, self._scale)
+                self._grid, self._origin = kernels.cell_grid(F.w, m.alive, n, F.L)
             self._options_key = key
             self.rho_new = self.open_prior(m, n)
             rows = np.arange(n)
@@ -680,8 +719,8 @@ class MotivationEstimator:
         else:
             return
         self._dirty.clear()
-        kernels.option_values(m.w, m.out, m.alive, n, rows, self.goal_x, self.delta,
-                              self._scale, self.v_star, self.gamma, self.tried, self.bump_t,
+        kernels.option_values(F.w, m.out, m.alive, n, rows, F.goal, F.delta,
+                              F.L, self.v_star, self.gamma, self.tried, self.bump_t,
                               self.closed_t, self.bump_e, self.succ, clock, T, self.episode,
                               self.stale_horizon, rho_max, self.rho_new, stuck, self._grid,
                               self._origin, self.V, self.sel, self.chain,
@@ -779,7 +818,7 @@ class MotivationEstimator:
                 kernels.value_iteration(                     # Eq. 4-5, no option
                     m.out, m.E, self.R, self.V0, n, self.beta, self.gamma, self.vi_tol,
                     V_FLOOR, self.vi_max_sweeps, self._absorbing(m, n), m.alive,
-                    self.U[:n], np.zeros((n, N_PRIMITIVES)), self.osucc[:n], self.onb[:n],
+                    self.U[:n], np.zeros((n, self.n_primitives)), self.osucc[:n], self.onb[:n],
                     self.ong[:n])
             self._v0_fresh = True
         return self.V0
@@ -795,7 +834,7 @@ class MotivationEstimator:
         return Links(*kernels.option_links(links.targets, links.E, links.actions, self.V, i,
                                            self.U, self.rho, self.osucc, self.onb,
                                            self.ong, R_i,
-                                           self.gamma, _PRIMITIVES))
+                                           self.gamma, self.primitives))
 
     def links_of(self, m: SensorimotorMap, i: int) -> Links:
         """:meth:`options_of` node i's links in map m (what Eq. 6 ranks in-process)."""

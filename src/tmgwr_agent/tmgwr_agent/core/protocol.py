@@ -15,19 +15,24 @@ A greedy rollout (convergence checks) calls ``begin_episode(..., learn=False)``,
 ``act(explore=False)`` and ``observe(..., learn=False)``: epsilon 0 and no learning.
 
 What each agent may use is part of the comparison (Table 1): the TMGWR agent uses only the
-sensed ``obs`` vector, ``info.bumped`` (a touch sensor) and the goal *observation*; the
-tabular agents use ``cell`` (their state) and the outcome flags of ``info`` for their
-rewards; the model-based agent is also handed the original maze as its transition model.
+sensed ``obs`` vector (of the dimension its :class:`~tmgwr_agent.core.senses.Senses`
+declare), ``info.bumped`` (a touch sensor) and the goal *observation*; the tabular agents
+use ``cell`` (their state: the world's cell, or under a sensor transform the discretised
+sensation, never the true cell) and the outcome flags of ``info`` for their rewards; the
+model-based agent is also handed the original maze as its transition model.
 """
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
-from maze_sim.maze import Cell
-from maze_sim.world import StepInfo
+#: The tabular agents' state: a world's cell index (the TMGWR agent never reads it).
+Cell = Any
+#: What a step did besides the observation: ``action``, ``bumped``, ``reached_goal``,
+#: ``terminated`` (the simulator's ``maze_sim.world.StepInfo``, or any object with them).
+StepInfo = Any
 
 
 class Agent(Protocol):

@@ -67,7 +67,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from maze_sim.maze import ACTION_VECTORS
 from tmgwr_agent.core import kernels
 from tmgwr_agent.core.outcome import Outcome
 from tmgwr_common.params import Config, param
@@ -155,9 +154,15 @@ _INITIAL_DEGREE = 4
 class SensorimotorMap:
     """A growing map of (weight, context) nodes joined by directed, action-labelled links."""
 
-    def __init__(self, dim: int, action_dim: int = 2, config: MapConfig = MapConfig()):
+    def __init__(self, dim: int, action_dim: int = 2, config: MapConfig = MapConfig(),
+                 primitives: np.ndarray | None = None):
+        """``primitives``: the motor vector of each action (:class:`~tmgwr_agent.core.
+        senses.Senses`), what :meth:`experience` labels a link with; :meth:`step` takes
+        the vector itself."""
         kernels.announce_compilation()
         self.dim, self.action_dim = dim, action_dim
+        self.primitives = None if primitives is None else \
+            np.ascontiguousarray(primitives, dtype=float)
         self.config = config
         c = config
         self.a_T, self.h_T = c.a_T, c.h_T
@@ -287,7 +292,10 @@ class SensorimotorMap:
             self.begin_episode()
             motor = None
         else:
-            motor = ACTION_VECTORS[outcome.action]
+            if self.primitives is None:
+                raise ValueError("the map was given no motor primitives: experience() "
+                                 "labels links with primitives[action]")
+            motor = self.primitives[outcome.action]
         winner = self.step(x, motor, learn=learn)
         if learn and outcome.ends_episode:
             self.mark_terminal(winner)
@@ -394,18 +402,20 @@ class SensorimotorMap:
         return path
 
     @classmethod
-    def load(cls, path: str | Path, config: MapConfig = MapConfig(), with_run: bool = False
+    def load(cls, path: str | Path, config: MapConfig = MapConfig(), with_run: bool = False,
+             primitives: np.ndarray | None = None
              ) -> tuple[SensorimotorMap, int] | tuple[SensorimotorMap, int, int]:
         """A map read from a :meth:`save` file (its dimensions from the file, the
-        hyperparameters ``config``) and the last step id it learnt (-1 if unknown); with
-        ``with_run``, also the run id of that step (0 if unknown)."""
+        hyperparameters ``config``, the agent's motor ``primitives``) and the last step id
+        it learnt (-1 if unknown); with ``with_run``, also the run id of that step (0 if
+        unknown)."""
         try:
             with np.load(Path(path)) as data:
                 state = {k: data[k] for k in data.files}
             step_id = int(state.pop("step_id", -1))
             run_id = int(state.pop("run_id", 0))
             m = cls(dim=int(state["w"].shape[1]), action_dim=int(state["a"].shape[2]),
-                    config=config)
+                    config=config, primitives=primitives)
             m.load_state_dict(state)
         except (OSError, KeyError, ValueError, IndexError) as exc:
             raise ValueError(f"{path}: not a saved sensorimotor map ({exc})") from exc

@@ -2,8 +2,10 @@
 
 ``make_agent("tmgwr:credit", maze, rng)``: a name, optionally followed by ``:options``
 joined by ``+``. TMGWR options: ``literal`` / ``credit`` choose the sensorimotor-link rule
-(plain ``tmgwr`` uses the default of ``MapConfig.link_rule``); ``paper`` turns our
-additions off (``absorbing_terminals``; ``value_unknown`` and ``try_untried``, the options
+(plain ``tmgwr`` uses the default of ``MapConfig.link_rule``); ``grid`` measures the value
+of the unknown on the sensor's axes (``unknown`` grid: it is told the sensation is a grid
+cell's coordinates; plain ``tmgwr`` learns its frame, core/frame.py); ``paper`` turns our
+additions off (``absorbing_terminals``; ``unknown`` none and ``try_untried``, the options
 of Eq. 5' and Eq. 6; ``goal_search``; ``walk_while_novel``: the agent of Eq. 1-7 as
 printed), e.g.
 ``tmgwr:literal+paper``. The baselines (:data:`BASELINES`) take no option. Options are
@@ -19,6 +21,8 @@ import numpy as np
 
 from maze_sim.maze import Maze
 from tmgwr_agent.core.protocol import Agent
+from tmgwr_agent.core.senses import Senses
+from tmgwr_agent.world_senses import maze_senses
 
 AGENT_NAMES = ("tmgwr", "q_learning", "model_based", "dyna_q_plus", "rmax", "freespace")
 
@@ -35,7 +39,8 @@ BASELINES = {
 TMGWR_OPTIONS = {
     "literal": {"link_rule": "literal"},
     "credit": {"link_rule": "credit"},
-    "paper": {"absorbing_terminals": False, "value_unknown": False, "goal_search": False,
+    "grid": {"unknown": "grid"},
+    "paper": {"absorbing_terminals": False, "unknown": "none", "goal_search": False,
               "try_untried": False, "walk_while_novel": False, "eps_min": 0.1},
 }
 
@@ -63,9 +68,17 @@ def baseline_class(name: str) -> type:
 
 
 def make_agent(spec: str, maze: Maze, rng: np.random.Generator,
-               overrides: Mapping[str, Any] | None = None) -> Agent:
+               overrides: Mapping[str, Any] | None = None, senses: Senses | None = None,
+               sensed: bool = False) -> Agent:
+    """``senses``: what the TMGWR agent senses and acts with (default: the grid world's,
+    :func:`~tmgwr_agent.world_senses.maze_senses`); ``sensed``: the world is seen through
+    a sensor transform (:mod:`.sensing`): a tabular agent then keys on sensed states, not
+    cells."""
     name, options = parse_spec(spec)
     if name == "tmgwr":
         from tmgwr_agent.core.agent import TMGWRAgent
-        return TMGWRAgent(maze, rng, {**(overrides or {}), **options})
-    return baseline_class(name)(maze, rng, overrides)
+        return TMGWRAgent(senses or maze_senses(), rng, {**(overrides or {}), **options})
+    from tmgwr_agent.experiments.sensing import SENSED_TABLE_AGENTS
+    if name in SENSED_TABLE_AGENTS:
+        return baseline_class(name)(maze, rng, overrides, sensed_states=sensed)
+    return baseline_class(name)(maze, rng, overrides)   # sensing.check_sensor refuses it

@@ -70,6 +70,12 @@ def register(subparsers) -> None:
                         "baseline the section named after it; AGENT=FILE gives the file "
                         "to that agent (a spec of --agents, or a name for all its specs) "
                         "only. Repeatable, later files win; recorded in the JSON")
+    p.add_argument("--sensor", default=None, metavar="SPEC",
+                   help="how the agents sense the maze (default identity: the (row, col) "
+                        "of the cell): comma-joined noise=SIGMA (cells), scale=SX:SY, "
+                        "rotate=DEG (composed in that order), or view=K alone (the "
+                        "(2K+1)^2 window of walls around the agent plus a compass to the "
+                        "goal); recorded as 'sensor' in the JSON")
     p.add_argument("--suite", default=None, metavar="SPEC",
                    help="instead of --maze: generated mazes (env-change, goal-change), "
                         "FAMILY[:N] or all[:N] or a comma list (braided:3,rooms:3); "
@@ -197,7 +203,8 @@ def cmd_experiment(args: argparse.Namespace) -> int:
         result = run_scenario(args.scenario, args.maze or _default_maze(), args.agents,
                               args.trials, args.seed, args.goals, args.episodes, args.event,
                               args.goal, args.jobs, progress=not args.quiet,
-                              overrides=overrides, params_files=args.params or ())
+                              overrides=overrides, params_files=args.params or (),
+                              sensor=args.sensor)
     except UsageError as exc:
         return _fail(str(exc))
     write_json(result, args.json)
@@ -237,7 +244,7 @@ def _cmd_suite(args: argparse.Namespace) -> int:
                            args.suite_seed, args.suite_first, args.event, args.goals,
                            args.episodes, args.jobs, progress=not args.quiet,
                            maze_dir=maze_dir, overrides=overrides,
-                           params_files=args.params or ())
+                           params_files=args.params or (), sensor=args.sensor)
     except UsageError as exc:
         return _fail(str(exc))
     write_json(result, args.json)

@@ -17,6 +17,10 @@ Protocol, per agent and trial (a fresh agent, its generator from the trial's see
    caps run out, and also when step 3 failed (an agent stuck at the block would only burn
    the budget).
 
+``learning_steps``: the mean steps of the last 10 training episodes of step 1
+(:func:`.runner.learning_steps`): what an episode costs once learnt, exploration and any
+re-testing included, against ``shortest_before``.
+
 ``oracle_steps`` (top level): the lower bound of an agent that knows the old maze
 perfectly: it walks a shortest path of the old maze, bumps once into the first blocked
 cell on it, then walks a shortest path of the new maze from where it stands. Over all
@@ -36,16 +40,19 @@ Parameters: ``overrides`` (``experiment --params``) change an agent's declared d
 
 from __future__ import annotations
 
+from functools import partial
 from typing import Any, Mapping
 
 import numpy as np
 
 from maze_sim.maze import Maze, bfs_distances
+from maze_sim.sensors import IDENTITY
 from tmgwr_agent.experiments.agent_factory import make_agent
 from tmgwr_agent.experiments.parallel import agent_trials
 from tmgwr_agent.experiments.runner import (
     Caps,
     greedy_optimal,
+    learning_steps,
     make_world,
     run_episode,
     set_goal,
@@ -53,6 +60,9 @@ from tmgwr_agent.experiments.runner import (
     with_overrides,
 )
 from tmgwr_agent.experiments.stats import stat
+
+#: Per-trial results, each a STAT per agent in the JSON.
+RESULTS = ("steps", "episodes_to_optimal", "train_episodes", "learning_steps")
 
 DEFAULT_AGENTS = ("tmgwr", "tmgwr:literal", "tmgwr:credit", "q_learning", "model_based",
                   "dyna_q_plus")
@@ -100,15 +110,17 @@ def oracle_steps(maze: Maze, event: str, goal: str = "G") -> int:
 
 def trial(spec: str, t: int, seed: np.random.SeedSequence, maze: str | Maze, event: str,
           goal: str, overrides: Mapping[str, Any] | None = None, *,
-          to_optimal: bool = True, within: int | None = None) -> dict:
+          to_optimal: bool = True, within: int | None = None,
+          sensor: str = IDENTITY) -> dict:
     """Steps 1-4 for one agent and trial (``maze``: a file or a Maze); ``to_optimal``
     False stops after step 3 (``episodes_to_optimal`` is then ``None``); ``within`` caps
     step 4 at that many episodes (``None`` beyond them; default the caps of
-    :class:`.runner.Caps`)."""
+    :class:`.runner.Caps`); ``sensor``: the ``--sensor`` spec (:mod:`.sensing`)."""
     maze = maze if isinstance(maze, Maze) else Maze.from_file(maze)
     caps = Caps.for_maze(maze)
-    world = make_world(maze, goal, caps)
-    agent = make_agent(spec, maze, np.random.default_rng(seed), overrides)
+    world = make_world(maze, goal, caps, sensor, seed)
+    agent = make_agent(spec, maze, np.random.default_rng(seed), overrides,
+                       sensed=not world.identity, senses=world.senses)
     set_goal(world, agent, goal)
     conv = train_until_converged(world, agent, caps)
     world.fire_event(event)
@@ -129,18 +141,20 @@ def trial(spec: str, t: int, seed: np.random.SeedSequence, maze: str | Maze, eve
             n += 1
             used += e.steps
     return {"steps": steps, "episodes_to_optimal": episodes,
-            "train_episodes": conv.episodes}
+            "train_episodes": conv.episodes, "learning_steps": learning_steps(conv.curve)}
 
 
 def run(maze_path: str, agents: list[str], trials: int, seed: int, event: str = "a",
         goal: str = "G", jobs: int | None = None, progress: bool = True,
-        overrides: Mapping[str, Mapping[str, Any]] | None = None) -> dict:
-    """``overrides``: parameter overrides per agent spec (absent: the defaults)."""
+        overrides: Mapping[str, Mapping[str, Any]] | None = None,
+        sensor: str = IDENTITY) -> dict:
+    """``overrides``: parameter overrides per agent spec (absent: the defaults);
+    ``sensor``: the normalised ``--sensor`` spec."""
     maze = Maze.from_file(maze_path)
-    res = agent_trials(with_overrides(trial, overrides), agents, seed, trials,
+    fn = partial(trial, sensor=sensor) if sensor != IDENTITY else trial
+    res = agent_trials(with_overrides(fn, overrides), agents, seed, trials,
                        (maze_path, event, goal), jobs, f"env-change {event}", progress)
-    out = {a: {k: stat(r[k] for r in rs)
-               for k in ("steps", "episodes_to_optimal", "train_episodes")}
+    out = {a: {k: stat(r[k] for r in rs) for k in RESULTS}
            for a, rs in res.items()}
     return {"event": event, "goal": goal, "oracle_steps": oracle_steps(maze, event, goal),
             "shortest_before": maze.shortest_path_length(maze.start, maze.goal_cell(goal)),

@@ -17,21 +17,29 @@ Protocol, per agent and trial (a fresh agent, its generator from the trial's see
   episode starting from S). An episode truncated by the step cap counts for neither, so
   the two percentages add up to at most 100.
 
+* ``learning_steps`` of a transition ``a -> b``: the mean steps of the last 10 episodes
+  with goal ``a`` (:func:`.runner.learning_steps`), what an episode to ``a`` cost once
+  learnt, just before the goal moved.
+
 JSON: ``agents[NAME] = {"transitions": [{"from", "to", "previous_pct": STAT,
-"current_pct": STAT}, ...]}`` plus ``"episodes"`` at the top level.
+"current_pct": STAT, "learning_steps": STAT}, ...]}`` plus ``"episodes"`` at the top
+level.
 """
 
 from __future__ import annotations
 
+from functools import partial
 from typing import Any, Mapping
 
 import numpy as np
 
 from maze_sim.maze import Maze
+from maze_sim.sensors import IDENTITY
 from tmgwr_agent.experiments.agent_factory import make_agent
 from tmgwr_agent.experiments.parallel import agent_trials
 from tmgwr_agent.experiments.runner import (
     Caps,
+    learning_steps,
     make_world,
     run_episode,
     set_goal,
@@ -45,34 +53,43 @@ DEFAULT_EPISODES = 1000
 
 def trial(spec: str, t: int, seed: np.random.SeedSequence, maze_path: str,
           goals: tuple[str, ...], episodes: int,
-          overrides: Mapping[str, Any] | None = None) -> list[dict]:
+          overrides: Mapping[str, Any] | None = None, *, sensor: str = IDENTITY) -> list[dict]:
     maze = Maze.from_file(maze_path)
     caps = Caps.for_maze(maze)
-    world = make_world(maze, goals[0], caps)
-    agent = make_agent(spec, maze, np.random.default_rng(seed), overrides)
+    world = make_world(maze, goals[0], caps, sensor, seed)
+    agent = make_agent(spec, maze, np.random.default_rng(seed), overrides,
+                       sensed=not world.identity, senses=world.senses)
     set_goal(world, agent, goals[0])
     out = []
+    curve: list[int] = []
     for i, goal in enumerate(goals):
         if i:
+            before = learning_steps(curve)        # the last episodes with the old goal
             set_goal(world, agent, goal, keep_previous=True)
         prev = cur = 0
+        curve = []
         for _ in range(episodes):
             ep = run_episode(world, agent)
             prev += ep.reached_previous_goal
             cur += ep.reached_goal
+            curve.append(ep.steps)
         if i:
             out.append({"from": goals[i - 1], "to": goal,
                         "previous_pct": 100.0 * prev / episodes,
-                        "current_pct": 100.0 * cur / episodes})
+                        "current_pct": 100.0 * cur / episodes,
+                        "learning_steps": before})
     return out
 
 
 def run(maze_path: str, agents: list[str], trials: int, seed: int,
         goals: tuple[str, ...] = DEFAULT_GOALS, episodes: int = DEFAULT_EPISODES,
         jobs: int | None = None, progress: bool = True,
-        overrides: Mapping[str, Mapping[str, Any]] | None = None) -> dict:
-    """``overrides``: parameter overrides per agent spec (absent: the defaults)."""
-    res = agent_trials(with_overrides(trial, overrides), agents, seed, trials,
+        overrides: Mapping[str, Mapping[str, Any]] | None = None,
+        sensor: str = IDENTITY) -> dict:
+    """``overrides``: parameter overrides per agent spec (absent: the defaults);
+    ``sensor``: the normalised ``--sensor`` spec."""
+    fn = partial(trial, sensor=sensor) if sensor != IDENTITY else trial
+    res = agent_trials(with_overrides(fn, overrides), agents, seed, trials,
                        (maze_path, tuple(goals), episodes), jobs, "goal-change", progress)
     out = {}
     for a, per_trial in res.items():
@@ -81,6 +98,7 @@ def run(maze_path: str, agents: list[str], trials: int, seed: int,
             transitions.append({
                 "from": tr["from"], "to": tr["to"],
                 "previous_pct": stat(p[k]["previous_pct"] for p in per_trial),
-                "current_pct": stat(p[k]["current_pct"] for p in per_trial)})
+                "current_pct": stat(p[k]["current_pct"] for p in per_trial),
+                "learning_steps": stat(p[k]["learning_steps"] for p in per_trial)})
         out[a] = {"transitions": transitions}
     return {"episodes": episodes, "goals": list(goals), "agents": out}

@@ -29,6 +29,7 @@ import numpy as np
 from maze_sim.maze import Maze
 from maze_sim.world import GridWorld
 from tmgwr_agent.core.agent import TMGWRAgent
+from tmgwr_agent.world_senses import maze_senses
 
 
 def run_reference(maze_path: str | Path, steps: int, goal: str | tuple = "G",
@@ -39,7 +40,7 @@ def run_reference(maze_path: str | Path, steps: int, goal: str | tuple = "G",
     """``steps`` observations of the lockstep loop; returns (cells, seconds)."""
     maze = Maze.from_file(maze_path)
     world = GridWorld(maze, goal, sensor_noise, max_episode_steps, seed=world_seed)
-    agent = TMGWRAgent(maze, np.random.default_rng(agent_seed), params)
+    agent = TMGWRAgent(maze_senses(), np.random.default_rng(agent_seed), params)
     changes = {int(k): tuple(c) for k, c in goal_changes}
     cells: list[tuple[int, int, int, int]] = []
     agent.set_goal(world.goal, world.goal_observation())

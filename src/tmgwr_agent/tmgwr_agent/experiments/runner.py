@@ -46,12 +46,18 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Any, Callable, Mapping
 
+import numpy as np
+
 from maze_sim.maze import Maze
+from maze_sim.sensors import SensorSpec
 from maze_sim.world import GridWorld
 from tmgwr_agent.core.protocol import Agent
+from tmgwr_agent.experiments.sensing import SensedWorld, noise_rng
 
 #: Consecutive optimal greedy rollouts that count as convergence (section 5.2.5).
 STREAK = 10
+#: ``learning_steps``: the mean steps of this many training episodes before an event.
+LEARNING_EPISODES = 10
 
 
 @dataclass(frozen=True)
@@ -90,22 +96,34 @@ def _call_with(fn: Callable, overrides: dict[str, dict[str, Any]], spec: str, *a
     return fn(spec, *args, overrides=overrides.get(spec))
 
 
-def make_world(maze: Maze, goal: str, caps: Caps) -> GridWorld:
-    return GridWorld(maze, goal=goal, max_episode_steps=caps.episode_steps)
+def make_world(maze: Maze, goal: str, caps: Caps, sensor: SensorSpec | str | None = None,
+               seed: np.random.SeedSequence | None = None) -> SensedWorld:
+    """The world under ``sensor`` (default identity); ``seed``: the trial's seed, whose
+    sensor-noise stream (:func:`.sensing.noise_rng`) drives any noise."""
+    world = GridWorld(maze, goal=goal, max_episode_steps=caps.episode_steps)
+    return SensedWorld(world, sensor, noise_rng(seed))
 
 
-def set_goal(world: GridWorld, agent: Agent, goal: str, keep_previous: bool = False) -> None:
-    """Move the goal in the world and tell the agent (cell for the tabular agents, the
-    goal *observation* for TMGWR, which never sees cells)."""
+def agent_state(world: GridWorld | SensedWorld):
+    """What a tabular agent may know of where it is: the discretised sensation of a
+    :class:`.sensing.SensedWorld`, the cell of a bare world (identity sensing)."""
+    return world.state if isinstance(world, SensedWorld) else world.cell
+
+
+def set_goal(world: GridWorld | SensedWorld, agent: Agent, goal: str,
+             keep_previous: bool = False) -> None:
+    """Move the goal in the world and tell the agent (its tabular state for the tabular
+    agents, the goal *sensation* for TMGWR, which never sees cells)."""
     world.set_goal(goal, keep_previous=keep_previous)
-    agent.set_goal(world.goal, world.goal_observation())
+    state = world.goal_state if isinstance(world, SensedWorld) else world.goal
+    agent.set_goal(state, world.goal_observation())
 
 
-def run_episode(world: GridWorld, agent: Agent, learn: bool = True, explore: bool = True,
-                max_steps: int | None = None) -> Episode:
+def run_episode(world: GridWorld | SensedWorld, agent: Agent, learn: bool = True,
+                explore: bool = True, max_steps: int | None = None) -> Episode:
     """One episode from S; ``max_steps`` (default: the world's episode cap) truncates."""
     obs, _ = world.reset()
-    agent.begin_episode(obs, world.cell, learn=learn)
+    agent.begin_episode(obs, agent_state(world), learn=learn)
     cap = max_steps if max_steps is not None else world.max_episode_steps
     steps = 0
     while True:
@@ -127,6 +145,14 @@ def greedy_optimal(world: GridWorld, agent: Agent, optimal: int | None = None) -
         return False
     ep = run_episode(world, agent, learn=False, explore=False, max_steps=d)
     return ep.reached_goal and ep.steps == d
+
+
+def learning_steps(curve: list[int], n: int = LEARNING_EPISODES) -> float | None:
+    """The mean steps of the last ``n`` training episodes of ``curve`` (all of them when
+    fewer ran; None when none did): the cost of an episode once learnt, epsilon-greedy
+    exploration and any re-testing of walls included (the greedy probes never show it)."""
+    tail = curve[-n:]
+    return sum(tail) / len(tail) if tail else None
 
 
 @dataclass

@@ -3,7 +3,8 @@
 :func:`run_scenario` validates every name before any work starts (agents, goals, event,
 maze file) and raises :class:`UsageError` with a message naming what is wrong; the CLI
 turns it into exit code 2. The JSON starts with the contract header (README, Experiment JSON)
-(``scenario, maze, trials, seed``), then the scenario's own top-level fields, the step
+(``scenario, maze, trials, seed``, and ``sensor``: the normalised ``--sensor`` spec,
+``"identity"`` without one), then the scenario's own top-level fields, the step
 caps used (:class:`.runner.Caps`), with parameter overrides (``--params``) the ``params``
 they came from (:func:`params_record`), and ``agents``.
 """
@@ -17,10 +18,12 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from maze_sim.maze import Maze, MazeError, maze_file
+from maze_sim.sensors import SensorSpec, SensorSpecError, parse_sensor
 from tmgwr_agent.experiments import env_change, goal_change, sample_complexity, timing
 from tmgwr_agent.experiments.agent_factory import AGENT_NAMES, make_agent, parse_spec
 from tmgwr_agent.experiments.names import SCENARIOS
 from tmgwr_agent.experiments.runner import Caps
+from tmgwr_agent.experiments.sensing import check_sensor
 
 DEFAULT_MAZE = maze_file()
 DEFAULT_AGENTS = AGENT_NAMES
@@ -94,6 +97,19 @@ def params_record(overrides: Mapping[str, Mapping[str, Any]],
             "agents": {a: dict(v) for a, v in overrides.items()}}
 
 
+def check_sensor_spec(sensor: str | None, agents: Sequence[str]) -> SensorSpec:
+    """``--sensor``: the checked spec, refused (naming the part, or the agent that cannot
+    run under it) as a :class:`UsageError`."""
+    try:
+        spec = parse_sensor(sensor)
+    except SensorSpecError as exc:
+        raise UsageError(f"--sensor: {exc}") from None
+    why = check_sensor(agents, spec)
+    if why:
+        raise UsageError(f"--sensor: {why}")
+    return spec
+
+
 def check_goals(maze: Maze, goals: Sequence[str]) -> tuple[str, ...]:
     for g in goals:
         if g not in maze.goals:
@@ -118,10 +134,11 @@ def run_scenario(scenario: str, maze_path: str | Path = DEFAULT_MAZE,
                  event: str = "a", goal: str = "G", jobs: int | None = None,
                  progress: bool = True,
                  overrides: Mapping[str, Mapping[str, Any]] | None = None,
-                 params_files: Sequence[str] = ()) -> dict:
+                 params_files: Sequence[str] = (), sensor: str | None = None) -> dict:
     """``overrides``: parameter overrides per agent spec (``--params``; None: every agent
     with its declared defaults, and no ``params`` in the JSON); ``params_files``: where
-    they came from, recorded beside them."""
+    they came from, recorded beside them; ``sensor``: the ``--sensor`` spec (None:
+    identity), recorded normalised as ``sensor``."""
     if scenario not in SCENARIOS:
         raise UsageError(f"unknown scenario {scenario!r}; scenarios: {', '.join(SCENARIOS)}")
     d = DEFAULTS[scenario]
@@ -137,8 +154,9 @@ def run_scenario(scenario: str, maze_path: str | Path = DEFAULT_MAZE,
         raise UsageError(f"--episodes must be >= 1, got {episodes}")
     if overrides is not None:
         overrides = check_overrides(agents, overrides, maze)
+    spec = check_sensor_spec(sensor, agents)
     maze_s = str(maze_path)
-    common = dict(jobs=jobs, progress=progress, overrides=overrides)
+    common = dict(jobs=jobs, progress=progress, overrides=overrides, sensor=spec.text)
     if scenario == "goal-change":
         if len(goals) < 2:
             raise UsageError("goal-change needs at least two goals (--goals 1,2,...)")
@@ -153,7 +171,8 @@ def run_scenario(scenario: str, maze_path: str | Path = DEFAULT_MAZE,
             raise UsageError(f"timing takes two goals FROM,TO (got {','.join(goals)})")
         body = timing.run(maze_s, agents, trials, seed, goals, check_event(maze, event, goal),
                           goal, **common)
-    out = {"scenario": scenario, "maze": maze_s, "trials": trials, "seed": seed}
+    out = {"scenario": scenario, "maze": maze_s, "trials": trials, "seed": seed,
+           "sensor": spec.text}
     out.update({k: v for k, v in body.items() if k != "agents"})
     out["caps"] = asdict(Caps.for_maze(maze))
     if overrides is not None:

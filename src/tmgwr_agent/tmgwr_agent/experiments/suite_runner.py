@@ -30,7 +30,8 @@ opening) or without the goals is skipped and listed in ``suite.skipped``.
 Parameter overrides (``--params``) apply to every maze and are recorded as ``params``
 before ``agents``, as in a single-maze run (:func:`.scenarios.params_record`).
 
-JSON: the scenario's header and ``agents`` (each statistic over every trial of every maze,
+JSON: the scenario's header (``sensor`` included: ``--sensor`` applies to every maze) and
+``agents`` (each statistic over every trial of every maze,
 maze by maze; env-change adds ``oracle_ratio``: steps / oracle_steps per trial), then::
 
     "suite": {"spec", "seed", "first", "event" (env-change: "block" | "open"),
@@ -78,9 +79,11 @@ import math
 import statistics
 import tempfile
 from dataclasses import asdict
+from functools import partial
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from maze_sim.sensors import IDENTITY
 from maze_sim.suite import SuiteError, SuiteMaze, suite
 from tmgwr_agent.experiments import env_change, goal_change
 from tmgwr_agent.experiments.parallel import run_items, trial_seeds
@@ -90,6 +93,7 @@ from tmgwr_agent.experiments.scenarios import (
     UsageError,
     check_agents,
     check_overrides,
+    check_sensor_spec,
     params_record,
 )
 from tmgwr_agent.experiments.stats import stat
@@ -184,8 +188,7 @@ def _env_maze(sm: SuiteMaze, event: str, res: dict[str, list[dict]]) -> dict:
             "shortest_after": maze.shortest_path_length(
                 maze.start, maze.goal_cell(GOAL), walls=maze.walls_after([event])),
             "caps": asdict(Caps.for_maze(maze)),
-            "agents": {a: {k: stat(r[k] for r in rs)
-                           for k in ("steps", "episodes_to_optimal", "train_episodes")}
+            "agents": {a: {k: stat(r[k] for r in rs) for k in env_change.RESULTS}
                        for a, rs in res.items()}}
 
 
@@ -193,7 +196,7 @@ def _env_agents(mazes: list[dict], agents: list[str]) -> dict:
     out = {}
     for a in agents:
         d = {k: stat(v for m in mazes for v in m["agents"][a][k]["values"])
-             for k in ("steps", "episodes_to_optimal", "train_episodes")}
+             for k in env_change.RESULTS}
         d["oracle_ratio"] = stat(None if v is None else v / m["oracle_steps"]
                                  for m in mazes for v in m["agents"][a]["steps"]["values"])
         out[a] = d
@@ -204,7 +207,8 @@ def _env_agents(mazes: list[dict], agents: list[str]) -> dict:
 def _goal_rows(per_trial: list[list[dict]]) -> list[dict]:
     return [{"from": tr["from"], "to": tr["to"],
              "previous_pct": stat(p[k]["previous_pct"] for p in per_trial),
-             "current_pct": stat(p[k]["current_pct"] for p in per_trial)}
+             "current_pct": stat(p[k]["current_pct"] for p in per_trial),
+             "learning_steps": stat(p[k]["learning_steps"] for p in per_trial)}
             for k, tr in enumerate(per_trial[0])]
 
 
@@ -258,10 +262,10 @@ def run_suite(scenario: str, spec: str, agents: Sequence[str] | None = None,
               episodes: int | None = None, jobs: int | None = None, progress: bool = True,
               maze_dir: str | Path | None = None,
               overrides: Mapping[str, Mapping[str, Any]] | None = None,
-              params_files: Sequence[str] = ()) -> dict:
+              params_files: Sequence[str] = (), sensor: str | None = None) -> dict:
     """Run ``scenario`` on every maze of ``spec``; returns the suite JSON (see above).
     ``maze_dir``: where the maze files go (None: a temporary folder, removed after);
-    ``overrides``, ``params_files``: as for :func:`.scenarios.run_scenario`."""
+    ``overrides``, ``params_files``, ``sensor``: as for :func:`.scenarios.run_scenario`."""
     if scenario not in SUITE_SCENARIOS:
         raise UsageError(f"--suite runs {' and '.join(SUITE_SCENARIOS)}, not {scenario}")
     if trials < 1:
@@ -275,6 +279,7 @@ def run_suite(scenario: str, spec: str, agents: Sequence[str] | None = None,
                              f"got {event!r}")
         kind = EVENT_KINDS[event]
     agents = check_agents(agents if agents else DEFAULTS[scenario]["agents"])
+    sensor = check_sensor_spec(sensor, agents).text
     if scenario == "goal-change":
         episodes = episodes if episodes is not None else goal_change.DEFAULT_EPISODES
         if episodes < 1:
@@ -292,13 +297,14 @@ def run_suite(scenario: str, spec: str, agents: Sequence[str] | None = None,
     if maze_dir is None:
         with tempfile.TemporaryDirectory(prefix="tmgwr_suite_") as tmp:
             return _run(scenario, spec, agents, trials, seed, suite_seed, first, kind,
-                        episodes, jobs, progress, Path(tmp), mazes, todo, skipped, params)
+                        episodes, jobs, progress, Path(tmp), mazes, todo, skipped, params,
+                        sensor)
     return _run(scenario, spec, agents, trials, seed, suite_seed, first, kind, episodes,
-                jobs, progress, Path(maze_dir), mazes, todo, skipped, params)
+                jobs, progress, Path(maze_dir), mazes, todo, skipped, params, sensor)
 
 
 def _run(scenario, spec, agents, trials, seed, suite_seed, first, kind, episodes, jobs,
-         progress, maze_dir: Path, mazes, todo, skipped, params) -> dict:
+         progress, maze_dir: Path, mazes, todo, skipped, params, sensor: str) -> dict:
     for sm in mazes:                      # every maze, skipped ones too: all inspectable
         sm.write(maze_dir)
     seeds = trial_seeds(seed, trials)
@@ -310,8 +316,10 @@ def _run(scenario, spec, agents, trials, seed, suite_seed, first, kind, episodes
             for t in range(trials):
                 items.append((a, t, seeds[t]) + extra)
                 owner.append((m, a))
-    fn = with_overrides(env_change.trial if scenario == "env-change" else goal_change.trial,
-                        params[0] if params else None)
+    fn = env_change.trial if scenario == "env-change" else goal_change.trial
+    if sensor != IDENTITY:
+        fn = partial(fn, sensor=sensor)
+    fn = with_overrides(fn, params[0] if params else None)
     # Biggest mazes first (the pool's tail is shorter); results go back in item order.
     order = sorted(range(len(items)), key=lambda i: -todo[owner[i][0]][0].free_cells)
     done = run_items(fn, [items[i] for i in order], jobs,
@@ -348,7 +356,8 @@ def _run(scenario, spec, agents, trials, seed, suite_seed, first, kind, episodes
 
     fam_summary = {f: summary([e for e in entries if e["family"] == f],
                               sum(s["family"] == f for s in skipped)) for f in families}
-    out: dict = {"scenario": scenario, "maze": None, "trials": trials, "seed": seed}
+    out: dict = {"scenario": scenario, "maze": None, "trials": trials, "seed": seed,
+                 "sensor": sensor}
     if scenario == "env-change":
         out.update({"event": kind, "goal": GOAL})
     else:

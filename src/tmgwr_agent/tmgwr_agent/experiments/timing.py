@@ -24,11 +24,13 @@ run (same seeds, same load), not across runs.
 from __future__ import annotations
 
 import time
+from functools import partial
 from typing import Any, Mapping
 
 import numpy as np
 
 from maze_sim.maze import Maze
+from maze_sim.sensors import IDENTITY
 from tmgwr_agent.experiments.agent_factory import make_agent
 from tmgwr_agent.experiments.parallel import agent_trials
 from tmgwr_agent.experiments.runner import (
@@ -46,13 +48,14 @@ DEFAULT_GOALS = ("4", "3")
 
 def trial(spec: str, t: int, seed: np.random.SeedSequence, maze_path: str,
           goals: tuple[str, str], event: str, goal: str = "G",
-          overrides: Mapping[str, Any] | None = None) -> dict:
+          overrides: Mapping[str, Any] | None = None, *, sensor: str = IDENTITY) -> dict:
     maze = Maze.from_file(maze_path)
     caps = Caps.for_maze(maze)
     s_train, s_adapt = seed.spawn(2)
     # training on G, then the event
-    world = make_world(maze, goal, caps)
-    agent = make_agent(spec, maze, np.random.default_rng(s_train), overrides)
+    world = make_world(maze, goal, caps, sensor, s_train)
+    agent = make_agent(spec, maze, np.random.default_rng(s_train), overrides,
+                       sensed=not world.identity, senses=world.senses)
     set_goal(world, agent, goal)
     conv = train_until_converged(world, agent, caps)
     train_s = conv.cpu_s if conv.episodes is not None else None
@@ -61,8 +64,9 @@ def trial(spec: str, t: int, seed: np.random.SeedSequence, maze_path: str,
     ep = run_episode(world, agent)
     event_s = time.process_time() - t0 if ep.reached_goal else None
     # training on goals[0], then the goal moves to goals[1]
-    world = make_world(maze, goals[0], caps)
-    agent = make_agent(spec, maze, np.random.default_rng(s_adapt), overrides)
+    world = make_world(maze, goals[0], caps, sensor, s_adapt)
+    agent = make_agent(spec, maze, np.random.default_rng(s_adapt), overrides,
+                       sensed=not world.identity, senses=world.senses)
     set_goal(world, agent, goals[0])
     adapt_s = None
     if train_until_converged(world, agent, caps).episodes is not None:
@@ -76,11 +80,14 @@ def trial(spec: str, t: int, seed: np.random.SeedSequence, maze_path: str,
 def run(maze_path: str, agents: list[str], trials: int, seed: int,
         goals: tuple[str, ...] = DEFAULT_GOALS, event: str = "a", goal: str = "G",
         jobs: int | None = None, progress: bool = True,
-        overrides: Mapping[str, Mapping[str, Any]] | None = None) -> dict:
-    """``overrides``: parameter overrides per agent spec (absent: the defaults)."""
+        overrides: Mapping[str, Mapping[str, Any]] | None = None,
+        sensor: str = IDENTITY) -> dict:
+    """``overrides``: parameter overrides per agent spec (absent: the defaults);
+    ``sensor``: the normalised ``--sensor`` spec."""
     if len(goals) != 2:
         raise ValueError(f"timing takes two goals FROM,TO (got {','.join(goals)})")
-    res = agent_trials(with_overrides(trial, overrides), agents, seed, trials,
+    fn = partial(trial, sensor=sensor) if sensor != IDENTITY else trial
+    res = agent_trials(with_overrides(fn, overrides), agents, seed, trials,
                        (maze_path, tuple(goals), event, goal), jobs, "timing", progress)
     out = {a: {k: stat(r[k] for r in rs)
                for k in ("train_s", "goal_adapt_s", "event_recover_s", "train_episodes")}

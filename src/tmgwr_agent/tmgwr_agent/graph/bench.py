@@ -225,11 +225,12 @@ def in_process_rate(steps: int, warmup: int = 200, seed: int = 0,
     from maze_sim.maze import Maze, maze_file
     from maze_sim.world import GridWorld
     from tmgwr_agent.core.agent import TMGWRAgent
+    from tmgwr_agent.world_senses import maze_senses
 
     path = maze_file(maze) if maze else maze_file()
     m = Maze.from_file(path)
     world = GridWorld(m, goal="G", seed=seed)
-    agent = TMGWRAgent(m, np.random.default_rng(seed))
+    agent = TMGWRAgent(maze_senses(), np.random.default_rng(seed))
     agent.set_goal(world.goal, world.goal_observation())
     obs, _ = world.reset()
     agent.begin_episode(obs, world.cell)

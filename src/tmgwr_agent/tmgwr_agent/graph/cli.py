@@ -149,9 +149,10 @@ def cmd_cell(args) -> int:
 def cmd_event(args) -> int:
     from tmgwr_agent.graph.clients import fire_event_request
     from tmgwr_common import topics
+    from tmgwr_common.text import shown
     return _service(args, lambda: fire_event_request(args.name),
                     _name(args, topics.FIRE_EVENT, topics.SIMULATOR),
-                    f"event {args.name!r}")
+                    f"event {shown(args.name)}")
 
 
 def cmd_reset(args) -> int:
@@ -181,6 +182,7 @@ def _run_settings(args) -> tuple[dict, Path | None, Path | None]:
         return given, run_dir, run_dir
     run_dir = resume.find_run(args.resume)
     settings = resume.merged_settings(run_dir, given)
+    resume.check_checkpoints(run_dir)
     bag = None if args.no_record else Path(args.record_dir or resume.resumed_bag_dir(run_dir))
     return settings, run_dir, bag
 

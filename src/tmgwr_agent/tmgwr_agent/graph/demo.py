@@ -4,7 +4,7 @@
    ``runs/<UTC timestamp>/``.
 2. Let the agent learn the default goal until it reaches it reliably: the last
    ``streak`` episodes all ended at the goal within ``slack`` times the shortest path.
-3. Change the goal with a real ``/set_goal`` call (the motivation estimator's service, as
+3. Change the goal with a real ``/set_goal`` call (the simulator's service, as
    ``./tmgwr goal X Y`` or ``ros2 service call`` would) and wait until the new goal is
    reached, then reached reliably.
 4. Fire maze event ``a`` (``/maze_sim/fire_event``): a corridor on the learnt route

@@ -21,7 +21,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from tmgwr_common.checkpoint import SUFFIX
+from tmgwr_common.checkpoint import SUFFIX, CheckpointError, decode, read_regular
 
 RUN_FILE = "graph.json"
 SETTINGS = ("maze", "goal", "seed", "params_files", "composed")
@@ -76,6 +76,9 @@ def merged_settings(run_dir: Path, given: dict[str, Any]) -> dict[str, Any]:
         value = given.get(key)
         if value in (None, [], (), False):
             continue
+        if key == "seed" and saved and saved.get(key) is None:
+            raise ResumeError(f"--seed {value}: the run was started without a seed "
+                              f"({run_dir / RUN_FILE}): a resumed run keeps its settings")
         if key in ("maze", "goal", "seed") and saved.get(key) is not None:
             if str(value) != str(saved[key]):
                 raise ResumeError(f"--{key} {value} differs from the run's {key} "
@@ -83,6 +86,23 @@ def merged_settings(run_dir: Path, given: dict[str, Any]) -> dict[str, Any]:
                                   "its settings")
         out[key] = value
     return out
+
+
+def check_checkpoints(run_dir: Path) -> None:
+    """Refuse (ResumeError, naming the file and why) a run whose checkpoints a node would
+    refuse to read (:func:`tmgwr_common.checkpoint.decode`: array headers checked before
+    anything is allocated), before any node starts."""
+    fd = os.open(run_dir, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
+    try:
+        for path in sorted(run_dir.glob("*" + SUFFIX)):
+            try:
+                decode(read_regular(path.name, fd), str(path))
+            except FileNotFoundError:
+                continue
+            except CheckpointError as exc:
+                raise ResumeError(f"{exc} (remove or replace it to resume)") from None
+    finally:
+        os.close(fd)
 
 
 def resumed_bag_dir(run_dir: Path) -> Path:

@@ -18,10 +18,10 @@ from __future__ import annotations
 import numpy as np
 from rclpy.node import Node
 
-from maze_sim.maze import ACTION_VECTORS
 from tmgwr_agent.core.action_selector import ActionSelector, SelectorConfig
 from tmgwr_agent.core.sensorimotor_map import Links
 from tmgwr_agent.nodes.step_messages import outcome_of
+from tmgwr_agent.world_senses import maze_senses
 from tmgwr_common import topics
 from tmgwr_common.cdr import codec
 from tmgwr_common.checkpoint import (
@@ -59,7 +59,8 @@ class ActionSelectorNode(Node):
     def __init__(self):
         super().__init__("action_selector", **NODE_OPTIONS)
         config, self.p = declare_parameters(self, SelectorConfig, NODE_SPECS)
-        self.core = ActionSelector(np.random.default_rng(self.p["seed"]), config)
+        self.core = ActionSelector(np.random.default_rng(self.p["seed"]), config,
+                                  primitives=maze_senses().primitives)
         self.prev_winner = -1               # the winner this selector last acted from
         pub = self.create_publisher(Action, topics.ACTION, STEP_QOS)
         self.lockstep = Lockstep(pub, logger=self.get_logger(), what="motivation field")
@@ -110,7 +111,7 @@ class ActionSelectorNode(Node):
             action, a.explored = self.core.select(lambda _node: links, node, V, goal,
                                                   self.p["explore"])
             a.action = int(action)
-            a.motor = ACTION_VECTORS[action]
+            a.motor = self.core.primitives[action]
         self.prev_winner = int(f.winner)
         a.walk_next = bool(self.p["explore"] and self.core.policy.draw_ahead())
         return ACTION.encode(a)

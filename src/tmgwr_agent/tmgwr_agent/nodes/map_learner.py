@@ -51,7 +51,8 @@ Lifecycle (a managed node, ``rclpy.lifecycle.LifecycleNode`` as in ros2/demos
   checkpoint; ``activate`` goes on from the same map and step;
 * ``cleanup``: drop the map, the publishers and services, release the directory;
 * ``shutdown`` (from any state; Ctrl-C and SIGTERM take it too): save as on deactivate
-  (atomic), release everything.
+  (atomic), release everything, and end the process (a finalized learner never steps
+  again: ``./tmgwr up`` then stops the graph naming it, never a silent stall).
 
 ``autostart`` (default true) configures and activates the node as soon as it is built, so
 ``ros2 run``, ``ros2 launch``, ``./tmgwr up`` and the composed graph step by themselves; a
@@ -174,6 +175,7 @@ class MapLearnerNode(LifecycleNode):
         self.map_timer = None
         self.refusal = ""                  # why the last transition failed ("" = none)
         self.exit_code = 0
+        self.finished = False              # finalized: the process ends (tmgwr_common.node)
         self.motivation_raw: bytes | None = None
         if self.p["autostart"]:
             autostart(self)                 # ValueError: exit code 2 with the reason
@@ -208,6 +210,7 @@ class MapLearnerNode(LifecycleNode):
             self.store.path(self.p["map_name"])          # a bad name stops us now, not later
         if self.p["initial_map"]:
             self.map, last_step, run_id = self.read_initial_map(self.p["initial_map"])
+            self.map.primitives = ACTION_VECTORS          # the simulator's motor primitives
             self.get_logger().info(f"started from {self.p['initial_map']}: {self.map.size} nodes, "
                                    f"{self.map.link_count()} links, step {last_step} "
                                    f"(run {run_id or 'unknown'})")
@@ -291,6 +294,14 @@ class MapLearnerNode(LifecycleNode):
                 ok = False
         wait_for_acknowledgments(self)       # subscribers get our last messages first
         self.release(final=True)
+        # A finalized learner never steps again: its process ends, so that whoever runs the
+        # graph sees it go (./tmgwr up stops the graph naming it) instead of a ring that
+        # waits for ever on a node that is still there (issue 24).
+        if not self.finished:
+            self.finished = True
+            print("map_learner: finalized: the process ends", flush=True)
+        if not ok:
+            self.exit_code = 1
         return TransitionCallbackReturn.SUCCESS if ok else TransitionCallbackReturn.FAILURE
 
     def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -371,7 +382,7 @@ class MapLearnerNode(LifecycleNode):
         x = np_f64(f.features)
         if self.map is None:
             self.map = SensorimotorMap(dim=len(x), action_dim=ACTION_VECTORS.shape[1],
-                                       config=self.config)
+                                       config=self.config, primitives=ACTION_VECTORS)
         self.gain = f.gain or 1.0
         outcome = outcome_of(f)
         self.prev_winner = -1 if outcome.episode_start else int(self.map.prev)
@@ -566,6 +577,7 @@ class MapLearnerNode(LifecycleNode):
             self.get_logger().warning(resp.message)
             return resp
         self.map = m
+        self.map.primitives = ACTION_VECTORS
         self.lockstep.forget(self.lockstep.last_step)   # the cached state is of the old map
         resp.success = True
         resp.message = (f"loaded {self.map.size} nodes, {self.map.link_count()} links from "
@@ -583,7 +595,8 @@ class MapLearnerNode(LifecycleNode):
             validate_state({**ck.arrays, "step_id": np.array(ck.step_id),
                             "run_id": np.array(ck.run_id, dtype=np.uint64)}, str(ck.path))
             m = SensorimotorMap(dim=ck.arrays["w"].shape[1],
-                                action_dim=ck.arrays["a"].shape[2], config=self.config)
+                                action_dim=ck.arrays["a"].shape[2], config=self.config,
+                                primitives=ACTION_VECTORS)
             m.load_state_dict(ck.arrays)
         except (MapStoreError, KeyError, ValueError, IndexError) as exc:
             raise CheckpointError(str(exc)) from None

@@ -1,4 +1,4 @@
-"""``ros2 run tmgwr_agent motivation_estimator``: Eq. 4-5 on this step's map; hosts /set_goal.
+"""``ros2 run tmgwr_agent motivation_estimator``: Eq. 4-5 on this step's map.
 
 Per step (lockstep): ``SensorimotorState`` in (it carries this step's change of the map),
 applied to this node's replica of the map (:mod:`tmgwr_agent.map_replica`),
@@ -26,21 +26,17 @@ before it: solved, as the in-process agent solves its first step. A field not so
 carries the winner's links without options, potentials 0, goal node -1 and 0 sweeps, and
 no ``/potentials`` goes out for it.
 
-``/set_goal`` (``tmgwr_interfaces/SetGoal``, x = column, y = row) changes the goal of the
-whole system in one call: a goal that is not finite, outside the maze or in a wall (per the
-simulator's latched grid) is refused with a message; otherwise the cell goes to the
-simulator (``/maze_sim/set_goal``), which moves its terminal cell from its next observation
-on, and that observation's goal sensation reaches this node. The node stays up whatever the
-request.
+The goal reaches this node only as the goal sensation of the observations: ``/set_goal``
+is the simulator's (``maze_sim``), which answers from its own check, so "accepted" means
+applied (issue 24; this node hosted it once and answered before the simulator had
+checked reachability).
 """
 
 from __future__ import annotations
 
 import copy
-import math
 
 import numpy as np
-from nav_msgs.msg import OccupancyGrid
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
@@ -48,6 +44,7 @@ from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
 from tmgwr_agent.core.sensorimotor_map import Links
 from tmgwr_agent.map_replica import APPLIED, GAP, Replica
 from tmgwr_agent.nodes.step_messages import change_of, outcome_of
+from tmgwr_agent.world_senses import maze_senses
 from tmgwr_common import topics
 from tmgwr_common.cdr import codec
 from tmgwr_common.checkpoint import (
@@ -78,7 +75,6 @@ from tmgwr_interfaces.msg import (
     SensorimotorSnapshot,
     SensorimotorState,
 )
-from tmgwr_interfaces.srv import SetGoal
 
 FIELD = codec(MotivationField)        # the per-step messages go serialized (tmgwr_common.cdr)
 
@@ -93,7 +89,7 @@ class MotivationEstimatorNode(Node):
     def __init__(self):
         super().__init__("motivation_estimator", **NODE_OPTIONS)
         config, self.p = declare_parameters(self, MotivationConfig, NODE_SPECS)
-        self.core = MotivationEstimator(config)
+        self.core = MotivationEstimator(config, primitives=maze_senses().primitives)
         self._ids = np.zeros(0, dtype=np.int32)
         pub = self.create_publisher(MotivationField, topics.MOTIVATION, STEP_QOS)
         self.lockstep = Lockstep(pub, logger=self.get_logger(), what="state")
@@ -117,13 +113,6 @@ class MotivationEstimatorNode(Node):
             Trigger, topics.of_node(topics.LEARNER, topics.REQUEST_SNAPSHOT))
         self.asked = False                  # a snapshot request is under way
         self.potentials_pub = self.create_publisher(Potentials, topics.POTENTIALS, LATCHED_QOS)
-        # /set_goal checks the cell against the simulator's grid (latched: it arrives
-        # whenever this node starts) and hands it to the simulator's own service.
-        self.walls: np.ndarray | None = None
-        self.create_subscription(OccupancyGrid, topics.GRID, self.on_grid, LATCHED_QOS)
-        self.sim_goal = self.create_client(SetGoal, topics.of_node(topics.SIMULATOR,
-                                                                   topics.SIM_SET_GOAL))
-        self.create_service(SetGoal, topics.SET_GOAL, self.on_set_goal)
         # the outcome memory of Eq. 5' survives any stop (tmgwr_common.checkpoint)
         self.checkpoints = Checkpointer("motivation_estimator", self.p, self.get_logger(),
                                         namespace=self.get_namespace())
@@ -132,8 +121,16 @@ class MotivationEstimatorNode(Node):
 
     # ------------------------------------------------------------------ per step
     def on_action(self, a):
-        if self.heard is not None and (a.run_id, a.step_id) < self.heard[:2]:
-            return                  # an older step answered again (a resend): not news
+        """The selector's answer to a step: news only when it answers the newest step this
+        node computed (a state may wait for it) or the one before (a state solved without
+        it, provisional). Anything else is a resent answer, or a stray (another run, a
+        step this node never computed): kept, it would hold every state of the real ring
+        until the simulator's resend, for good (issue 24)."""
+        ls = self.lockstep
+        if a.run_id != ls.run_id or a.step_id not in (ls.last_step, ls.last_step - 1) or (
+                self.heard is not None and (a.run_id, a.step_id) < self.heard[:2]
+                and self.heard[0] == ls.run_id and self.heard[1] <= ls.last_step):
+            return
         self.heard = (a.run_id, a.step_id, a.walk_next)
         self.settle(a)
         w = self.waiting
@@ -181,8 +178,22 @@ class MotivationEstimatorNode(Node):
 
     def follow(self, s) -> bool:
         """Bring the replica to the map of state ``s``; False (``s`` held, a whole map
-        asked for) when its change does not follow the replica."""
-        c = change_of(s)
+        asked for) when its change does not follow the replica; False (``s`` dropped) when
+        ``s`` cannot be a learner's (a stray message must not wipe the replica or crash the
+        node: the simulator's resend brings the real step)."""
+        try:
+            c = change_of(s)
+            why = c.problem()
+        except ValueError as exc:           # array lengths that do not fit the sizes
+            why = str(exc)
+        if why is None and self.replica.status(c) != GAP and not (
+                -1 <= s.winner < max(c.n, self.replica.n)):
+            why = f"winner {s.winner}"
+        if why is not None:
+            self.get_logger().warning(
+                f"dropped a state of step {s.step_id} (run {s.run_id}) that no learner sent: "
+                f"{why}", throttle_duration_sec=5.0)
+            return False
         if self.replica.apply(c) != GAP:
             return True
         r = self.replica
@@ -272,52 +283,6 @@ class MotivationEstimatorNode(Node):
         p.node_ids = i32(self._ids)
         p.potentials = f64(V)
         self.potentials_pub.publish(p)
-
-    # ------------------------------------------------------------------ runtime goal
-    def on_grid(self, grid: OccupancyGrid):
-        self.walls = (np.asarray(grid.data, dtype=np.int16) >= 50).reshape(
-            grid.info.height, grid.info.width)
-
-    def on_set_goal(self, req, resp):
-        """Validate against the simulator's latched grid, then hand the cell to maze_sim.
-
-        Answers at once (no nested wait on another service, so any executor can run it);
-        maze_sim checks the cell again when it applies it at its next observation.
-        """
-        g = req.goal
-        resp.accepted = False
-        if not all(math.isfinite(v) for v in (g.x, g.y, g.z)):
-            resp.message = f"goal (x={g.x}, y={g.y}, z={g.z}) refused: not finite"
-        elif self.walls is None or not self.sim_goal.service_is_ready():
-            resp.message = (f"goal (x={g.x}, y={g.y}) refused: the simulator is not "
-                            f"available ({self.resolve_topic_name(topics.GRID)} / "
-                            f"{self.resolve_service_name(self.sim_goal.srv_name)})")
-        else:
-            col, row = int(math.floor(g.x + 0.5)), int(math.floor(g.y + 0.5))
-            rows, cols = self.walls.shape
-            if not (0 <= row < rows and 0 <= col < cols):
-                resp.message = (f"goal (x={g.x}, y={g.y}) refused: cell (row {row}, col "
-                                f"{col}) is outside the {rows}x{cols} maze")
-            elif self.walls[row, col]:
-                resp.message = (f"goal (x={g.x}, y={g.y}) refused: cell (row {row}, col "
-                                f"{col}) is a wall")
-            else:
-                future = self.sim_goal.call_async(SetGoal.Request(goal=g))
-                future.add_done_callback(self.on_sim_goal)
-                resp.accepted = True
-                resp.message = (f"goal set to row {row}, col {col} (x={col}, y={row}); the "
-                                "simulator applies it at its next observation")
-        if resp.accepted:
-            self.get_logger().info(resp.message)
-        else:
-            self.get_logger().warn(resp.message)
-        return resp
-
-    def on_sim_goal(self, future):
-        answer = future.result()
-        if answer is None or not answer.accepted:
-            self.get_logger().error("maze_sim dropped the goal: "
-                                    f"{answer.message if answer else 'no answer'}")
 
     def restore(self, ck: Checkpoint) -> None:
         """The core's state from checkpoint ``ck`` (the core refuses what it cannot take)."""

@@ -1,4 +1,4 @@
-"""Compile the numba kernels once, into their on-disk cache: ``python -m tmgwr_agent.core.warmup``.
+"""Compile the numba kernels once, into their on-disk cache: ``python -m tmgwr_agent.warmup``.
 
 The kernels (:mod:`tmgwr_agent.core.kernels`) are compiled lazily, for the argument types
 of their first call, and cached next to ``kernels.py`` (``__pycache__``, or under
@@ -28,10 +28,11 @@ def warm_up(max_steps: int = 3000) -> list[str]:
     from tmgwr_agent.core import kernels
     from tmgwr_agent.core.agent import TMGWRAgent
     from tmgwr_agent.core.sensorimotor_map import MapSnapshot
+    from tmgwr_agent.world_senses import maze_senses
 
     maze = Maze.from_text(generate_maze(13, 17, np.random.default_rng(0)), "<warm-up maze>")
     world = GridWorld(maze, "G", max_episode_steps=400, seed=0)
-    agent = TMGWRAgent(maze, np.random.default_rng(0))
+    agent = TMGWRAgent(maze_senses(), np.random.default_rng(0))
     agent.set_goal(world.goal, world.goal_observation())
     steps = 0
     while steps < max_steps and kernels.uncached():
@@ -51,7 +52,7 @@ def warm_up(max_steps: int = 3000) -> list[str]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m tmgwr_agent.core.warmup",
+    ap = argparse.ArgumentParser(prog="python -m tmgwr_agent.warmup",
                                  description=__doc__.split("\n\n")[0])
     ap.add_argument("--quiet", action="store_true", help="print nothing when all is cached")
     ap.add_argument("--prefix", default="", help="text put before each line printed")

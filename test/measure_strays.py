@@ -1,0 +1,96 @@
+"""Rate after / rate before each stray on the per-step topics (issue 24, point 1 target:
+>= 0.8). Not a test (pytest does not collect it): a measurement, run by hand::
+
+    source tools/env.sh && python test/measure_strays.py [--window 10] [--json OUT] [--match T]
+
+Starts the five nodes and the simulator as ``ros2 run`` does (a free ROS_DOMAIN_ID of its
+own), a step monitor on ``/observation``, then for each stray of ``strays.strays``: the
+ring's rate over ``--window`` s, the stray (real ``ros2 topic pub``), the rate over the next
+``--window`` s; before each, a control pair of windows with no stray between them (how
+much the rate moves by itself: the agent's phase, the machine's load); and in each window
+the longest stall (the newest step unchanged), which a resend-paced ring shows as ~1 s.
+Prints one line per stray and the ratios; needs the ``ros2`` command.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from ros_helpers import allocate_domain, release_domain, spawn_python  # noqa: E402
+from strays import STEP_MONITOR, newest_step, publish, strays  # noqa: E402
+from test_lockstep_graph import run_of  # noqa: E402
+from test_nodes import start_graph, stop_graph  # noqa: E402
+
+
+def rate(monitor, run: int, window: float) -> tuple[float, float]:
+    """(steps per second, longest stall in seconds: the longest time the newest step did
+    not move) of run ``run`` over the next ``window`` seconds."""
+    s0 = newest_step(monitor, run)
+    t0 = last_move = time.monotonic()
+    step, stall = s0, 0.0
+    while time.monotonic() - t0 < window:
+        time.sleep(0.05)
+        now, s = time.monotonic(), newest_step(monitor, run, s0)
+        if s != step:
+            step, last_move = s, now
+        stall = max(stall, now - last_move)
+    return (step - s0) / (time.monotonic() - t0), stall
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--window", type=float, default=10.0, help="seconds per rate")
+    ap.add_argument("--json", help="write the figures here")
+    ap.add_argument("--match", default="", help="only the strays whose description holds "
+                    "this text (e.g. /motivation)")
+    args = ap.parse_args()
+    domain = allocate_domain()
+    with tempfile.TemporaryDirectory() as tmp:
+        procs = start_graph(domain, Path(tmp))
+        monitor = procs["monitor"] = spawn_python(STEP_MONITOR, domain=domain,
+                                                  name="monitor")
+        rows, pause = [], 2.0
+        try:
+            run = run_of(procs["maze_sim"])
+            monitor.wait_for_line("MONITOR READY", timeout=60)
+            while (newest_step(monitor, run) or 0) < 500:      # past the start
+                time.sleep(0.5)
+            for stray in [s for s in strays(run) if args.match in str(s)]:
+                # a control pair first (no stray between two windows, a pause as long as
+                # the last publication took): how much the rate moves by itself
+                first, _ = rate(monitor, run, args.window)
+                time.sleep(pause)
+                before, stall_before = rate(monitor, run, args.window)
+                t0 = time.monotonic()
+                publish(domain, stray)
+                pause = time.monotonic() - t0
+                after, stall_after = rate(monitor, run, args.window)
+                rows.append({"stray": str(stray), "before": before, "after": after,
+                             "ratio": after / before, "control_ratio": before / first,
+                             "stall_before_s": stall_before, "stall_after_s": stall_after})
+                print(f"{str(stray):75s} before {before:6.1f}/s after {after:6.1f}/s "
+                      f"ratio {after / before:.2f} (control {before / first:.2f}); longest "
+                      f"stall before {stall_before:.1f} s, after {stall_after:.1f} s",
+                      flush=True)
+        finally:
+            stop_graph(procs)
+            release_domain(domain)
+    for key in ("ratio", "control_ratio", "stall_before_s", "stall_after_s"):
+        v = sorted(r[key] for r in rows)
+        print(f"{key}: min {v[0]:.2f}, median {v[len(v) // 2]:.2f}, max {v[-1]:.2f} over "
+              f"{len(v)} strays")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"window_s": args.window, "strays": rows},
+                                              indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
