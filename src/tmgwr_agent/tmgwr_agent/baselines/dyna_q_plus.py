@@ -29,6 +29,14 @@ the book; ``act(explore=False)`` -- the experimenter's greedy probe -- on ``Q0``
 behaviour of the agent is unchanged; only the probe now measures its knowledge and not
 its curiosity. Cost: a second update per planning draw.
 
+A goal change relabels the model (``set_goal``): the model stores the next state of every
+tried pair and whether it bumped, so its reward and terminal flag are recomputed for the
+new goal (r_wall for a bump, r_goal and terminal into the new goal, r_empty otherwise).
+Planning then propagates the new goal's values at once; without the relabel it would keep
+replaying the old goal's rewards until every pair near the route was tried again. A
+termination away from the goal (the previous goal of the goal-change scenario) is then an
+ordinary empty cell in the model, as it is in Eq. 8's reward, until it is tried again.
+
 Default kappa = 0.1 (the book's 0.001 is for a reward of 1 at the goal and 0 elsewhere).
 Scaled to rewards of tens to hundreds: a pair untried for tau = 10^4 real steps gets
 ``kappa sqrt(tau) = 10``, a third of one step's cost (29), so an old detour is worth
@@ -55,7 +63,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from maze_sim.maze import Maze
+from maze_sim.maze import Cell, Maze
 from tmgwr_agent.baselines.q_learning import N_ACTIONS, QLearningAgent, QLearningConfig
 from tmgwr_common.params import param
 
@@ -87,6 +95,7 @@ class DynaQPlusAgent(QLearningAgent):
         self.m_next = [-1] * n
         self.m_reward = [0.0] * n
         self.m_terminal = [False] * n
+        self.m_bumped = [False] * n
         self.m_time = [0] * n          # real time step at which (s, a) was last tried
         self.visited: list[int] = []   # states in order of first visit
         self.is_visited = [False] * (self.rows * self.cols)
@@ -99,9 +108,22 @@ class DynaQPlusAgent(QLearningAgent):
         self.m_next.extend([-1] * N_ACTIONS)
         self.m_reward.extend([0.0] * N_ACTIONS)
         self.m_terminal.extend([False] * N_ACTIONS)
+        self.m_bumped.extend([False] * N_ACTIONS)
         self.m_time.extend([0] * N_ACTIONS)
         self.is_visited.append(False)
         self.Q0.append([0.0] * N_ACTIONS)
+
+    def set_goal(self, goal_cell: Cell, goal_obs: np.ndarray | None = None) -> None:
+        """The new goal, and the model's rewards and terminals relabelled for it."""
+        super().set_goal(goal_cell, goal_obs)
+        g = self.index(self.goal)
+        for sa, s2 in enumerate(self.m_next):
+            if s2 < 0:
+                continue
+            bumped = self.m_bumped[sa]          # a bump stays put, it reaches nothing
+            self.m_terminal[sa] = s2 == g and not bumped
+            self.m_reward[sa] = (self.r_wall if bumped else
+                                 self.r_goal if s2 == g else self.r_empty)
 
     def act(self, explore: bool = True) -> int:
         Q = self.Q if explore else self.Q0      # the probe reads the bonus-free twin
@@ -127,6 +149,7 @@ class DynaQPlusAgent(QLearningAgent):
         self.m_next[sa] = s2
         self.m_reward[sa] = r
         self.m_terminal[sa] = terminal
+        self.m_bumped[sa] = r == self.r_wall and s2 == s
         self.m_time[sa] = t
         # (f) planning
         if self.n_planning:

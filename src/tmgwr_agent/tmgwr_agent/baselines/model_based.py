@@ -104,11 +104,12 @@ class ModelBasedAgent:
     """Value iteration with T(s, a, s') of the original maze (never updated)."""
 
     name = "model_based"
+    Config = ModelBasedConfig
 
     def __init__(self, maze: Maze, rng: np.random.Generator,
                  config: ModelBasedConfig | Mapping[str, Any] | None = None):
         """``config``: the agent's config, or a dict of parameter overrides."""
-        if not isinstance(config, ModelBasedConfig):
+        if not isinstance(config, self.Config):
             config = make_config(ModelBasedConfig, config, where=self.name)
         self.config = c = config
         self.gamma, self.beta = c.gamma, c.beta

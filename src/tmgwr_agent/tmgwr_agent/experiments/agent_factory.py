@@ -8,12 +8,13 @@ cell's coordinates; plain ``tmgwr`` learns its frame, core/frame.py); ``paper`` 
 additions off (``absorbing_terminals``; ``unknown`` none and ``try_untried``, the options
 of Eq. 5' and Eq. 6; ``goal_search``; ``walk_while_novel``: the agent of Eq. 1-7 as
 printed), e.g.
-``tmgwr:literal+paper``. The baselines take no option. Options are parameter overrides,
-checked like any other (an unknown name is refused).
+``tmgwr:literal+paper``. The baselines (:data:`BASELINES`) take no option. Options are
+parameter overrides, checked like any other (an unknown name is refused).
 """
 
 from __future__ import annotations
 
+from importlib import import_module
 from typing import Any, Mapping
 
 import numpy as np
@@ -23,7 +24,16 @@ from tmgwr_agent.core.protocol import Agent
 from tmgwr_agent.core.senses import Senses
 from tmgwr_agent.world_senses import maze_senses
 
-AGENT_NAMES = ("tmgwr", "q_learning", "model_based", "dyna_q_plus")
+AGENT_NAMES = ("tmgwr", "q_learning", "model_based", "dyna_q_plus", "rmax", "freespace")
+
+#: The baseline agents: name -> (module, class); each class has ``Config``, its parameters.
+BASELINES = {
+    "q_learning": ("tmgwr_agent.baselines.q_learning", "QLearningAgent"),
+    "model_based": ("tmgwr_agent.baselines.model_based", "ModelBasedAgent"),
+    "dyna_q_plus": ("tmgwr_agent.baselines.dyna_q_plus", "DynaQPlusAgent"),
+    "rmax": ("tmgwr_agent.baselines.rmax", "RMaxAgent"),
+    "freespace": ("tmgwr_agent.baselines.freespace", "FreeSpaceAgent"),
+}
 
 
 TMGWR_OPTIONS = {
@@ -51,6 +61,12 @@ def parse_spec(spec: str) -> tuple[str, dict[str, Any]]:
     return name, overrides
 
 
+def baseline_class(name: str) -> type:
+    """The agent class of a baseline name (imported on first use)."""
+    module, cls = BASELINES[name]
+    return getattr(import_module(module), cls)
+
+
 def make_agent(spec: str, maze: Maze, rng: np.random.Generator,
                overrides: Mapping[str, Any] | None = None, senses: Senses | None = None,
                sensed: bool = False) -> Agent:
@@ -62,11 +78,7 @@ def make_agent(spec: str, maze: Maze, rng: np.random.Generator,
     if name == "tmgwr":
         from tmgwr_agent.core.agent import TMGWRAgent
         return TMGWRAgent(senses or maze_senses(), rng, {**(overrides or {}), **options})
-    if name == "q_learning":
-        from tmgwr_agent.baselines.q_learning import QLearningAgent
-        return QLearningAgent(maze, rng, overrides, sensed_states=sensed)
-    if name == "model_based":
-        from tmgwr_agent.baselines.model_based import ModelBasedAgent
-        return ModelBasedAgent(maze, rng, overrides)
-    from tmgwr_agent.baselines.dyna_q_plus import DynaQPlusAgent
-    return DynaQPlusAgent(maze, rng, overrides, sensed_states=sensed)
+    from tmgwr_agent.experiments.sensing import SENSED_TABLE_AGENTS
+    if name in SENSED_TABLE_AGENTS:
+        return baseline_class(name)(maze, rng, overrides, sensed_states=sensed)
+    return baseline_class(name)(maze, rng, overrides)   # sensing.check_sensor refuses it

@@ -36,8 +36,9 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "experiment", help="run one of the paper's experiments (Tables 3-6, Figs 5-7)",
         description="Run a scenario of the paper over several trials and write its JSON "
-                    "(docs/experiments.md). Agents: tmgwr, tmgwr:literal, tmgwr:credit, "
-                    "q_learning, model_based, dyna_q_plus; tmgwr options join with + and "
+                    "(docs/experiments.md). Agents: tmgwr, tmgwr:grid, tmgwr:literal, "
+                    "tmgwr:credit, q_learning, model_based, dyna_q_plus, rmax, freespace; "
+                    "tmgwr options join with + and "
                     "'paper' turns our three additions off (tmgwr:credit+paper).")
     p.add_argument("scenario", choices=SCENARIOS, metavar="SCENARIO",
                    help=f"one of {', '.join(SCENARIOS)}")
@@ -130,8 +131,8 @@ def register(subparsers) -> None:
                     "tuning.md). Writes the best parameters as a ROS 2 parameter file and a "
                     "JSON summary.")
     t.add_argument("agent", metavar="AGENT",
-                   help="tmgwr (with options, e.g. tmgwr:credit), q_learning, model_based "
-                        "or dyna_q_plus")
+                   help="tmgwr (with options, e.g. tmgwr:credit), q_learning, model_based, "
+                        "dyna_q_plus, rmax or freespace")
     t.add_argument("--trials", type=int, default=40,
                    help="trials of the study in all, every agent the same (default 40)")
     t.add_argument("--workers", type=int, default=1,

@@ -3,7 +3,8 @@
 The paper tuned every agent by Bayesian optimisation (hyperopt's TPE, section 5.3); this
 is the same with Optuna's :class:`~optuna.samplers.TPESampler`, the same budget and the
 same objective for every agent (``tmgwr``, ``q_learning``, ``model_based``,
-``dyna_q_plus``; TMGWR options as in ``experiment``, e.g. ``tmgwr:credit``).
+``dyna_q_plus``, ``rmax``, ``freespace``; TMGWR options as in ``experiment``, e.g.
+``tmgwr:credit``).
 
 Objective (minimised), on a *training split* of the generated suite
 (:func:`maze_sim.suite.suite`, ``--suite SPEC --suite-seed K --suite-first I``; default
@@ -97,7 +98,7 @@ from maze_sim.maze import Maze
 from maze_sim.suite import SuiteError, suite
 from maze_sim.suite import parse_spec as suite_counts
 from tmgwr_agent.experiments import env_change
-from tmgwr_agent.experiments.agent_factory import AGENT_NAMES, make_agent
+from tmgwr_agent.experiments.agent_factory import AGENT_NAMES, baseline_class, make_agent
 from tmgwr_agent.experiments.agent_factory import parse_spec as parse_agent
 from tmgwr_agent.experiments.env_change import oracle_steps
 from tmgwr_agent.experiments.parallel import run_items, trial_seeds, warm_up
@@ -192,6 +193,21 @@ SEARCH: dict[str, dict[str, Interval]] = {
         "r_empty": _REWARDS["r_empty"],
         **_EXPLORATION,
     },
+    # R-max and the free-space planner explore by optimism: epsilon starts at 0, and its
+    # start is searched instead of its floor (a floor above the start is refused)
+    "rmax": {
+        "gamma": Interval(0.8, 0.99),
+        **_REWARDS,
+        "m_known": Interval(1, 5),
+        "forget_after": Interval(0, 30),
+        "eps_start": Interval(0.0, 0.3),
+        "p_turn": _EXPLORATION["p_turn"],
+    },
+    "freespace": {
+        "forget_after": Interval(0, 30),
+        "eps_start": Interval(0.0, 0.3),
+        "p_turn": _EXPLORATION["p_turn"],
+    },
 }
 
 
@@ -201,14 +217,7 @@ def agent_specs(agent: str) -> tuple[Param, ...]:
     if name == "tmgwr":
         from tmgwr_agent.core.agent import SPECS
         return SPECS
-    if name == "q_learning":
-        from tmgwr_agent.baselines.q_learning import QLearningConfig
-        return specs(QLearningConfig)
-    if name == "dyna_q_plus":
-        from tmgwr_agent.baselines.dyna_q_plus import DynaQPlusConfig
-        return specs(DynaQPlusConfig)
-    from tmgwr_agent.baselines.model_based import ModelBasedConfig
-    return specs(ModelBasedConfig)
+    return specs(_config_class(name))
 
 
 @dataclass(frozen=True)
@@ -727,14 +736,7 @@ def experiment_params(agents: Sequence[str],
 
 
 def _config_class(name: str):
-    if name == "q_learning":
-        from tmgwr_agent.baselines.q_learning import QLearningConfig
-        return QLearningConfig
-    if name == "dyna_q_plus":
-        from tmgwr_agent.baselines.dyna_q_plus import DynaQPlusConfig
-        return DynaQPlusConfig
-    from tmgwr_agent.baselines.model_based import ModelBasedConfig
-    return ModelBasedConfig
+    return baseline_class(name).Config
 
 
 def _trial_row(t) -> dict:
