@@ -223,10 +223,10 @@ def _pct(x: float | None) -> str:
     return "-" if x is None else f"{100 * x:.0f} %"
 
 
-def table_suite(root: Path) -> str:
+def table_suite(root: Path, name: str = "suite_blocks") -> str:
     """Blocks on the suite: per family and agent, the median over mazes of the per-maze
     median steps / oracle and the worst trial; the first agent's share of mazes won."""
-    d = load("suite_blocks", root)
+    d = load(name, root)
     r, s = d["result"], d["result"]["suite"]
     agents = list(r["agents"])
     first, others = agents[0], agents[1:]
@@ -251,10 +251,10 @@ def table_suite(root: Path) -> str:
             + _source(d))
 
 
-def table_suite_openings(root: Path) -> str:
+def table_suite_openings(root: Path, name: str = "suite_openings") -> str:
     """Openings on the suite: per family and agent, the share of trials whose greedy path
     uses the shortcut within 10 episodes, and ever (within the caps)."""
-    d = load("suite_openings", root)
+    d = load(name, root)
     r, s = d["result"], d["result"]["suite"]
     agents = list(r["agents"])
     rows = []
@@ -340,6 +340,8 @@ TABLES: dict[str, Callable[[Path], str]] = {
     "suite-openings": table_suite_openings,
     "bench": table_bench,
     "sensing": table_sensing,
+    "rivals-blocks": lambda root: table_suite(root, "rivals_blocks"),
+    "rivals-openings": lambda root: table_suite_openings(root, "rivals_openings"),
 }
 
 
