@@ -48,6 +48,7 @@ import numpy as np
 
 from maze_sim.maze import Cell, Maze, move
 from maze_sim.world import StepInfo
+from tmgwr_agent.baselines.q_learning import argmax_ties
 from tmgwr_agent.core.exploration import EpsilonGreedy, ExplorationConfig
 from tmgwr_common.params import make_config, param
 
@@ -159,12 +160,7 @@ class ModelBasedAgent:
         if s < 0 or self.goal is None:
             return None
         V = self.V_list
-        vals = [V[j] for j in self.next_list[s]]
-        top = max(vals)
-        best = [a for a in range(N_ACTIONS) if vals[a] == top]
-        if len(best) == 1:
-            return best[0]
-        return best[int(self.rng.integers(len(best)))]
+        return argmax_ties([V[j] for j in self.next_list[s]], self.rng)
 
     # -------------------------------------------------------------- Agent protocol
     @property

@@ -59,6 +59,16 @@ class QLearningConfig(ExplorationConfig):
                            low=-1e6, high=1e6)
 
 
+def argmax_ties(values, rng: np.random.Generator) -> int:
+    """The index of the largest of ``values``, ties broken by the generator (no draw when
+    there is none): the greedy choice of every tabular agent."""
+    top = max(values)
+    best = [a for a in range(len(values)) if values[a] == top]
+    if len(best) == 1:
+        return best[0]
+    return best[int(rng.integers(len(best)))]
+
+
 class QLearningAgent:
     """Tabular Q-learning with the rewards of Eq. 8 and the exploration of section 5.1."""
 
@@ -122,12 +132,7 @@ class QLearningAgent:
         generator; None for an untried state."""
         if s < 0 or not self.tried[s]:
             return None
-        q = (self.Q if Q is None else Q)[s]
-        top = max(q)
-        best = [a for a in range(N_ACTIONS) if q[a] == top]
-        if len(best) == 1:
-            return best[0]
-        return best[int(self.rng.integers(len(best)))]
+        return argmax_ties((self.Q if Q is None else Q)[s], self.rng)
 
     def q_update(self, s: int, a: int, r: float, s2: int, terminal: bool) -> None:
         """The Q-learning update (one-step, off-policy)."""

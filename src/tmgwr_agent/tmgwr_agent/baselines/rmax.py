@@ -57,6 +57,7 @@ import numpy as np
 
 from maze_sim.maze import Cell, Maze
 from maze_sim.world import StepInfo
+from tmgwr_agent.baselines.q_learning import argmax_ties
 from tmgwr_agent.core.exploration import EpsilonGreedy, ExplorationConfig
 from tmgwr_common.params import make_config, param
 
@@ -213,12 +214,7 @@ class RMaxAgent:
             if not self.hopeful()[s] and (self.bumped & self.known()).any():
                 self.doubt_bumps()
                 self.solve()
-        q = self.Q_rows[s]
-        top = max(q)
-        best = [a for a in range(N_ACTIONS) if q[a] == top]
-        if len(best) == 1:
-            return best[0]
-        return best[int(self.rng.integers(len(best)))]
+        return argmax_ties(self.Q_rows[s], self.rng)
 
     # -------------------------------------------------------------- Agent protocol
     @property
