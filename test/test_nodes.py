@@ -331,8 +331,21 @@ def test_detour_after_event_and_learner_restart_from_saved_map(ros_domain, tmp_p
         stop_graph(procs)
         if echo is not None:
             echo.stop()
-    assert snap["step_id"] == int(saved["step_id"])
+    # The first map the echo sees is the saved one; or, when the ring resumed before the
+    # echo's subscription matched the restarted publisher (the latched topic keeps only its
+    # newest sample: seen once in CI, step 2557 for 2556), that map after a step or two,
+    # which moves only the winner's neighbourhood within the GWR's radius.
     alive = np.flatnonzero(saved["alive"])
-    assert [n[0] for n in snap["nodes"]] == alive.tolist()
-    assert np.array_equal(np.array([n[1] for n in snap["nodes"]]), saved["w"][alive])
-    assert snap["links"] == n_links
+    ids = [n[0] for n in snap["nodes"]]
+    w = {n[0]: n[1] for n in snap["nodes"]}
+    late = snap["step_id"] - int(saved["step_id"])
+    assert 0 <= late <= 2, (snap["step_id"], int(saved["step_id"]))
+    if late == 0:
+        assert ids == alive.tolist()
+        assert np.array_equal(np.array([w[i] for i in ids]), saved["w"][alive])
+        assert snap["links"] == n_links
+    else:
+        assert set(alive.tolist()) <= set(ids) and len(ids) - len(alive) <= late
+        np.testing.assert_allclose(np.array([w[i] for i in alive]), saved["w"][alive],
+                                   atol=0.02)
+        assert abs(snap["links"] - n_links) <= 4 * late
