@@ -18,6 +18,23 @@ the same relative precision as near the goal), or after ``vi_max_sweeps``. V is
 warm-started from the last solution, so a step that changed the map a little costs a few
 sweeps; a new goal restarts from V = 0 (Algorithm 1 line 5).
 
+**Incremental solution** (``vi_incremental``, on by default; off: the synchronous solve
+every step). A converged step changes almost nothing (the traversed link's E, a node's
+weights, sometimes an option), yet a sweep visits every node. So between full solves the
+estimator keeps a copy of the last solve's inputs and solves by prioritized sweeping
+(Moore & Atkeson 1993, :func:`kernels.prioritized_sweep`): the rows whose links, reward,
+absorbing flag or options differ from the copy are queued, each queued node's V is set to
+the right-hand side of Eq. 4-5' (:func:`kernels.node_target`), largest change first, and
+the nodes that read it are queued when their own residual exceeds ``vi_tol (1 - gamma)
+V``; it stops when nothing above that is left. Every node then meets the synchronous
+solve's stopping rule, and V is as close to the fixed point as the synchronous solve's
+(test_incremental_vi.py). A goal change, a new map size, a change that may cut a node off
+its sources (a link removed, an E or R gone to 0, a node made absorbing, a last option
+gone: V = 0 is then reached only geometrically by sweeping) and a sweep of more updates
+than nodes fall back to the synchronous solve. Both are solutions within ``vi_tol``, not
+the same bits: where two of a node's links are worth the same within that tolerance
+Eq. 6 may choose the other one, and the trajectory goes on differently from there.
+
 **Exactly 0 without a route.** Before the sweeps a reverse breadth-first search from the
 sources (nodes with R > 0, or with an option below) over the links with E > 0 finds the
 nodes from which some link path leads to a source (:func:`kernels.reaches_source`); every
