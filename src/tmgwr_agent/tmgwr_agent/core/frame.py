@@ -75,6 +75,7 @@ class LearntFrame:
         self.T: np.ndarray | None = None     # None: the sensor frame stands in
         self.chosen: tuple[int, ...] = ()    # the primitives of the basis
         self.version = 0                     # bumped whenever T changes
+        self._w = np.zeros((0, 0))           # the last coordinates of the map's weights
 
     def refresh(self, delta: np.ndarray, moves: np.ndarray, L: float,
                 again: bool = True) -> None:
@@ -122,7 +123,10 @@ class LearntFrame:
         if self.T is None:
             return Frame(w, goal, delta, L)
         T = self.T
-        return Frame(np.ascontiguousarray(w @ T.T), np.ascontiguousarray(T @ goal),
+        if self._w.shape != (len(w), len(T)):
+            self._w = np.empty((len(w), len(T)))
+        np.matmul(w, T.T, out=self._w)                  # into the last step's array
+        return Frame(self._w, np.ascontiguousarray(T @ goal),
                      np.ascontiguousarray(delta @ T.T), 1.0)
 
 

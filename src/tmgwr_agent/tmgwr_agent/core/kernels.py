@@ -82,6 +82,7 @@ def incident_neighbours(out, n, b):
 def goal_rewards(w, alive, n, g, sigma, floor, R):
     """Eq. 10: R_i = sim(i, g) = exp(-|w_i - w_g|^2 / (2 sigma^2)), 0 below ``floor``."""
     inv = 1.0 / (2.0 * sigma * sigma)
+    cut = 1.0 - np.log(floor) if floor > 0.0 else np.inf   # exp(-cut) < floor: no exp
     for i in range(n):
         if not alive[i]:
             R[i] = 0.0
@@ -90,6 +91,9 @@ def goal_rewards(w, alive, n, g, sigma, floor, R):
         for k in range(w.shape[1]):
             t = w[i, k] - w[g, k]
             d += t * t
+        if d * inv > cut:
+            R[i] = 0.0
+            continue
         r = np.exp(-d * inv)
         R[i] = r if r >= floor else 0.0
 
@@ -379,6 +383,255 @@ def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, abso
         if V[i] < v_floor:
             V[i] = 0.0
     return sweeps
+
+
+# ---------------------------------------------------------------- incremental Eq. 4-5'
+@njit(cache=True)
+def node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb, ong):
+    """The right-hand side of Eq. 4-5' at node i, ``R_i + gamma max(max_k E[i, k] V(k),
+    max_a O(i, a))`` (:func:`value_iteration`'s update with beta = 1): the value V(i) has
+    at the fixed point given its successors' values. Dead slots: 0; absorbing nodes: R_i."""
+    if not alive[i]:
+        return 0.0
+    if absorbing[i]:
+        return R[i]
+    best = 0.0
+    for s in range(out.shape[1]):                       # max_k E[i, k] V(k)
+        j = out[i, s]
+        if j >= 0:
+            ev = E[i, s] * V[j]
+            if ev > best:
+                best = ev
+    stay = R[i] + gamma * best
+    opt = 0.0
+    for a in range(rho.shape[1]):                       # max_a O(i, a), Eq. 5'
+        r = rho[i, a]
+        if r > 0.0:
+            sv = successor_value(V, osucc[i, a], U[i, a], onb[i], ong[i], a, gamma)
+            ov = r * sv + (1.0 - r) * stay
+            if ov > opt:
+                opt = ov
+    if opt > best:
+        best = opt
+    return R[i] + gamma * best
+
+
+@njit(cache=True)
+def predecessors(out, n, alive, osucc, onb):
+    """Who reads whose value in Eq. 4-5' (CSR, ``pred[first[j]:first[j + 1]]``: the nodes i
+    whose target reads V(j)): links i -> j, option successors ``osucc[i, a] == j`` and wall
+    exits ``onb[i, a, b] == j`` of every option slot, whatever its rho (a superset: a rho
+    that changes needs no rebuild)."""
+    K, P, B = out.shape[1], osucc.shape[1], onb.shape[2]
+    first = np.zeros(n + 1, dtype=np.int64)
+    for i in range(n):
+        if alive[i]:
+            for s in range(K):
+                j = out[i, s]
+                if 0 <= j < n:
+                    first[j + 1] += 1
+            for a in range(P):
+                j = osucc[i, a]
+                if 0 <= j < n:
+                    first[j + 1] += 1
+                for b in range(B):
+                    j = onb[i, a, b]
+                    if 0 <= j < n:
+                        first[j + 1] += 1
+    for j in range(n):
+        first[j + 1] += first[j]
+    pred = np.empty(first[n], dtype=np.int64)
+    fill = first[:n].copy()
+    for i in range(n):
+        if alive[i]:
+            for s in range(K):
+                j = out[i, s]
+                if 0 <= j < n:
+                    pred[fill[j]] = i
+                    fill[j] += 1
+            for a in range(P):
+                j = osucc[i, a]
+                if 0 <= j < n:
+                    pred[fill[j]] = i
+                    fill[j] += 1
+                for b in range(B):
+                    j = onb[i, a, b]
+                    if 0 <= j < n:
+                        pred[fill[j]] = i
+                        fill[j] += 1
+    return first, pred
+
+
+@njit(cache=True)
+def _heap_up(heap, pos, key, k):
+    x = heap[k]
+    while k > 0:
+        p = (k - 1) >> 1
+        if key[heap[p]] >= key[x]:
+            break
+        heap[k] = heap[p]
+        pos[heap[k]] = k
+        k = p
+    heap[k] = x
+    pos[x] = k
+
+
+@njit(cache=True)
+def _heap_down(heap, pos, key, k, size):
+    x = heap[k]
+    while True:
+        c = 2 * k + 1
+        if c >= size:
+            break
+        if c + 1 < size and key[heap[c + 1]] > key[heap[c]]:
+            c += 1
+        if key[heap[c]] <= key[x]:
+            break
+        heap[k] = heap[c]
+        pos[heap[k]] = k
+        k = c
+    heap[k] = x
+    pos[x] = k
+
+
+@njit(cache=True)
+def _heap_push(heap, pos, key, size, i, priority):
+    """Push node i with ``priority`` (or raise its priority if queued); returns the size."""
+    if pos[i] >= 0:
+        if priority > key[i]:
+            key[i] = priority
+            _heap_up(heap, pos, key, pos[i])
+        return size
+    key[i] = priority
+    heap[size] = i
+    pos[i] = size
+    _heap_up(heap, pos, key, size)
+    return size + 1
+
+
+@njit(cache=True)
+def prioritized_sweep(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
+                      onb, ong, first, pred, seeds, n_seeds, max_updates, heap, pos, key):
+    """Eq. 4-5' solved incrementally by prioritized sweeping (Moore & Atkeson 1993) from a
+    solution of a map that differs from this one in the rows ``seeds[:n_seeds]`` only
+    (their links, rewards, options or absorbing flag changed): each queued node's value is
+    set to its target (:func:`node_target`), largest change first, and the nodes that read
+    it (``pred``, :func:`predecessors`) are queued when their own change would exceed
+    ``tol V + v_floor``; it stops when the queue holds nothing above that. Returns the
+    updates made, or -1 after ``max_updates`` (the caller then solves in full: a change
+    that cuts a region off its sources decays only geometrically). ``heap``, ``pos``
+    (-1 = not queued) and ``key`` are work arrays of n entries; ``pos`` is left all -1."""
+    size = 0
+    for k in range(n_seeds):
+        i = seeds[k]
+        t = node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb, ong)
+        d = abs(t - V[i])
+        if d > tol * t + v_floor:
+            size = _heap_push(heap, pos, key, size, i, d)
+    updates = 0
+    while size > 0:
+        i = heap[0]
+        pos[i] = -1
+        size -= 1
+        if size > 0:
+            heap[0] = heap[size]
+            pos[heap[0]] = 0
+            _heap_down(heap, pos, key, 0, size)
+        if updates >= max_updates:
+            while size > 0:                          # leave pos clean for the next call
+                size -= 1
+                pos[heap[size]] = -1
+            return -1
+        V[i] = node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb,
+                           ong)
+        updates += 1
+        for c in range(first[i], first[i + 1]):
+            p = pred[c]
+            t = node_target(p, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb,
+                            ong)
+            d = abs(t - V[p])
+            if d > tol * t + v_floor:
+                size = _heap_push(heap, pos, key, size, p, d)
+    return updates
+
+
+@njit(cache=True)
+def changed_rows(out, E, R, absorbing, out0, E0, R0, absorbing0, n, seeds):
+    """The rows whose links, reliabilities, reward or absorbing flag differ from the copy
+    (``out0`` ...) of the last solve, written into ``seeds``, and the copy brought up to
+    date. Returns (count, lost, relinked): ``lost`` when a change may cut a node off its
+    sources (a link removed or retargeted or its E gone to 0, a node made absorbing, a
+    reward gone to 0), which prioritized sweeping only follows geometrically;
+    ``relinked`` when a link changed its target (:func:`predecessors` must be rebuilt)."""
+    K = out.shape[1]
+    c = 0
+    lost = False
+    relinked = False
+    for i in range(n):
+        diff = R[i] != R0[i] or absorbing[i] != absorbing0[i]
+        if R0[i] > 0.0 and R[i] <= 0.0:
+            lost = True
+        if absorbing[i] and not absorbing0[i]:
+            lost = True
+        for s in range(K):
+            if out[i, s] != out0[i, s]:
+                diff = relinked = True
+                if out0[i, s] >= 0:
+                    lost = True
+            elif E[i, s] != E0[i, s]:
+                diff = True
+                if E0[i, s] > 0.0 and E[i, s] <= 0.0:
+                    lost = True
+        if diff:
+            seeds[c] = i
+            c += 1
+            R0[i] = R[i]
+            absorbing0[i] = absorbing[i]
+            for s in range(K):
+                out0[i, s] = out[i, s]
+                E0[i, s] = E[i, s]
+    return c, lost, relinked
+
+
+@njit(cache=True)
+def changed_options(rows, n_rows, rho, U, osucc, onb, ong, rho0, U0, osucc0, onb0, ong0,
+                    seeds, c):
+    """:func:`changed_rows` for the options of Eq. 5' of the nodes ``rows[:n_rows]`` (those
+    recomputed since the last solve): the rows that differ from the copy are appended to
+    ``seeds`` from ``c`` and the copy brought up to date. Returns (count, lost, relinked):
+    ``lost`` when a row lost its last option (it may have been a node's only source),
+    ``relinked`` when an option's successor or a wall exit changed (the predecessors must
+    be rebuilt, :func:`predecessors`)."""
+    P, B = rho.shape[1], onb.shape[2]
+    lost = False
+    relinked = False
+    for k in range(n_rows):
+        i = rows[k]
+        diff = False
+        had = False
+        has = False
+        for a in range(P):
+            had = had or rho0[i, a] > 0.0
+            has = has or rho[i, a] > 0.0
+            if rho[i, a] != rho0[i, a] or U[i, a] != U0[i, a]:
+                diff = True
+            if osucc[i, a] != osucc0[i, a]:
+                diff = relinked = True
+            for b in range(B):
+                if onb[i, a, b] != onb0[i, a, b]:
+                    diff = relinked = True
+                elif ong[i, a, b] != ong0[i, a, b]:
+                    diff = True
+        if had and not has:
+            lost = True
+        if diff:
+            seeds[c] = i
+            c += 1
+            for a in range(P):
+                rho0[i, a], U0[i, a], osucc0[i, a] = rho[i, a], U[i, a], osucc[i, a]
+                for b in range(B):
+                    onb0[i, a, b], ong0[i, a, b] = onb[i, a, b], ong[i, a, b]
+    return c, lost, relinked
 
 
 @njit(cache=True)

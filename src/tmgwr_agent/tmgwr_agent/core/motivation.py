@@ -18,6 +18,23 @@ the same relative precision as near the goal), or after ``vi_max_sweeps``. V is
 warm-started from the last solution, so a step that changed the map a little costs a few
 sweeps; a new goal restarts from V = 0 (Algorithm 1 line 5).
 
+**Incremental solution** (``vi_incremental``, on by default; off: the synchronous solve
+every step). A converged step changes almost nothing (the traversed link's E, a node's
+weights, sometimes an option), yet a sweep visits every node. So between full solves the
+estimator keeps a copy of the last solve's inputs and solves by prioritized sweeping
+(Moore & Atkeson 1993, :func:`kernels.prioritized_sweep`): the rows whose links, reward,
+absorbing flag or options differ from the copy are queued, each queued node's V is set to
+the right-hand side of Eq. 4-5' (:func:`kernels.node_target`), largest change first, and
+the nodes that read it are queued when their own residual exceeds ``vi_tol (1 - gamma)
+V``; it stops when nothing above that is left. Every node then meets the synchronous
+solve's stopping rule, and V is as close to the fixed point as the synchronous solve's
+(test_incremental_vi.py). A goal change, a new map size, a change that may cut a node off
+its sources (a link removed, an E or R gone to 0, a node made absorbing, a last option
+gone: V = 0 is then reached only geometrically by sweeping) and a sweep of more updates
+than nodes fall back to the synchronous solve. Both are solutions within ``vi_tol``, not
+the same bits: where two of a node's links are worth the same within that tolerance
+Eq. 6 may choose the other one, and the trajectory goes on differently from there.
+
 **Exactly 0 without a route.** Before the sweeps a reverse breadth-first search from the
 sources (nodes with R > 0, or with an option below) over the links with E > 0 finds the
 nodes from which some link path leads to a source (:func:`kernels.reaches_source`); every
@@ -255,6 +272,9 @@ class MotivationConfig(Config):
                           "node", low=0.0, low_open=True, high=1.0)
     vi_max_sweeps: int = param(5000, "upper bound on sweeps per call", low=1, high=1e9,
                                integer=True)
+    vi_incremental: bool = param(True, "solve Eq. 4-5' incrementally between full solves: "
+                                 "prioritized sweeping from the rows that changed "
+                                 "(motivation.py; false: a full solve every step)")
     absorbing_terminals: bool = param(True, "nodes where an episode ended have no successor "
                                       "in Eq. 5 (false: the paper's Eq. 5 on every node)")
     unknown: str = param("learnt", "Eq. 5': the value of what the map does not know: "
@@ -297,6 +317,33 @@ def grown(a: np.ndarray, n: int, fill) -> np.ndarray:
     return b
 
 
+class IncrementalState:
+    """What the incremental solve of Eq. 4-5' keeps between calls (:meth:`MotivationEstimator.
+    _incremental`): a copy of the inputs of the last solve (links, reliabilities, rewards,
+    absorbing flags, options), the predecessors of every node (who reads whose value,
+    :func:`kernels.predecessors`) and the work arrays of the priority queue."""
+
+    def __init__(self, n: int, goal_node: int, out0, E0, R0, abs0, rho0, U0, osucc0, onb0,
+                 ong0, first, pred):
+        self.n, self.goal_node = n, goal_node
+        self.out0, self.E0, self.R0, self.abs0 = out0, E0, R0, abs0
+        self.rho0, self.U0, self.osucc0, self.onb0, self.ong0 = rho0, U0, osucc0, onb0, ong0
+        self.first, self.pred = first, pred
+        self.seeds = np.empty(2 * n + 1, dtype=np.int64)
+        self.heap = np.empty(n + 1, dtype=np.int64)
+        self.pos = np.full(n + 1, -1, dtype=np.int64)
+        self.key = np.zeros(n + 1)
+
+    @classmethod
+    def of(cls, m: SensorimotorMap, n: int, R: np.ndarray, absorbing: np.ndarray,
+           est: "MotivationEstimator") -> "IncrementalState":
+        """The state after a full solve on map m (rewards R, the absorbing mask)."""
+        return cls(n, est.goal_node, m.out[:n].copy(), m.E[:n].copy(), R[:n].copy(),
+                   absorbing[:n].copy(), est.rho.copy(), est.U.copy(), est.osucc.copy(),
+                   est.onb.copy(), est.ong.copy(),
+                   *kernels.predecessors(m.out, n, m.alive, est.osucc, est.onb))
+
+
 class MotivationEstimator:
     """Holds the goal, the potentials V and the outcome memory of Eq. 5'; :meth:`record`
     notes what an action did, :meth:`update` re-solves Eq. 4-5'."""
@@ -313,6 +360,10 @@ class MotivationEstimator:
         self.gamma, self.beta = config.gamma, config.beta
         self.goal_sigma, self.goal_sim_floor = config.goal_sigma, config.goal_sim_floor
         self.vi_tol, self.vi_max_sweeps = config.vi_tol, config.vi_max_sweeps
+        self.vi_incremental = config.vi_incremental
+        self._inc: IncrementalState | None = None   # the copy of the last solve's inputs
+        self._opt_rows: np.ndarray | None = None    # option rows recomputed since
+        self.solves = {"incremental": 0, "full": 0}   # and why the incremental declined
         self.absorbing_terminals = config.absorbing_terminals
         self.value_unknown = config.unknown != "none"
         self.frame = make_frame(config.unknown)     # where places are measured (frame.py)
@@ -377,6 +428,7 @@ class MotivationEstimator:
         self._options_key = ()
         self.route = 0.0                  # the route to the new goal is not known yet
         self.V[:] = 0.0
+        self._inc = None
         self.V0[:] = 0.0
         self._v0_fresh = False
 
@@ -506,6 +558,7 @@ class MotivationEstimator:
         self.delta = np.array(d["delta"], dtype=float)
         self.moves = np.array(d["moves"], dtype=np.int64)
         self._options_key = ()
+        self._inc = None                  # the next solve is a full one
 
     # ------------------------------------------------------------------ Eq. 4-5'
     @staticmethod
@@ -711,6 +764,8 @@ class MotivationEstimator:
         else:
             return
         self._dirty.clear()
+        self._opt_rows = rows if self._opt_rows is None or len(rows) == n else \
+            np.union1d(self._opt_rows, rows)
         kernels.option_values(F.w, m.out, m.alive, n, rows, F.goal, F.delta,
                               F.L, self.v_star, self.gamma, self.tried, self.bump_t,
                               self.closed_t, self.bump_e, self.succ, clock, T, self.episode,
@@ -788,11 +843,73 @@ class MotivationEstimator:
             self._options(m, n)
             if self.broken:
                 R, absorbing = self._goal_terminal(n, absorbing)
-        self.sweeps = kernels.value_iteration(               # Eq. 4-5'
+        self.sweeps = self._solve(m, n, R, absorbing)          # Eq. 4-5'
+        return self.V[:n]
+
+    def _solve(self, m: SensorimotorMap, n: int, R: np.ndarray, absorbing: np.ndarray
+               ) -> int:
+        """Eq. 4-5' on this map: with ``vi_incremental`` by prioritized sweeping from the
+        last solution (:meth:`_incremental`); without it, or when that declines (a goal
+        change, a new map size, a change that may have cut a node off its sources, a
+        sweep over budget), by synchronous sweeps warm-started from the last V
+        (:func:`kernels.value_iteration`). Returns the sweeps of a synchronous solve (0:
+        solved incrementally). Either way every node ends with ``|beta (T(i) - V(i))| <=
+        vi_tol V(i)`` (``T``: the right-hand side of Eq. 4-5', :func:`kernels.
+        node_target`), the synchronous solve's stopping rule."""
+        rows, self._opt_rows = self._opt_rows, None
+        if self.vi_incremental and self._incremental(m, n, R, absorbing, rows):
+            return 0
+        sweeps = kernels.value_iteration(
             m.out, m.E, R, self.V, n, self.beta, self.gamma, self.vi_tol, V_FLOOR,
             self.vi_max_sweeps, absorbing, m.alive, self.U[:n], self.rho[:n],
             self.osucc[:n], self.onb[:n], self.ong[:n])
-        return self.V[:n]
+        self.solves["full"] += 1
+        if self.vi_incremental:
+            self._inc = IncrementalState.of(m, n, R, absorbing, self)
+        return sweeps
+
+    def _incremental(self, m: SensorimotorMap, n: int, R: np.ndarray, absorbing: np.ndarray,
+                     rows: np.ndarray | None) -> bool:
+        """Prioritized sweeping from the last solution, seeded with the rows that changed
+        since (:func:`kernels.changed_rows`, and :func:`kernels.changed_options` over the
+        option rows recomputed since); at most one update per node. Declines (False)
+        without a last solution of a map of this size and goal, when a change may have cut
+        a node off its sources (Eq. 4-5's V = 0 without a route is reached only
+        geometrically by sweeping) or when the sweep outgrows its budget."""
+        inc = self._inc
+        if inc is None or inc.goal_node != self.goal_node:
+            return self._declined("goal")
+        if inc.n != n or inc.out0.shape != m.out[:n].shape or inc.rho0.shape != self.rho.shape:
+            return self._declined("size")
+        c, lost, relinked = kernels.changed_rows(m.out, m.E, R, absorbing, inc.out0, inc.E0,
+                                                 inc.R0, inc.abs0, n, inc.seeds)
+        relinked_o = False
+        if rows is not None and not lost:
+            c, lost_o, relinked_o = kernels.changed_options(
+                rows, len(rows), self.rho, self.U, self.osucc, self.onb, self.ong, inc.rho0,
+                inc.U0, inc.osucc0, inc.onb0, inc.ong0, inc.seeds, c)
+            lost |= lost_o
+        if lost:
+            return self._declined("lost")
+        self.solves["incremental"] += 1
+        if c == 0:
+            return True
+        if relinked or relinked_o:
+            inc.first, inc.pred = kernels.predecessors(m.out, n, m.alive, self.osucc,
+                                                       self.onb)
+        done = kernels.prioritized_sweep(
+            m.out, m.E, R, self.V, n, self.gamma, self.vi_tol * (1.0 - self.gamma),
+            V_FLOOR, absorbing, m.alive, self.U, self.rho, self.osucc, self.onb, self.ong,
+            inc.first, inc.pred, inc.seeds, c, n, inc.heap, inc.pos, inc.key)
+        if done < 0:
+            self.solves["incremental"] -= 1
+            return self._declined("budget")
+        return True
+
+    def _declined(self, why: str) -> bool:
+        """Count why an incremental solve declined (``solves``); False."""
+        self.solves[why] = self.solves.get(why, 0) + 1
+        return False
 
     def exploit(self, m: SensorimotorMap) -> np.ndarray:
         """The potentials of Eq. 5 without options (the learnt policy, for the greedy

@@ -28,6 +28,7 @@
 
 from __future__ import annotations
 
+import math
 import platform
 import sys
 import time
@@ -35,7 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
-from maze_sim.maze import Maze, generate_maze
+from maze_sim.maze import Maze, bfs_distances, generate_maze, move
+from tmgwr_agent.core import kernels
 from tmgwr_agent.experiments.agent_factory import AGENT_NAMES, make_agent
 from tmgwr_agent.experiments.parallel import agent_trials, default_jobs, warm_up
 from tmgwr_agent.experiments.runner import (
@@ -160,6 +162,9 @@ def run(args) -> int:
     print("bench: TMGWR step time on a ~1300-cell maze (about a minute of training) ...",
           file=sys.stderr)
     result["step_large"] = bench_large(args.seed, args.steps)
+    t0 = time.perf_counter()
+    result.update(scaling(args.seed))
+    result["scaling_wall_s"] = round(time.perf_counter() - t0, 1)
     print("bench: CPU seconds to convergence ...", file=sys.stderr)
     result["cpu_to_convergence"] = cpu_to_convergence(args.trials, args.seed, args.jobs)
     if not getattr(args, "no_graph", False):
@@ -169,6 +174,8 @@ def run(args) -> int:
     path = Path(args.json) if args.json else Path("results") / "bench.json"
     write_json(result, path)
     print(ratio_table(result))
+    print()
+    print(scaling_table(result))
     print()
     print(bench_table(result))
     print(f"written: {path}")
@@ -279,3 +286,325 @@ def ratio_rows(result: dict) -> list[list[str]]:
                          f"mean {num(st.get('mean_us'), 1)} us", "",
                          f"median <= {target:g} us" if target else ""])
     return rows
+
+
+# ---------------------------------------------------------------------------- scaling
+#: Free cells of the scaling benchmark's maps (issue 27), per family.
+SCALING_CELLS = (300, 1400, 3200, 10000)
+SCALING_FAMILIES = ("open", "braided")
+#: Steps timed per map for the scaling rows.
+SCALING_STEPS = 2000
+#: Ordinary learning episodes at most after the tours (:func:`tour_train`); a greedy
+#: optimal rollout ends training earlier.
+SCALING_EPISODES = 12
+#: Learning tours of the maze before them.
+SCALING_TOURS = 3
+
+
+def scaling_open_field(cells: int, rng: np.random.Generator, density: float = 0.08) -> str:
+    """An open square field of about ``cells`` free cells with sparse random obstacles (bars
+    of 1 to 3 cells covering about ``density`` of it), pockets walled up, S and G in opposite
+    corners."""
+    side = int(round(math.sqrt(cells / (1.0 - density))))
+    walls = np.ones((side + 2, side + 2), dtype=bool)
+    walls[1:-1, 1:-1] = False
+    keep = {(1, 1), (side, side)}
+    while walls[1:-1, 1:-1].sum() < density * side * side:
+        h, w = 1, int(rng.integers(1, 4))
+        if rng.random() < 0.5:
+            h, w = w, h
+        r, c = int(rng.integers(1, side + 1)), int(rng.integers(1, side + 1))
+        cut = {(rr, cc) for rr in range(r, min(r + h, side + 1))
+               for cc in range(c, min(c + w, side + 1))}
+        if not cut & keep:
+            for cell in cut:
+                walls[cell] = True
+    walls |= bfs_distances(walls, (1, 1)) < 0              # wall up cut-off pockets
+    chars = np.where(walls, "#", ".").astype("<U1")
+    chars[1, 1], chars[side, side] = "S", "G"
+    return "\n".join("".join(row) for row in chars) + "\n"
+
+
+def scaling_braided(cells: int, rng: np.random.Generator, loops: float = 0.2) -> str:
+    """A braided maze of about ``cells`` free cells: a recursive-backtracker perfect maze
+    with a share ``loops`` of its inner walls knocked out (:func:`maze_sim.maze.
+    generate_maze`), S top left, G bottom right."""
+    side = int(round(math.sqrt(2.0 * cells / (1.0 + loops / 2.0)))) + 1
+    side += 1 - side % 2                                   # odd
+    return generate_maze(side, side, rng, loop_fraction=loops)
+
+
+def scaling_maze(family: str, cells: int, seed: int) -> Maze:
+    rng = np.random.default_rng([seed, cells, SCALING_FAMILIES.index(family)])
+    text = (scaling_open_field if family == "open" else scaling_braided)(cells, rng)
+    return Maze.from_text(text, source=f"scaling {family} ~{cells} cells, seed {seed}")
+
+
+#: The move that undoes each action (up/down, left/right: maze_sim's numbering).
+_BACK = (1, 0, 3, 2)
+
+
+def tour_actions(walls: np.ndarray, start) -> list[int]:
+    """A depth-first tour of every free cell from ``start`` that, on entering a cell, also
+    takes each move into a wall there once (a bump), and walks back along the tree: the
+    actions of a systematic explorer (:func:`maze_sim.maze.move`'s numbering)."""
+    seen = np.zeros_like(walls)
+    seen[start] = True
+    acts: list[int] = []
+    stack: list[tuple[tuple[int, int], int, int]] = [(start, 0, -1)]   # cell, next a, came
+    while stack:
+        cell, k, came = stack.pop()
+        if k == 0:
+            acts.extend(a for a in range(4) if move(walls, cell, a)[1])
+        for a in range(k, 4):
+            nxt, bumped = move(walls, cell, a)
+            if not bumped and not seen[nxt]:
+                seen[nxt] = True
+                stack.append((cell, a + 1, came))
+                stack.append((nxt, 0, a))
+                acts.append(a)
+                break
+        else:
+            if came >= 0:
+                acts.append(_BACK[came])
+    return acts
+
+
+def tour_train(world, agent, tours: int = SCALING_TOURS,
+               max_episodes: int = SCALING_EPISODES) -> dict:
+    """The cheaper route to a converged agent on a large map (the first episode of a random
+    walk over 10,000 cells would take hours): ``tours`` learning episodes that follow
+    :func:`tour_actions` from S (the agent observes every step but does not choose; the
+    world's goal G ends an episode, which then resumes from G), which give the map a node
+    per cell, the links of every move and the bumps of every wall; the goal then told to
+    the agent, Eq. 7's epsilon set to its floor (as after ten goals); then ordinary
+    learning episodes from S until a greedy rollout takes a shortest path (at most
+    ``max_episodes``). Returns those episodes and whether the last probe was optimal."""
+    acts = tour_actions(world.walls, world.maze.start)
+    for _ in range(tours):
+        obs, _ = world.reset()
+        agent.begin_episode(obs, world.cell)
+        for a in acts:
+            obs, _, term, trunc, info = world.step(a)
+            agent.observe(obs, info)
+            if term or trunc:
+                obs, _ = world.reset(start=world.cell)
+                agent.begin_episode(obs, world.cell)
+        world.end_episode()
+    set_goal(world, agent, "G")
+    agent.selector.attained = True
+    schedule = agent.selector.policy.schedule
+    schedule.eps = schedule.eps_min
+    d = world.shortest_path_length()
+    for k in range(1, max_episodes + 1):
+        run_episode(world, agent)
+        if greedy_optimal(world, agent, d):
+            return {"episodes": k, "optimal": True}
+    return {"episodes": max_episodes, "optimal": False}
+
+
+def lookup_floor_ns(agent, winners: np.ndarray) -> np.ndarray:
+    """Nanoseconds of a pure lookup of the winner's best link (its links' ``E V`` argmax,
+    :func:`kernels.best_links`) for each of ``winners`` on the agent's map: the floor of a
+    step that changes nothing."""
+    m, V = agent.map, agent.motivation.V
+    out = np.empty(len(winners), dtype=np.int64)
+    clock = time.perf_counter_ns
+    for k, i in enumerate(winners):
+        t0 = clock()
+        kernels.best_links(m.out[i], m.E[i], V)
+        out[k] = clock() - t0
+    return out
+
+
+def time_steps_winners(world, agent, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`time_steps`, with the winner each step acted from."""
+    ns = np.empty(n, dtype=np.int64)
+    win = np.empty(n, dtype=np.int64)
+    i = 0
+    clock = time.perf_counter_ns
+    while i < n:
+        obs, _ = world.reset()
+        agent.begin_episode(obs, world.cell)
+        while i < n:
+            win[i] = agent.winner
+            t0 = clock()
+            a = agent.act()
+            t1 = clock()
+            obs, _, term, trunc, info = world.step(a)
+            t2 = clock()
+            agent.observe(obs, info)
+            t3 = clock()
+            ns[i] = (t1 - t0) + (t3 - t2)
+            i += 1
+            if term or trunc:
+                break
+    return ns, win
+
+
+def goal_change_first_ms(world, agent, goal_cell) -> float:
+    """Milliseconds of the agent's part of a goal change (``set_goal``, which re-solves
+    Eq. 4-5 from V = 0) and of its first step after it, mid-episode."""
+    obs, _ = world.reset()
+    agent.begin_episode(obs, world.cell)
+    for _ in range(3):                       # a few steps into the episode
+        obs, _, term, trunc, info = world.step(agent.act())
+        agent.observe(obs, info)
+    world.set_goal(goal_cell)
+    goal_obs = world.goal_observation()
+    state = world.goal_state
+    t0 = time.perf_counter_ns()
+    agent.set_goal(state, goal_obs)
+    a = agent.act()
+    t1 = time.perf_counter_ns()
+    obs, _, term, trunc, info = world.step(a)
+    t2 = time.perf_counter_ns()
+    agent.observe(obs, info)
+    t3 = time.perf_counter_ns()
+    world.end_episode()
+    return ((t1 - t0) + (t3 - t2)) / 1e6
+
+
+def block_episode_ms(world, agent, seed: int) -> dict:
+    """A cell of the agent's route is blocked (the first one from the route's middle on that
+    leaves the goal reachable), then one learning episode from S is timed (``act`` +
+    ``observe``, milliseconds) with its steps."""
+    d = world.shortest_path_length()
+    path = _greedy_cells(world, agent, d)
+    blocked = None
+    for cell in path[len(path) // 2:-1]:
+        try:
+            world.set_cell(cell[0], cell[1], True)
+        except Exception:  # noqa: BLE001 -- refused: it would cut the last route
+            continue
+        blocked = cell
+        break
+    clock = time.perf_counter_ns
+    obs, _ = world.reset()
+    agent.begin_episode(obs, world.cell)
+    total, steps = 0, 0
+    while True:
+        t0 = clock()
+        a = agent.act()
+        t1 = clock()
+        obs, _, term, trunc, info = world.step(a)
+        t2 = clock()
+        agent.observe(obs, info)
+        total += (t1 - t0) + (clock() - t2)
+        steps += 1
+        if term or trunc:
+            break
+    return {"block_episode_ms": total / 1e6, "block_episode_steps": steps,
+            "blocked_cell": list(blocked) if blocked else None,
+            "shortest_after": world.shortest_path_length()}
+
+
+def _greedy_cells(world, agent, d: int) -> list[tuple[int, int]]:
+    """The cells of a greedy rollout (no learning) of at most ``d`` steps from S."""
+    obs, _ = world.reset()
+    agent.begin_episode(obs, world.cell, learn=False)
+    cells = [world.cell]
+    for _ in range(d):
+        obs, _, term, trunc, info = world.step(agent.act(explore=False))
+        agent.observe(obs, info, learn=False)
+        cells.append(world.cell)
+        if term or trunc:
+            break
+    world.end_episode()
+    return cells
+
+
+def scaling_row(family: str, cells: int, seed: int, steps: int = SCALING_STEPS,
+                overrides: dict | None = None) -> dict:
+    """One row of the scaling benchmark (issue 27): the default TMGWR agent trained on
+    :func:`scaling_maze` by :func:`tour_train`, then ``steps`` converged learning steps
+    timed (median, p99, mean; ``solves``: how many the estimator solved incrementally), the
+    lookup floor on the same winners, as many more steps with the incremental solve off
+    (``full_solve_step_median_us``: the same map solved in full every step, an A/B in one
+    run), the first step after a goal change (to the free cell nearest the maze's centre,
+    and back to G), and the episode after a block on the route."""
+    maze = scaling_maze(family, cells, seed)
+    caps = Caps.for_maze(maze)
+    world = make_world(maze, "G", caps)
+    world.set_goal("G")
+    agent = make_agent("tmgwr", maze, np.random.default_rng(seed), overrides)
+    t0 = time.perf_counter()
+    trained = tour_train(world, agent)
+    train_s = time.perf_counter() - t0
+    before = dict(getattr(agent.motivation, "solves", {}))
+    ns, winners = time_steps_winners(world, agent, steps)
+    solves = {k: v - before.get(k, 0)
+              for k, v in getattr(agent.motivation, "solves", {}).items()}
+    full = None
+    if getattr(agent.motivation, "vi_incremental", False):   # the same map, solved in full
+        agent.motivation.vi_incremental = False
+        full = float(np.median(time_steps_winners(world, agent, steps)[0])) / 1e3
+        agent.motivation.vi_incremental = True
+    us = ns / 1e3
+    floor = lookup_floor_ns(agent, winners) / 1e3
+    free = maze.free_cells()
+    centre = np.array(maze.walls.shape) / 2.0
+    mid = min(free, key=lambda c: (abs(c[0] - centre[0]) + abs(c[1] - centre[1]), c))
+    goal_ms = goal_change_first_ms(world, agent, mid)
+    world.set_goal("G")
+    back_ms = goal_change_first_ms(world, agent, maze.goal_cell("G"))
+    block = block_episode_ms(world, agent, seed)
+    med = float(np.median(us))
+    return {"family": family, "cells": len(free), "nodes": int(agent.map.size),
+            "maze": maze.source, "train_s": round(train_s, 2), "trained": trained,
+            "step_median_us": med, "step_p99_us": float(np.percentile(us, 99)),
+            "step_mean_us": float(us.mean()), "step_max_us": float(us.max()),
+            "floor_median_us": float(np.median(floor)),
+            "median_over_floor": med / float(np.median(floor)),
+            "solves": solves, "full_solve_step_median_us": full,
+            "goal_change_first_ms": goal_ms, "goal_back_first_ms": back_ms,
+            **block}
+
+
+def scaling(seed: int, steps: int = SCALING_STEPS, cells=SCALING_CELLS,
+            families=SCALING_FAMILIES) -> dict:
+    """``scaling``: every row of :func:`scaling_row`; ``scaling_slopes``: per family, the
+    log-log slope of the step's median against the node count from about 1,400 cells
+    on (:func:`scaling_slopes`)."""
+    rows = []
+    for family in families:
+        for c in cells:
+            print(f"bench: scaling, {family} ~{c} cells ...", file=sys.stderr)
+            rows.append(scaling_row(family, c, seed, steps))
+    return {"scaling": rows, "scaling_slopes": scaling_slopes(rows)}
+
+
+SCALING_HEADER = ("family", "cells", "nodes", "median us", "p99 us", "mean us",
+                  "median / floor", "goal change ms", "block episode ms (steps)",
+                  "incremental solves")
+
+
+def scaling_table(result: dict) -> str:
+    """The scaling rows (issue 27) as a table, with the slopes."""
+    from tmgwr_agent.experiments.report import _table
+    rows = []
+    for r in result.get("scaling") or []:
+        sv = r.get("solves") or {}
+        total = sum(v for k, v in sv.items() if k in ("incremental", "full"))
+        rows.append([r["family"], str(r["cells"]), str(r["nodes"]),
+                     f"{r['step_median_us']:.1f}", f"{r['step_p99_us']:.0f}",
+                     f"{r['step_mean_us']:.0f}", f"{r['median_over_floor']:.0f}",
+                     f"{r['goal_change_first_ms']:.1f}",
+                     f"{r['block_episode_ms']:.1f} ({r['block_episode_steps']})",
+                     f"{sv.get('incremental', 0)} / {total}" if total else "-"])
+    slopes = ", ".join(f"{f} {v:.2f}" for f, v in (result.get("scaling_slopes") or {}).items())
+    return ("scaling (issue 27): converged core step against map size; log-log slope of the "
+            f"median from ~1,400 cells: {slopes or '-'}\n" + _table(list(SCALING_HEADER), rows))
+
+
+def scaling_slopes(rows: list[dict]) -> dict:
+    """Per family, d log(step median) / d log(nodes) between its rows of about 1,400 cells
+    and over (the least-squares slope)."""
+    out = {}
+    for family in {r["family"] for r in rows}:
+        rs = [r for r in rows if r["family"] == family and r["cells"] >= 1000]
+        if len(rs) >= 2:
+            x = np.log([r["nodes"] for r in rs])
+            y = np.log([r["step_median_us"] for r in rs])
+            out[family] = float(np.polyfit(x, y, 1)[0])
+    return out

@@ -1,0 +1,169 @@
+"""The incremental solution of Eq. 4-5' (prioritized sweeping, kernels.prioritized_sweep)
+equals a full solve within vi_tol after random sequences of map edits, and the agent's
+estimator, solving incrementally, keeps V equal to a full solve of each step's map."""
+
+import numpy as np
+import pytest
+
+from tmgwr_agent.core import kernels
+from tmgwr_agent.core.value_iteration import Options, solve
+
+GAMMA, BETA, TOL, FLOOR = 0.97, 0.8, 1e-4, 1e-150
+
+
+def random_map(rng, n, K=4, P=4):
+    out = np.where(rng.random((n, K)) < 0.6, rng.integers(0, n, (n, K)), -1)
+    E = np.where(out >= 0, rng.uniform(0.3, 1.0, (n, K)), 0.0)
+    R = np.where(rng.random(n) < 0.1, rng.random(n), 0.0)
+    absorbing = rng.random(n) < 0.05
+    alive = np.ones(n, bool)
+    rho = np.where(rng.random((n, P)) < 0.2, rng.random((n, P)), 0.0)
+    osucc = rng.choice(np.r_[-2, -1, np.arange(n)], size=(n, P))
+    onb = np.where(rng.random((n, P, P)) < 0.5, rng.integers(0, n, (n, P, P)), -1)
+    ong = rng.random((n, P, P))
+    U = rng.random((n, P)) * 5
+    return out, E, R, absorbing, alive, Options(U, rho, osucc, onb, ong)
+
+
+def exact(out, E, R, absorbing, alive, o):
+    """The fixed point of Eq. 4-5' (the numpy reference at a tolerance far below vi_tol)."""
+    n = len(R)
+    V, _ = solve(out, E, R, np.zeros(n + 1), BETA, GAMMA, 1e-13, FLOOR, 10**6, absorbing,
+                 alive, o)
+    return V
+
+
+def edit(rng, out, E, R, o, n):
+    """One random edit that keeps every node's sources (what the estimator sweeps
+    incrementally; a removal makes it solve in full): a link added or its reliability
+    changed up or down, a reward raised, an option's rho, U or successor changed.
+    Returns the rows it touched."""
+    i = int(rng.integers(n))
+    kind = rng.integers(5)
+    if kind == 0:
+        free = np.flatnonzero(out[i] < 0)
+        if len(free):
+            out[i, free[0]] = rng.integers(n)
+            E[i, free[0]] = rng.uniform(0.3, 1.0)
+    elif kind == 1:
+        s = np.flatnonzero(out[i] >= 0)
+        if len(s):
+            E[i, s[0]] = np.clip(E[i, s[0]] * rng.uniform(0.7, 1.3), 0.05, 1.0)
+    elif kind == 2:
+        R[i] = R[i] + rng.uniform(0.0, 0.5)
+    else:
+        a = int(rng.integers(o.rho.shape[1]))
+        if o.rho[i, a] > 0.0:
+            o.rho[i, a] = rng.uniform(0.05, 1.0)
+        o.U[i, a] = rng.random() * 5
+        if kind == 4:
+            o.osucc[i, a] = rng.choice(np.r_[-2, -1, np.arange(n)])
+    return [i]
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_incremental_equals_a_full_solve_after_random_edits(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(20, 150))
+    out, E, R, absorbing, alive, o = random_map(rng, n)
+    V = exact(out, E, R, absorbing, alive, o)
+    heap, pos, key = np.empty(n, np.int64), np.full(n, -1, np.int64), np.zeros(n)
+    updates = 0
+    for _ in range(40):
+        seeds = np.array(sorted({i for _ in range(int(rng.integers(1, 4)))
+                                 for i in edit(rng, out, E, R, o, n)}), dtype=np.int64)
+        first, pred = kernels.predecessors(out, n, alive, o.osucc, o.onb)
+        done = kernels.prioritized_sweep(out, E, R, V, n, GAMMA, TOL * (1 - GAMMA), FLOOR,
+                                         absorbing, alive, o.U, o.rho, o.osucc, o.onb,
+                                         o.ong, first, pred, seeds, len(seeds), 100 * n,
+                                         heap, pos, key)
+        assert done >= 0
+        updates += done
+        ref = exact(out, E, R, absorbing, alive, o)
+        np.testing.assert_allclose(V[:n], ref[:n], rtol=TOL, atol=1e-12)
+        assert (pos == -1).all()
+    assert updates > 0
+
+
+def test_a_budget_exceeded_says_so_and_leaves_the_queue_clean():
+    rng = np.random.default_rng(3)
+    n = 60
+    out, E, R, absorbing, alive, o = random_map(rng, n)
+    V = np.zeros(n + 1)                       # far from the solution: many updates
+    first, pred = kernels.predecessors(out, n, alive, o.osucc, o.onb)
+    seeds = np.arange(n, dtype=np.int64)
+    heap, pos, key = np.empty(n, np.int64), np.full(n, -1, np.int64), np.zeros(n)
+    assert kernels.prioritized_sweep(out, E, R, V, n, GAMMA, 1e-8, FLOOR, absorbing, alive,
+                                     o.U, o.rho, o.osucc, o.onb, o.ong, first, pred, seeds,
+                                     n, 3, heap, pos, key) == -1
+    assert (pos == -1).all()
+
+
+def test_changed_rows_finds_the_edits_and_flags_a_removal():
+    rng = np.random.default_rng(0)
+    n = 30
+    out, E, R, absorbing, alive, o = random_map(rng, n)
+    out0, E0, R0, a0 = out.copy(), E.copy(), R.copy(), absorbing.copy()
+    seeds = np.empty(n, np.int64)
+    s = np.flatnonzero(out[4] >= 0)[0]
+    E[4, s] *= 0.5
+    R[9] += 0.1
+    c, lost, relinked = kernels.changed_rows(out, E, R, absorbing, out0, E0, R0, a0, n, seeds)
+    assert sorted(seeds[:c]) == [4, 9] and not lost and not relinked
+    assert np.array_equal(E0, E)
+    out[7, np.flatnonzero(out[7] >= 0)[0]] = -1
+    c, lost, relinked = kernels.changed_rows(out, E, R, absorbing, out0, E0, R0, a0, n, seeds)
+    assert list(seeds[:c]) == [7] and lost and relinked
+
+
+def test_the_agent_solving_incrementally_meets_the_full_solves_stopping_rule(monkeypatch):
+    """Every solve of a training run on the default maze (a goal change and a block
+    included), incremental or in full, leaves every node with |beta (T(i) - V(i))| <=
+    vi_tol V(i) (T: the right-hand side of Eq. 4-5', kernels.node_target), the stopping
+    rule of the synchronous solve; and V within vi_tol / (beta (1 - gamma)) of the exact
+    fixed point, the bound that rule gives."""
+    from maze_sim.maze import Maze
+    from tmgwr_agent.core.motivation import V_FLOOR, MotivationEstimator
+    from tmgwr_agent.experiments.agent_factory import make_agent
+    from tmgwr_agent.experiments.runner import Caps, make_world, run_episode, set_goal
+    from tmgwr_agent.experiments.scenarios import DEFAULT_MAZE
+
+    original = MotivationEstimator._solve
+    seen = {"incremental": 0, "full": 0}
+    worst = {"rule": 0.0, "exact": 0.0}
+
+    def checked(self, m, n, R, absorbing):
+        sweeps = original(self, m, n, R, absorbing)
+        seen["incremental" if sweeps == 0 else "full"] += 1
+        T = np.array([kernels.node_target(i, m.out, m.E, R, self.V, self.gamma, absorbing,
+                                          m.alive, self.U, self.rho, self.osucc, self.onb,
+                                          self.ong) for i in range(n)])
+        V = self.V[:n]
+        rule = np.abs(self.beta * (T - V)) / (self.vi_tol * V + V_FLOOR)
+        ref = self.V.copy()
+        kernels.value_iteration(m.out, m.E, R, ref, n, self.beta, self.gamma, 1e-13,
+                                V_FLOOR, 10**6, absorbing, m.alive, self.U[:n],
+                                self.rho[:n], self.osucc[:n], self.onb[:n], self.ong[:n])
+        exact = np.abs(V - ref[:n]) / (ref[:n] + 1e-12)
+        live = T > 1e-100          # (a node off every route: T = V = 0)
+        worst["rule"] = max(worst["rule"], float(rule[live].max(initial=0.0)))
+        worst["exact"] = max(worst["exact"], float(exact.max()))
+        return sweeps
+
+    monkeypatch.setattr(MotivationEstimator, "_solve", checked)
+    maze = Maze.from_file(DEFAULT_MAZE)
+    caps = Caps.for_maze(maze)
+    world = make_world(maze, "G", caps)
+    agent = make_agent("tmgwr", maze, np.random.default_rng(0))
+    set_goal(world, agent, "G")
+    for k in range(11):
+        if k == 7:
+            set_goal(world, agent, "3")
+        if k == 9:
+            world.fire_event("a")
+        run_episode(world, agent, max_steps=3000)
+    print(seen, worst, agent.motivation.solves)
+    assert seen["incremental"] > 3 * seen["full"] > 0
+    assert worst["rule"] <= 1.0
+    mot = agent.motivation
+    assert worst["exact"] <= mot.vi_tol / (mot.beta * (1.0 - mot.gamma))
