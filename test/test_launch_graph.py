@@ -156,7 +156,8 @@ def test_ros2_launch_with_a_bad_params_file_ends_non_zero_naming_it(ros_domain, 
 
 @pytest.mark.timeout(150)
 def test_ros2_launch_ends_non_zero_when_a_running_node_dies(ros_domain, tmp_path):
-    p = launch(ros_domain, env={"ROS_HOME": str(tmp_path)})
+    """With restarts off (``respawn_limit:=0``; test_respawn.py: with them on)."""
+    p = launch(ros_domain, "respawn_limit:=0", env={"ROS_HOME": str(tmp_path)})
     with p:
         p.wait_for_line(r"\[maze_sim-\d+\].*goal \(\d+, \d+\) reached", timeout=120)
         pid = int(re.search(r"\[motivation_estimator-\d+\]: process started with pid \[(\d+)\]",
