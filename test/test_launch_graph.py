@@ -112,7 +112,8 @@ def test_ros2_launch_with_a_namespace_then_ctrl_c(ros_domain, tmp_path):
     for node in NODES:
         assert re.search(rf"\[{node}-\d+\]: process has finished cleanly", out), (node, out)
     assert not re.search(r"Traceback|FATAL|KeyboardInterrupt", out), out
-    assert (tmp_path / "tmgwr" / f"domain{ros_domain}_a" / "map.npz").is_file()
+    # each launch keeps its own directory (issue 24: a fresh launch overwrote the last map)
+    assert list((tmp_path / "tmgwr" / f"domain{ros_domain}_a").glob("launch_*/map.npz")), out
 
 
 @pytest.mark.timeout(120)
