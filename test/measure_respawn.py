@@ -61,15 +61,17 @@ class Graph:
     def find(self, pattern: str, start: int = 0) -> list[tuple[int, float, str]]:
         regex = re.compile(pattern)
         with self.lock:
-            return [(i, t, ln) for i, (t, ln) in enumerate(self.lines)
-                    if i >= start and regex.search(ln)]
+            tail = self.lines[start:]
+        return [(start + i, t, ln) for i, (t, ln) in enumerate(tail) if regex.search(ln)]
 
     def wait(self, pattern: str, start: int = 0, timeout: float = 120.0, spin=None):
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
+            n = len(self.lines)
             hits = self.find(pattern, start)
             if hits:
                 return hits[0]
+            start = n
             if self.proc.poll() is not None:
                 break
             spin(0.02) if spin else time.sleep(0.02)

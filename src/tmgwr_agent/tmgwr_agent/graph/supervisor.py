@@ -365,8 +365,12 @@ def _recorder_respawn(spec: NodeSpec, n: int) -> NodeSpec:
 
 def _resume_respawn(spec: NodeSpec, n: int) -> NodeSpec:   # noqa: ARG001
     """A restarted node continues from its checkpoint (its own default directory when the
-    run has none: ``up --no-record``)."""
-    return replace(spec, params={**spec.params, "resume": True})
+    run has none: ``up --no-record``); a restarted simulator steps at once (the recorder's
+    subscriptions, what ``start_delay`` waits for, are already there)."""
+    params = {**spec.params, "resume": True}
+    if "start_delay" in params:
+        params["start_delay"] = 0.0
+    return replace(spec, params=params)
 
 
 COMPOSED_READY = re.compile(r"\bcomposed ready\b")
