@@ -52,6 +52,9 @@ def main() -> int:
         release_domain(domain)
     seconds = time.monotonic() - t0
     out = up.stdout + up.stderr
+    if not (bag / "metadata.yaml").is_file():
+        print(out[-5000:], file=sys.stderr)
+        raise SystemExit(f"no finished bag in {bag} (up exit {up.returncode})")
     meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     gaps = json.loads(meta["custom_data"]["step_gaps"])
     missing = {t: sum(r["missing"] for r in runs.values()) for t, runs in gaps.items()}

@@ -199,9 +199,10 @@ def recorded_missing(bag) -> dict[str, list[list[int]]]:
 def test_a_paused_recorder_says_exactly_what_it_lost(ros_domain, tmp_path):
     """Issue 10: a recorder paused for 10 s lost 1711 consecutive steps on every step topic,
     yet ended with 'received 25421, written 25421'. The ring does not wait for the recorder
-    (keep-last 10 per-step publishers), so a paused recorder loses what their history no
-    longer holds; now it says exactly which steps, live and at the end, and the bag's
-    metadata holds the same ranges as the bag itself lacks."""
+    (keep-last STEP_DEPTH per-step publishers), so a paused recorder loses what their
+    history no longer holds; now it says exactly which steps, live and at the end, and the
+    bag's metadata holds the same ranges as the bag itself lacks. The pause (25 s) outlasts
+    that history even at a loaded machine's rate."""
     import os
     import signal
     bag = tmp_path / "paused"
@@ -212,7 +213,7 @@ def test_a_paused_recorder_says_exactly_what_it_lost(ros_domain, tmp_path):
         pid = graph_up_pids(up, timeout=90)["recorder"]
         up.wait_for_line(r"\[maze_sim\].*goal \(\d+, \d+\) reached", timeout=90)
         os.kill(pid, signal.SIGSTOP)
-        time.sleep(10.0)
+        time.sleep(25.0)
         os.kill(pid, signal.SIGCONT)
         up.wait_for_line(r"\[recorder\].*GAP on /", timeout=30)     # said at once
         time.sleep(3.0)
@@ -232,7 +233,7 @@ def test_a_paused_recorder_says_exactly_what_it_lost(ros_domain, tmp_path):
         figures[topic] = (r["missing"], r["last"] - r["first"] + 1)
     m = re.search(r"step gaps: (\d+) steps MISSING on 5 per-step topics", out)
     assert m and int(m[1]) == sum(v[0] for v in figures.values()), out[-3000:]
-    print("paused 10 s: missing / steps per topic: "
+    print("paused 25 s: missing / steps per topic: "
           + ", ".join(f"{t} {a}/{b}" for t, (a, b) in figures.items()))
 
 
