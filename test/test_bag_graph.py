@@ -199,9 +199,10 @@ def recorded_missing(bag) -> dict[str, list[list[int]]]:
 def test_a_paused_recorder_says_exactly_what_it_lost(ros_domain, tmp_path):
     """Issue 10: a recorder paused for 10 s lost 1711 consecutive steps on every step topic,
     yet ended with 'received 25421, written 25421'. The ring does not wait for the recorder
-    (keep-last 10 per-step publishers), so a paused recorder loses what their history no
-    longer holds; now it says exactly which steps, live and at the end, and the bag's
-    metadata holds the same ranges as the bag itself lacks."""
+    (keep-last STEP_DEPTH per-step publishers), so a paused recorder loses what their
+    history no longer holds; now it says exactly which steps, live and at the end, and the
+    bag's metadata holds the same ranges as the bag itself lacks. The pause (25 s) outlasts
+    that history even at a loaded machine's rate."""
     import os
     import signal
     bag = tmp_path / "paused"
@@ -212,7 +213,7 @@ def test_a_paused_recorder_says_exactly_what_it_lost(ros_domain, tmp_path):
         pid = graph_up_pids(up, timeout=90)["recorder"]
         up.wait_for_line(r"\[maze_sim\].*goal \(\d+, \d+\) reached", timeout=90)
         os.kill(pid, signal.SIGSTOP)
-        time.sleep(10.0)
+        time.sleep(25.0)
         os.kill(pid, signal.SIGCONT)
         up.wait_for_line(r"\[recorder\].*GAP on /", timeout=30)     # said at once
         time.sleep(3.0)
@@ -232,7 +233,7 @@ def test_a_paused_recorder_says_exactly_what_it_lost(ros_domain, tmp_path):
         figures[topic] = (r["missing"], r["last"] - r["first"] + 1)
     m = re.search(r"step gaps: (\d+) steps MISSING on 5 per-step topics", out)
     assert m and int(m[1]) == sum(v[0] for v in figures.values()), out[-3000:]
-    print("paused 10 s: missing / steps per topic: "
+    print("paused 25 s: missing / steps per topic: "
           + ", ".join(f"{t} {a}/{b}" for t, (a, b) in figures.items()))
 
 
@@ -287,3 +288,33 @@ def test_report_states_the_runs_own_figures(graph_run, tmp_path):
     assert change["optimal_steps"] == 3 and event["optimal_steps"] == 3
     k = change["episodes_to_optimal"]
     assert k is None or change["steps_per_episode"][k - 1] == 3
+
+
+@pytest.mark.timeout(300)
+def test_a_root_recorder_checks_gaps_per_namespace(ros_domain, tmp_path):
+    """Issue 24: a recorder in the root namespace recorded two namespaced graphs but checked
+    the step ids of neither. Now each namespace's per-step topics are checked on their own."""
+    import signal
+
+    from ros_helpers import ros2_run, spawn_module
+    graphs = [spawn_module("tmgwr_agent.cli", "up", "--no-record", "--quiet", "--seed", str(i),
+                           "--namespace", ns, domain=ros_domain, name=f"up {ns}")
+              for i, ns in enumerate("ab")]
+    bag = tmp_path / "root_bag"
+    rec = ros2_run("tmgwr_agent", "recorder", "--ros-args", "-p", f"output_dir:={bag}",
+                   domain=ros_domain, name="recorder")
+    with rec, graphs[0], graphs[1]:
+        for g in graphs:
+            graph_up_pids(g, timeout=120)
+        for g in graphs:
+            g.wait_for_line(r"^episode \d+: \d+ steps", timeout=120)
+        time.sleep(2.0)
+        rec.proc.send_signal(signal.SIGINT)
+        out = rec.wait(timeout=60, check=False)
+    assert rec.proc.returncode == 0, rec.describe("the recorder did not stop cleanly")
+    assert "step gaps: none on 10 per-step topics" in out, out[-3000:]
+    info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    stated = json.loads(info["custom_data"]["step_gaps"])
+    assert set(stated) == {f"/{ns}{t}" for ns in "ab" for t in PER_STEP}, stated
+    for topic, runs in stated.items():
+        assert sum(r["received"] for r in runs.values()) > 50, (topic, runs)

@@ -146,8 +146,9 @@ def kill_under_up(proc, name: str, after: str | None = None) -> tuple[dict[str, 
 
 
 def test_up_reports_a_node_that_dies_and_stops_the_rest(ros_domain):
-    proc = spawn_module("tmgwr_agent.cli", "up", "--no-record", "--quiet", domain=ros_domain,
-                        name="tmgwr up")
+    """With restarts off (``--respawn-limit 0``; test_respawn.py: with them on)."""
+    proc = spawn_module("tmgwr_agent.cli", "up", "--no-record", "--quiet",
+                        "--respawn-limit", "0", domain=ros_domain, name="tmgwr up")
     pids, out = kill_under_up(proc, "map_learner")
     # the others were stopped cleanly, in reverse order
     stopped = re.search(r"^graph stopped: (.*)$", out, re.M).group(1)
@@ -164,7 +165,7 @@ def test_up_saves_the_map_when_another_node_dies(ros_domain, tmp_path):
     its map in the run's directory (and says so), beside its checkpoint."""
     run = tmp_path / "run"
     proc = spawn_module("tmgwr_agent.cli", "up", "--record-dir", str(run),
-                        domain=ros_domain, name="tmgwr up")
+                        "--respawn-limit", "0", domain=ros_domain, name="tmgwr up")
     _, out = kill_under_up(proc, "action_selector",
                            after=r"^episode 1: \d+ steps")
     saved = re.search(r"map_learner: saved (\d+) nodes, \d+ links \(step (\d+)\) to (\S+)",

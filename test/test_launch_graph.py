@@ -112,7 +112,8 @@ def test_ros2_launch_with_a_namespace_then_ctrl_c(ros_domain, tmp_path):
     for node in NODES:
         assert re.search(rf"\[{node}-\d+\]: process has finished cleanly", out), (node, out)
     assert not re.search(r"Traceback|FATAL|KeyboardInterrupt", out), out
-    assert (tmp_path / "tmgwr" / f"domain{ros_domain}_a" / "map.npz").is_file()
+    # each launch keeps its own directory (issue 24: a fresh launch overwrote the last map)
+    assert list((tmp_path / "tmgwr" / f"domain{ros_domain}_a").glob("launch_*/map.npz")), out
 
 
 @pytest.mark.timeout(120)
@@ -156,7 +157,8 @@ def test_ros2_launch_with_a_bad_params_file_ends_non_zero_naming_it(ros_domain, 
 
 @pytest.mark.timeout(150)
 def test_ros2_launch_ends_non_zero_when_a_running_node_dies(ros_domain, tmp_path):
-    p = launch(ros_domain, env={"ROS_HOME": str(tmp_path)})
+    """With restarts off (``respawn_limit:=0``; test_respawn.py: with them on)."""
+    p = launch(ros_domain, "respawn_limit:=0", env={"ROS_HOME": str(tmp_path)})
     with p:
         p.wait_for_line(r"\[maze_sim-\d+\].*goal \(\d+, \d+\) reached", timeout=120)
         pid = int(re.search(r"\[motivation_estimator-\d+\]: process started with pid \[(\d+)\]",
@@ -221,3 +223,22 @@ def test_a_hung_teardown_after_the_node_end_is_cut_with_its_reason(ros_domain):
     assert "state saved" in out and "DDS teardown did not finish" in out, out
     assert "destroy_node" in out, out             # where it hung
     assert took < TEARDOWN_LIMIT + 30, took
+
+
+@pytest.mark.timeout(300)
+def test_each_fresh_launch_keeps_its_own_maps(ros_domain, tmp_path):
+    """Issue 24: each fresh launch in a domain overwrote the previous run's map.npz. Each
+    now has its own directory, launch_<stamp>/ (logged), and both maps stay."""
+    dirs = []
+    for seed in (1, 2):
+        p = launch(ros_domain, f"seed:={seed}", env={"ROS_HOME": str(tmp_path)})
+        with p:
+            line = p.wait_for_line(r"maps and checkpoints in \S+ ", timeout=90)
+            dirs.append(re.search(r"maps and checkpoints in (\S+) ", line)[1])
+            p.wait_for_line(r"\[maze_sim-\d+\].*goal \(\d+, \d+\) reached", timeout=120)
+            os.killpg(p.proc.pid, signal.SIGINT)
+            p.wait(timeout=60)
+    assert dirs[0] != dirs[1], dirs
+    for d in dirs:
+        assert os.path.dirname(d) == str(tmp_path / "tmgwr" / f"domain{ros_domain}"), dirs
+        assert os.path.isfile(os.path.join(d, "map.npz")), (d, os.listdir(d))

@@ -493,3 +493,49 @@ def test_a_bad_initial_map_stops_the_learner_at_start_saying_why(ros_domain, tmp
             out = p.wait(timeout=60, check=False)
         assert p.proc.returncode == 2 and "cannot start" in out and cases[k] in out, out
         assert "Traceback" not in out, out
+
+
+def test_keep_previous_renames_an_earlier_runs_map_and_nothing_else(tmp_path):
+    """Issue 24: each fresh start in a domain overwrote the previous run's map.npz."""
+    store = MapStore(tmp_path)
+    try:
+        assert store.keep_previous("map") is None                  # nothing to keep
+        store.save(small_map(), "map", 7, 1)
+        os.utime(tmp_path / "map.npz", (0, 0))                     # 1970-01-01T00:00:00Z
+        kept = store.keep_previous("map")
+        assert kept == tmp_path / "map.19700101T000000Z.npz" and kept.is_file()
+        assert not (tmp_path / "map.npz").exists()
+        assert store.load("map.19700101T000000Z")[1] == 7          # the same map
+        store.save(small_map(), "map", 9, 2)
+        os.utime(tmp_path / "map.npz", (0, 0))                     # same stamp: a suffix
+        assert store.keep_previous("map") == tmp_path / "map.19700101T000000Z-2.npz"
+        (tmp_path / "map.npz").write_text("not a map")             # someone else's file
+        assert store.keep_previous("map") is None
+        assert (tmp_path / "map.npz").read_text() == "not a map"
+    finally:
+        store.close()
+
+
+@pytest.mark.ros
+@pytest.mark.timeout(180)
+def test_a_fresh_learner_keeps_the_previous_runs_map(ros_domain, tmp_path):
+    """Two fresh learners, one after the other, in one domain (the default map_dir): the
+    first one's map.npz is kept under its time stamp, the second saves its own."""
+    small_map().save(tmp_path / "start10.npz", 10, 1)
+    small_map().save(tmp_path / "start20.npz", 20, 2)
+    env = {"ROS_HOME": str(tmp_path / "ros_home")}
+    home = tmp_path / "ros_home" / "tmgwr" / f"domain{ros_domain}"
+    first = start_learner(ros_domain, "-p", f"initial_map:={tmp_path / 'start10.npz'}", env=env)
+    with first:
+        first.wait_for_line("map_learner ready", timeout=60)
+        first.stop()
+    assert first.proc.returncode == 0 and read_map(home / "map.npz")[1] == 10, first.output
+    second = start_learner(ros_domain, "-p", f"initial_map:={tmp_path / 'start20.npz'}",
+                           env=env)
+    with second:
+        line = second.wait_for_line(r"an earlier run's map .* kept as (map\.\S+\.npz)", 60)
+        second.stop()
+    assert second.proc.returncode == 0, second.output
+    kept = re.search(r"kept as (map\.\S+\.npz)", line)[1]
+    assert read_map(home / kept)[1] == 10, second.output            # the first run's map
+    assert read_map(home / "map.npz")[1] == 20, second.output       # the second run's own

@@ -322,3 +322,54 @@ node.destroy_node(); rclpy.try_shutdown()
         assert "NOT FOUND" in out
     finally:
         release_domain(other)
+
+
+# --------------------------------------------------------------------------- DDS sockets
+NODE_THAT_WAITS = r"""
+import time, rclpy
+from std_msgs.msg import UInt64
+rclpy.init()
+node = rclpy.create_node("socket_probe")
+node.create_publisher(UInt64, "probe", 10)
+node.create_subscription(UInt64, "probe", lambda m: None, 10)
+print("NODE UP", flush=True)
+time.sleep(60)
+"""
+
+
+def udp_sockets(pid: int) -> list[tuple[str, int]]:
+    """(address, port) of every UDP socket process ``pid`` holds (/proc/net/udp, IPv4)."""
+    inodes = set()
+    for fd in os.listdir(f"/proc/{pid}/fd"):
+        try:
+            target = os.readlink(f"/proc/{pid}/fd/{fd}")
+        except OSError:
+            continue
+        if target.startswith("socket:["):
+            inodes.add(target[len("socket:["):-1])
+    found = []
+    with open("/proc/net/udp") as f:
+        for line in f.read().splitlines()[1:]:
+            fields = line.split()
+            if fields[9] in inodes:
+                hexip, hexport = fields[1].split(":")
+                ip = ".".join(str(int(hexip[i:i + 2], 16)) for i in (6, 4, 2, 0))
+                found.append((ip, int(hexport, 16)))
+    return found
+
+
+def test_with_localhost_discovery_participants_bind_unicast_to_loopback(ros_domain):
+    """Issue 24: with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST the participants still bound
+    their unicast sockets to 0.0.0.0. tools/fastdds_localhost.xml's interface allowlist
+    binds them to 127.0.0.1: every socket on the domain's RTPS ports (7400 + 250 x domain
+    ... + 249: discovery and user unicast) of a node is on loopback."""
+    p = spawn_python(NODE_THAT_WAITS, domain=ros_domain, name="socket_probe")
+    with p:
+        p.wait_for_line("NODE UP", timeout=60)
+        time.sleep(1.0)
+        sockets = udp_sockets(p.proc.pid)
+        p.stop()
+    base = 7400 + 250 * ros_domain
+    rtps = [(ip, port) for ip, port in sockets if base <= port < base + 250]
+    assert len(rtps) >= 2, sockets                 # discovery and user unicast at least
+    assert all(ip == "127.0.0.1" for ip, _ in rtps), sockets

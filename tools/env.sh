@@ -14,7 +14,9 @@
 #   resolves to the source trees, so editing core code never needs a rebuild;
 # - ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST (nothing leaves the machine),
 #   RMW_IMPLEMENTATION=rmw_fastrtps_cpp, FASTRTPS_DEFAULT_PROFILES_FILE=tools/fastdds_localhost.xml
-#   (fast discovery). ROS_DOMAIN_ID is left as it is.
+#   (fast discovery; UDP on 127.0.0.1 only, and shared memory). ROS_DOMAIN_ID is left as it
+#   is. A graph over a LAN needs ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET and
+#   FASTRTPS_DEFAULT_PROFILES_FILE=tools/fastdds_subnet.xml, exported after sourcing this.
 # - TMGWR_ROOT = the repository root.
 
 if [ -z "${BASH_VERSION:-}" ]; then

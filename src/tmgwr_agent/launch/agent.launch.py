@@ -24,9 +24,21 @@ event of a launch file that includes this one (ros2/demos ``lifecycle_py`` style
 relative or private, so two agents run side by side in one domain (``/a/set_goal``,
 ``/a/maze_sim/fire_event``, ...).
 
-When any node exits, the launch ends: with exit code 0 when it finished (maze_sim's
-``exit_when_done``), else non-zero, saying which node exited with which code and its last
-error line (e.g. ``maze_sim exited with code 2: [maze_sim] cannot start: ...``). Ctrl-C
+A fresh launch keeps its maps and checkpoints in a directory of its own,
+``$ROS_HOME/tmgwr/domain<ID>[_<ns>]/launch_<UTC stamp>/`` (logged at start; a later launch
+never overwrites them; ``resume:=`` that directory continues the run).
+
+A node that dies while the graph runs (a crash, SIGKILL) is started again after
+``respawn_delay`` seconds (launch's ``respawn``) and continues from its checkpoint in that
+directory. A node that dies more than ``respawn_limit`` times within ``respawn_window``
+seconds ends the launch (exit code 1) naming it: ``map_learner died 6 times within 60 s
+(the limit is 5), last exit code -9: <its last error line>``; ``respawn_limit:=0`` ends it at
+the first death. A node that exits before its ready line (a start-up error) or with
+code 0 (maze_sim's ``exit_when_done``, a lifecycle ``shutdown`` of the learner) is not
+started again: the launch ends, with exit code 0 when the node finished cleanly, else
+non-zero, saying which node exited with which code and its last error line (e.g.
+``maze_sim exited with code 2: [maze_sim] cannot start: ...``). The recorder is started
+again only with ``output_dir:=''`` (each start writes its own ``runs/<stamp>/``). Ctrl-C
 stops every node. The launch file sets no DDS setting (``ROS_DOMAIN_ID``,
 ``ROS_AUTOMATIC_DISCOVERY_RANGE``, ``ROS_STATIC_PEERS``, ``RMW_IMPLEMENTATION``, Fast DDS
 profiles): the nodes inherit the user's environment (docs/graph.md, DDS settings).
@@ -36,15 +48,21 @@ does the same with tmgwr_agent.graph.supervisor.
 """
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, OpaqueFunction, RegisterEventHandler, Shutdown
-from launch.conditions import IfCondition
+from launch.actions import (
+    DeclareLaunchArgument,
+    LogInfo,
+    OpaqueFunction,
+    RegisterEventHandler,
+    Shutdown,
+)
 from launch.event_handlers import OnProcessExit, OnProcessIO
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import LifecycleNode, Node
 
-# the graph in data-flow order and the nodes that keep a checkpoint: one place, shared
-# with ./tmgwr up (the names are a contract)
-from tmgwr_agent.graph.supervisor import CHECKPOINTED, GRAPH_NODES
+# the graph in data-flow order, the nodes that keep a checkpoint, the ready lines and the
+# respawn policy: one place, shared with ./tmgwr up (the names are a contract)
+from tmgwr_agent.graph.respawn import RESPAWN_DELAY, RESPAWN_MAX_DEATHS, RESPAWN_WINDOW
+from tmgwr_agent.graph.supervisor import CHECKPOINTED, GRAPH_NODES, READY, RECORDER_READY
 
 #: The managed (lifecycle) nodes: started as launch_ros LifecycleNode actions, so a launch
 #: file that includes this one can send them ChangeState events and watch OnStateTransition.
@@ -73,21 +91,31 @@ class NodeExited(RuntimeError):
 
 
 class ExitWatch:
-    """Ends the launch when any node exits: a clean finish (exit code 0) shuts it down, any
-    other exit raises :class:`NodeExited`, which ``ros2 launch`` reports as 'Caught
-    exception in launch ...: maze_sim exited with code 2: <its last error line>' and turns
-    into exit code 1. Exits during a shutdown (Ctrl-C, another node's exit) are expected."""
+    """Ends the launch when a node exits for good: a clean finish (exit code 0) shuts it
+    down; an exit before the node's ready line (a start-up error), or the death more than
+    ``limit`` times within ``window`` seconds of a node that launch respawns, raises
+    :class:`NodeExited`, which ``ros2 launch`` reports as 'Caught exception in launch ...:
+    maze_sim exited with code 2: <its last error line>' and turns into exit code 1. Other
+    deaths are left to launch's ``respawn``. Exits during a shutdown (Ctrl-C, another node's
+    exit) are expected."""
 
-    def __init__(self):
+    def __init__(self, limit: int = RESPAWN_MAX_DEATHS, window: float = RESPAWN_WINDOW):
+        self.limit, self.window = limit, window
         self.last_line: dict[str, str] = {}
+        self.ready: set[str] = set()              # process names that printed a ready line
+        self.deaths: dict[str, list[float]] = {}
+        self.respawned: set[str] = set()          # node names launch respawns
 
     def on_output(self, event) -> None:
         lines = [ln.strip() for ln in event.text.decode(errors="replace").splitlines()]
         lines = [ln for ln in lines if ln]
         if lines:
             self.last_line[event.process_name] = lines[-1]
+        if any(READY.search(ln) or RECORDER_READY.search(ln) for ln in lines):
+            self.ready.add(event.process_name)
 
     def on_exit(self, event, context):
+        import time
         if context.is_shutdown:
             return None
         name = event.process_name.rsplit("-", 1)[0]          # maze_sim-2 -> maze_sim
@@ -95,46 +123,103 @@ class ExitWatch:
         if code == 0:
             return [Shutdown(reason=f"{name} finished (exit code 0)")]
         why = self.last_line.get(event.process_name, "no output")
-        raise NodeExited(f"{name} exited with code {code}: {why}")
+        if event.process_name not in self.ready or name not in self.respawned:
+            raise NodeExited(f"{name} exited with code {code}: {why}")
+        now = time.monotonic()
+        times = [t for t in self.deaths.get(name, []) if now - t <= self.window]
+        times.append(now)
+        self.deaths[name] = times
+        if len(times) > self.limit:
+            raise NodeExited(f"{name} died {len(times)} times within {self.window:g} s (the "
+                             f"limit is {self.limit}), last exit code {code}: {why}")
+        return None                               # launch's respawn starts it again
 
     def handlers(self):
         return [RegisterEventHandler(OnProcessIO(on_stderr=self.on_output)),
                 RegisterEventHandler(OnProcessExit(on_exit=self.on_exit))]
 
 
-def graph_nodes(context):
-    """The five nodes, each with the user's parameter file (if any), then its overrides."""
+def float_argument(context, name: str) -> float:
+    text = LaunchConfiguration(name).perform(context)
+    try:
+        value = float(text.strip())
+    except ValueError:
+        value = -1.0
+    if not value >= 0:
+        raise ValueError(f"launch argument {name}:={text}: expected a number >= 0")
+    return value
+
+
+def launch_run_dir(context) -> str:
+    """The directory of this launch's maps and checkpoints: ``resume:=DIR``, else a new
+    ``launch_<UTC stamp>`` in the graph's directory (a later launch never overwrites it)."""
+    import os
+    from datetime import datetime, timezone
+
+    from tmgwr_common.checkpoint import graph_dir
+    resume_dir = LaunchConfiguration("resume").perform(context).strip()
+    if resume_dir:               # continue from the checkpoints there (docs/graph.md, Continuing)
+        run_dir = os.path.abspath(os.path.expanduser(resume_dir))
+        if not os.path.isdir(run_dir):
+            raise ValueError(f"launch argument resume:={resume_dir}: no such directory")
+        return run_dir
+    base = graph_dir(namespace="/" + LaunchConfiguration("namespace").perform(context))
+    stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    run_dir, n = base / f"launch_{stamp}", 1
+    while run_dir.exists():
+        n += 1
+        run_dir = base / f"launch_{stamp}-{n}"
+    run_dir.mkdir(parents=True)
+    return str(run_dir)
+
+
+def graph_nodes(context, watch: ExitWatch):
+    """The recorder (``record:=true``) and the five nodes, each with the user's parameter
+    file (if any), then its overrides; every node that keeps a checkpoint resumes from the
+    launch's directory, so a respawned one continues where it was."""
     params_file = LaunchConfiguration("params_file").perform(context)
     files = [params_file] if params_file else []
     namespace = LaunchConfiguration("namespace")
     seed = int_argument(context, "seed")
+    watch.limit = int_argument(context, "respawn_limit")
+    watch.window = float_argument(context, "respawn_window")
+    respawn = {"respawn": watch.limit > 0,
+               "respawn_delay": float_argument(context, "respawn_delay")}
     overrides = {
         "maze_sim": {"maze": LaunchConfiguration("maze"), "goal": LaunchConfiguration("goal"),
                      "seed": seed},
         "action_selector": {"seed": seed},
     }
-    resume_dir = LaunchConfiguration("resume").perform(context).strip()
-    if resume_dir:               # continue from the checkpoints there (docs/graph.md, Continuing)
-        import os
-        run_dir = os.path.abspath(os.path.expanduser(resume_dir))
-        if not os.path.isdir(run_dir):
-            raise ValueError(f"launch argument resume:={resume_dir}: no such directory")
-        for name in CHECKPOINTED:
-            overrides.setdefault(name, {}).update(checkpoint_dir=run_dir, resume=True)
-        overrides["map_learner"]["map_dir"] = run_dir
+    run_dir = launch_run_dir(context)
+    for name in CHECKPOINTED:
+        overrides.setdefault(name, {}).update(checkpoint_dir=run_dir, resume=True)
+    overrides["map_learner"]["map_dir"] = run_dir
     if not true_argument(context, "autostart"):   # the learner waits for `ros2 lifecycle set`
         overrides.setdefault("map_learner", {})["autostart"] = False
+    actions = [LogInfo(msg=f"tmgwr: maps and checkpoints in {run_dir} (continue this run: "
+                           f"resume:={run_dir})")]
+    if true_argument(context, "record"):
+        output_dir = LaunchConfiguration("output_dir").perform(context)
+        again = {**respawn, "respawn": respawn["respawn"] and not output_dir}
+        actions.append(Node(package="tmgwr_agent", executable="recorder", name="recorder",
+                            output="screen", namespace=namespace,
+                            parameters=[{"output_dir": output_dir}], **again))
+        if again["respawn"]:
+            watch.respawned.add("recorder")
     if true_argument(context, "composed"):
         # one process, one executor (tmgwr_agent composed): its parameters reach every node
         # of it, a name only the nodes that declare it (maze and goal: maze_sim)
-        shared = {**overrides["maze_sim"], **overrides["action_selector"],
-                  **overrides.get("map_learner", {})}
-        return [Node(package="tmgwr_agent", executable="composed", output="screen",
-                     namespace=namespace, parameters=[*files, shared])]
-    return [
+        shared = {k: v for node in overrides.values() for k, v in node.items()}
+        if respawn["respawn"]:
+            watch.respawned.add("composed")
+        return actions + [Node(package="tmgwr_agent", executable="composed", output="screen",
+                               namespace=namespace, parameters=[*files, shared], **respawn)]
+    if respawn["respawn"]:
+        watch.respawned.update(executable for _, executable in GRAPH_NODES)
+    return actions + [
         (LifecycleNode if executable in MANAGED else Node)(
             package=package, executable=executable, name=executable, output="screen",
-            namespace=namespace, parameters=[*files, overrides.get(executable, {})])
+            namespace=namespace, parameters=[*files, overrides.get(executable, {})], **respawn)
         for package, executable in GRAPH_NODES
     ]
 
@@ -169,11 +254,16 @@ def generate_launch_description():
         DeclareLaunchArgument("params_file", default_value="",
                               description="ROS 2 parameter file of overrides for the five "
                                           "nodes ('' = every parameter at its default)"),
+        DeclareLaunchArgument("respawn_limit", default_value=str(RESPAWN_MAX_DEATHS),
+                              description="a node that dies is started again from its "
+                                          "checkpoint; more deaths of one node than this "
+                                          "within respawn_window end the launch (0: the "
+                                          "first death does)"),
+        DeclareLaunchArgument("respawn_window", default_value=f"{RESPAWN_WINDOW:g}",
+                              description="seconds over which a node's deaths are counted"),
+        DeclareLaunchArgument("respawn_delay", default_value=f"{RESPAWN_DELAY:g}",
+                              description="seconds from a node's death to its restart"),
     ]
-    recorder = Node(
-        package="tmgwr_agent", executable="recorder", name="recorder", output="screen",
-        namespace=LaunchConfiguration("namespace"),
-        parameters=[{"output_dir": LaunchConfiguration("output_dir")}],
-        condition=IfCondition(LaunchConfiguration("record")))
-    return LaunchDescription(arguments + ExitWatch().handlers()
-                             + [recorder, OpaqueFunction(function=graph_nodes)])
+    watch = ExitWatch()
+    return LaunchDescription(arguments + watch.handlers()
+                             + [OpaqueFunction(function=graph_nodes, args=[watch])])

@@ -17,6 +17,10 @@
   the new one, and a temporary folder that the next learner's :meth:`MapStore.lock`
   removes). The target must be absent or a regular file that is a map of ours: a
   symbolic link, a directory, a FIFO or any other file is never replaced.
+* A learner that starts fresh (not from its checkpoint) first renames the map an earlier
+  run saved under its ``map_name`` to ``NAME.<UTC mtime>.npz``
+  (:meth:`MapStore.keep_previous`): a new run never overwrites the previous run's map, and
+  ``map_name`` still names the current run's (what ``load_map`` with an empty name reads).
 * Reads (:func:`read_map`) open the file without following a final symbolic link and
   without blocking (a FIFO or device is refused, not waited on), accept only a regular
   file of at most :data:`MAX_BYTES`, check every array header before any array is
@@ -35,6 +39,7 @@ import re
 import shutil
 import stat
 import tempfile
+import time
 import zipfile
 from pathlib import Path
 
@@ -200,6 +205,14 @@ def is_our_map(path: str, dir_fd: int | None = None) -> bool:
     return True
 
 
+def _exists(fname: str, dir_fd: int) -> bool:
+    try:
+        os.stat(fname, dir_fd=dir_fd, follow_symlinks=False)
+    except FileNotFoundError:
+        return False
+    return True
+
+
 # ----------------------------------------------------------------------------- the store
 class MapStore:
     """The one directory a learner reads and writes maps in (see the module docstring)."""
@@ -254,6 +267,31 @@ class MapStore:
         except MapStoreError as exc:
             raise MapStoreError(str(exc).replace(fname, str(self.directory / fname), 1)) \
                 from None
+
+    def keep_previous(self, name: str) -> Path | None:
+        """Rename map ``name`` (a map of ours, left by an earlier run) to
+        ``NAME.<its UTC mtime>.npz``, so that this run's save does not replace it; returns
+        the new path, None when there is no such map. Called by a learner that starts
+        fresh (not from its checkpoint)."""
+        fname = map_file_name(name)
+        try:
+            st = os.stat(fname, dir_fd=self._dir_fd, follow_symlinks=False)
+        except FileNotFoundError:
+            return None
+        if not stat.S_ISREG(st.st_mode) or not is_our_map(fname, self._dir_fd):
+            return None                   # save() refuses it, saying why
+        stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(st.st_mtime))
+        kept, n = map_file_name(f"{name}.{stamp}"), 1
+        while _exists(kept, self._dir_fd):
+            n += 1
+            kept = map_file_name(f"{name}.{stamp}-{n}")
+        try:
+            os.rename(fname, kept, src_dir_fd=self._dir_fd, dst_dir_fd=self._dir_fd)
+            os.fsync(self._dir_fd)
+        except OSError as exc:
+            raise MapStoreError(f"cannot keep {self.directory / fname} as {kept}: "
+                                f"{exc.strerror or exc}") from None
+        return self.directory / kept
 
     def save(self, m: SensorimotorMap, name: str, step_id: int = -1, run_id: int = 0) -> Path:
         """Write ``m`` as map ``name`` atomically; returns the path. Refused when the target

@@ -3,8 +3,11 @@
 * QoS (chosen on purpose):
   - :data:`STEP_QOS` for the per-step ring (observation, features, state, motivation,
     action): reliable (a lost message would stall the lockstep ring until the simulator
-    resends), volatile (a late joiner must not replay old steps), keep-last 10 (lockstep
-    has one message in flight; the depth only absorbs the simulator's resends).
+    resends), volatile (a late joiner must not replay old steps), keep-last
+    :data:`STEP_DEPTH` (lockstep has one message in flight, but a reliable keep-last
+    writer drops a sample a starved bystander reader, the recorder, has not acknowledged
+    once its history is full: the depth is how long such a reader may be starved of CPU
+    without losing a step; it costs only memory and never slows the ring).
   - :data:`LATCHED_QOS` for state a late joiner needs at once (map, markers, grid, goal):
     reliable, transient local, keep-last 1 (only the newest snapshot matters).
   - :data:`SENSOR_QOS` for the pose stream: best effort keep-last 1 (a viewer wants the
@@ -53,7 +56,10 @@ from tmgwr_common.params import (
     unknown_name_message,
 )
 
-STEP_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+#: History of the per-step topics, writers and readers (issue 24: with 10, a recorder
+#: starved of CPU beside a busy-loop load lost whole runs of steps on every topic).
+STEP_DEPTH = 1000
+STEP_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=STEP_DEPTH,
                       reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
 LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,

@@ -16,8 +16,8 @@ node's own services are *private* (``~/set_cell`` of maze_sim is ``/maze_sim/set
 in its namespace; at the root namespace every name is what it always was.
 """
 
-# Per-step data (STEP_QOS in tmgwr_common.node: reliable, keep-last depth 10; lockstep never
-# has more than one in flight)
+# Per-step data (STEP_QOS in tmgwr_common.node: reliable, keep-last STEP_DEPTH; lockstep
+# never has more than one in flight)
 OBSERVATION = "observation"           # tmgwr_interfaces/msg/Observation, maze_sim
 FEATURES = "features"                 # tmgwr_interfaces/msg/Features, sensory_preprocessor
 SENSORIMOTOR_STATE = "sensorimotor_state"   # tmgwr_interfaces/msg/SensorimotorState, map_learner

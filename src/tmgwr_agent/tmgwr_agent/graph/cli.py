@@ -51,6 +51,15 @@ def register(subparsers) -> None:
     p.add_argument("--resume", metavar="RUN", help="continue run RUN (its directory, or "
                    "its stamp under runs/) where it stopped: map, exploration state, "
                    "counters, with the run's settings; records to RUN/resumed_<N>/")
+    from tmgwr_agent.graph.respawn import RESPAWN_DELAY, RESPAWN_MAX_DEATHS, RESPAWN_WINDOW
+    p.add_argument("--respawn-limit", type=int, default=RESPAWN_MAX_DEATHS, metavar="N",
+                   help="a node that dies is started again (from its checkpoint); one that "
+                        "dies more than N times within the window stops the graph; 0: any "
+                        f"death stops it (default {RESPAWN_MAX_DEATHS})")
+    p.add_argument("--respawn-window", type=float, default=RESPAWN_WINDOW, metavar="S",
+                   help=f"seconds the deaths are counted over (default {RESPAWN_WINDOW:g})")
+    p.add_argument("--respawn-delay", type=float, default=RESPAWN_DELAY, metavar="S",
+                   help=f"seconds from a death to the restart (default {RESPAWN_DELAY:g})")
     _domain_arg(p)
     _namespace_arg(p)
     p.set_defaults(func=cmd_up)
@@ -189,9 +198,16 @@ def _run_settings(args) -> tuple[dict, Path | None, Path | None]:
 
 def cmd_up(args) -> int:
     _apply_domain(args)
+    from tmgwr_agent.graph.respawn import Respawner, RespawnPolicy
     from tmgwr_agent.graph.resume import ResumeError, write_settings
-    from tmgwr_agent.graph.run import GraphRun, describe_exit
+    from tmgwr_agent.graph.run import GraphRun
+    from tmgwr_agent.graph.supervisor import GraphError
     from tmgwr_common.params import ParamError
+    try:
+        policy = RespawnPolicy(args.respawn_delay, args.respawn_limit, args.respawn_window)
+    except ValueError as exc:
+        say(f"up: --respawn-*: {exc}", sys.stderr)
+        return 2
     try:
         settings, run_dir, bag_dir = _run_settings(args)
         run = GraphRun(maze=settings["maze"], seed=settings["seed"], goal=settings["goal"],
@@ -231,13 +247,15 @@ def cmd_up(args) -> int:
 
     code = 0
     last_note = time.monotonic()
+    respawner = Respawner(run.supervisor, policy, steps=lambda: run.monitor.seen)
     try:
         while not stop["now"]:
             run.spin_once(0.2)
-            dead = run.supervisor.dead()
-            if dead:
-                for p in dead:
-                    say(f"up: {describe_exit(p)}", sys.stderr)
+            try:
+                for line in respawner.watch():
+                    say(f"up: {line}", sys.stderr)
+            except GraphError as exc:
+                say(f"up: {exc}", sys.stderr)
                 code = 1
                 break
             if args.max_steps is not None and run.monitor.last_step_id >= args.max_steps:

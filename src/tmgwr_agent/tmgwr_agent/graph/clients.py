@@ -98,9 +98,9 @@ def reset_request():
 # ----------------------------------------------------------------------- episodes
 MONITOR_DEPTH = 10000
 """Observations the monitor's reader keeps before the oldest is dropped: many seconds of
-the lockstep graph. The ring's own STEP_QOS depth (10) is enough for a node that answers
-every step, but the observer is a bystander that can fall behind by hundreds of steps
-while it prints or waits for a service, and with depth 10 it lost observations (so
+the lockstep graph. The ring's own STEP_QOS depth is enough for a node that answers
+every step, but the observer is a bystander that can fall behind by many steps
+while it prints or waits for a service, and with a depth of 10 it lost observations (so
 episodes). A reliable keep-last reader never slows the publisher down, so a deep history
 costs only memory."""
 

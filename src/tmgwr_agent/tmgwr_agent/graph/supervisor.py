@@ -31,7 +31,7 @@ import subprocess
 import sys
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
@@ -72,6 +72,8 @@ class NodeSpec:
     ready: re.Pattern = READY
     argv: Sequence[str] = ()             # a plain command instead of the package executable
     namespace: str = ""                  # ROS namespace (-r __ns:=...); "" = the root
+    #: the spec a restart (graph.respawn) uses, given this one and the restart's number
+    on_respawn: Callable[["NodeSpec", int], "NodeSpec"] | None = None
 
     @property
     def label(self) -> str:
@@ -170,6 +172,7 @@ class ManagedProcess:
         self.label = spec.label
         self.cmd = spec.command()
         self.ready = threading.Event()
+        self.ready_at = 0.0                   # time.monotonic() of the ready line
         self.tail: collections.deque[str] = collections.deque(maxlen=keep)
         self._sink = sink
         self.proc = subprocess.Popen(
@@ -187,6 +190,7 @@ class ManagedProcess:
             line = line.rstrip("\n")
             self.tail.append(line)
             if not self.ready.is_set() and self.spec.ready.search(line):
+                self.ready_at = time.monotonic()
                 self.ready.set()
             if self._sink is not None:
                 self._sink(f"[{self.label}] {line}")
@@ -322,7 +326,8 @@ def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | No
         # The recorder logs "recording ... to DIR" once its writer is open.
         specs.append(NodeSpec("tmgwr_agent", "recorder", (),
                               {"output_dir": str(record_dir), **node_params.get("recorder", {})},
-                              ready=RECORDER_READY, namespace=namespace))
+                              ready=RECORDER_READY, namespace=namespace,
+                              on_respawn=_recorder_respawn))
     for package, exe in GRAPH_NODES:
         params: dict[str, object] = {}
         if exe == "maze_sim":
@@ -346,8 +351,26 @@ def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | No
         if seed is not None and exe in ("maze_sim", "action_selector"):
             params["seed"] = int(seed)
         params.update(node_params.get(exe, {}))
-        specs.append(NodeSpec(package, exe, files, params, namespace=namespace))
+        specs.append(NodeSpec(package, exe, files, params, namespace=namespace,
+                              on_respawn=_resume_respawn if exe in CHECKPOINTED else None))
     return specs
+
+
+def _recorder_respawn(spec: NodeSpec, n: int) -> NodeSpec:
+    """A restarted recorder writes a new bag inside the killed one's directory (a bag is
+    never appended to)."""
+    out = Path(str(spec.params["output_dir"])) / f"respawned_{n}"
+    return replace(spec, params={**spec.params, "output_dir": str(out)})
+
+
+def _resume_respawn(spec: NodeSpec, n: int) -> NodeSpec:   # noqa: ARG001
+    """A restarted node continues from its checkpoint (its own default directory when the
+    run has none: ``up --no-record``); a restarted simulator steps at once (the recorder's
+    subscriptions, what ``start_delay`` waits for, are already there)."""
+    params = {**spec.params, "resume": True}
+    if "start_delay" in params:
+        params["start_delay"] = 0.0
+    return replace(spec, params=params)
 
 
 COMPOSED_READY = re.compile(r"\bcomposed ready\b")
@@ -362,7 +385,13 @@ def composed_specs(specs: Sequence[NodeSpec]) -> list[NodeSpec]:
     cmd = NodeSpec("tmgwr_agent", "composed", files, params).command()
     if any(s.executable == "recorder" for s in specs):
         cmd.insert(1, "--record")
-    return [NodeSpec("tmgwr_agent", "composed", argv=cmd, ready=COMPOSED_READY)]
+
+    def respawn(spec: NodeSpec, n: int) -> NodeSpec:
+        again = [s.on_respawn(s, n) if s.on_respawn else s for s in specs]
+        return replace(composed_specs(again)[0], on_respawn=spec.on_respawn)
+
+    return [NodeSpec("tmgwr_agent", "composed", argv=cmd, ready=COMPOSED_READY,
+                     on_respawn=respawn)]
 
 
 def install_stop_handlers(callback: Callable[[], None]) -> None:

@@ -220,6 +220,8 @@ class MapLearnerNode(LifecycleNode):
         ck = self.checkpoints.resume(check=self.map_of_checkpoint)
         if ck is not None:
             self.map, last_step, run_id = self.map_of_checkpoint(ck), ck.step_id, ck.run_id
+        elif self.p["map_name"]:
+            self.keep_previous_map()
         self.V = np.zeros(0)
         self.published = (-1, -1, ())    # (step, version, wanted) of the last /map, markers
 
@@ -335,6 +337,18 @@ class MapLearnerNode(LifecycleNode):
             self.store.close()
         self.map, self.store, self.checkpoints, self.lockstep = None, None, None, None
         self.encoder = self.encoder_of = None
+
+    def keep_previous_map(self) -> None:
+        """A fresh start: the map an earlier run saved as ``map_name`` is renamed, not
+        overwritten by this run's saves (map_store.MapStore.keep_previous)."""
+        try:
+            kept = self.store.keep_previous(self.p["map_name"])
+        except MapStoreError as exc:
+            self.get_logger().warning(f"{exc}; this run's saves will replace it")
+            return
+        if kept is not None:
+            self.get_logger().info(f"an earlier run's map {self.store.path(self.p['map_name'])} "
+                                   f"kept as {kept.name} (this run saves its own)")
 
     def save_all(self, print_: bool, strict: bool = False) -> str:
         """Write the checkpoint and save the map as ``map_name`` (both atomic); what was

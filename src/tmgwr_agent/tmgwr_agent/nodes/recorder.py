@@ -22,7 +22,8 @@ The latched whole-map snapshots (``/sensorimotor_snapshot``) and potentials
 local, a recorder that joins late still records the newest whole map, which the per-step
 map changes of ``/sensorimotor_state`` build on (``./tmgwr report`` rebuilds the map).
 
-Gaps: on the per-step topics (``gap_topics``: the ring's five) every message's (run_id,
+Gaps: on the per-step topics (``gap_topics``: the ring's five, and the same names and types
+in any namespace below the recorder's, each topic on its own) every message's (run_id,
 step_id) is read from its bytes (:mod:`tmgwr_agent.bag.gaps`); a step id that jumps ahead
 is logged at once as a gap naming the missing steps, and at the end each topic's steps,
 resends and gaps are logged and stored in the bag's metadata (``custom_data.step_gaps``,
@@ -138,6 +139,9 @@ class Recorder(Node):
         self._warned: set[str] = set()
         self.gaps = StepGaps()
         self.gap_topics = {self.resolve_topic_name(t) for t in p["gap_topics"] if t}
+        # their types (from ``expect``): the same name in a nested namespace is checked too
+        self.gap_types = {t: type_name for t, type_name in p["expect"].items()
+                          if t in self.gap_topics}
         self._gap_warned: dict[str, float] = {}      # topic -> time of its last warning
         self._drains: dict[str, tuple[object, type, object]] = {}   # for the final drain
         for topic, type_name in p["expect"].items():
@@ -209,6 +213,21 @@ class Recorder(Node):
             except definitions.DefinitionError as exc:
                 self._warn_once(topic, f"{topic} not recorded: {exc}")
 
+    def _checks_gaps(self, topic: str, type_name: str) -> bool:
+        """Whether ``topic``'s step ids are checked: a ``gap_topics`` name, or the same
+        name and type in a namespace below the recorder's (a recorder in the root namespace
+        checks ``/a/observation`` and ``/b/observation``, each on its own)."""
+        if topic in self.gap_topics:
+            return True
+        own = self.get_namespace().rstrip("/") + "/"
+        if not topic.startswith(own):
+            return False
+        for gap_topic, gap_type in self.gap_types.items():
+            base = gap_topic[len(own):] if gap_topic.startswith(own) else ""
+            if base and topic.endswith("/" + base) and type_name == gap_type:
+                return True
+        return False
+
     def _warn_once(self, topic: str, text: str) -> None:
         if topic not in self._warned:
             self._warned.add(topic)
@@ -259,7 +278,7 @@ class Recorder(Node):
         self.received[topic] = 0
         write = self.writer.write
         received = self.received
-        count_gaps = topic in self.gap_topics
+        count_gaps = self._checks_gaps(topic, type_name)
 
         def store(data: bytes, msg_info: dict) -> None:
             if topic not in self.writer.topics:             # first message of an early one
