@@ -381,6 +381,11 @@ class PointMazeWorld:
         self._set_goal_xy()
         return cell
 
+    def sync(self) -> None:
+        """Rebuild the env from the book-keeper's walls and goal (after they were restored
+        directly, e.g. from a checkpoint)."""
+        self._build(self.grid.walls)
+
     def _rebuild_if_changed(self, before: np.ndarray) -> None:
         if not np.array_equal(before, self.grid.walls):
             self._build(self.grid.walls)

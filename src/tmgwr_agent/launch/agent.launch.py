@@ -108,10 +108,13 @@ def graph_nodes(context):
     files = [params_file] if params_file else []
     namespace = LaunchConfiguration("namespace")
     seed = int_argument(context, "seed")
+    world = {"world": LaunchConfiguration("world")}   # the simulator's and the agent's senses
     overrides = {
         "maze_sim": {"maze": LaunchConfiguration("maze"), "goal": LaunchConfiguration("goal"),
-                     "seed": seed},
-        "action_selector": {"seed": seed},
+                     "seed": seed, **world},
+        "action_selector": {"seed": seed, **world},
+        "map_learner": dict(world),
+        "motivation_estimator": dict(world),
     }
     resume_dir = LaunchConfiguration("resume").perform(context).strip()
     if resume_dir:               # continue from the checkpoints there (docs/graph.md, Continuing)
@@ -128,7 +131,7 @@ def graph_nodes(context):
         # one process, one executor (tmgwr_agent composed): its parameters reach every node
         # of it, a name only the nodes that declare it (maze and goal: maze_sim)
         shared = {**overrides["maze_sim"], **overrides["action_selector"],
-                  **overrides.get("map_learner", {})}
+                  **overrides["map_learner"]}
         return [Node(package="tmgwr_agent", executable="composed", output="screen",
                      namespace=namespace, parameters=[*files, shared])]
     return [
@@ -144,6 +147,10 @@ def generate_launch_description():
         DeclareLaunchArgument("maze", default_value="paper_13x17.txt",
                               description="maze file: a path, or a file name in "
                                           "share/maze_sim/mazes"),
+        DeclareLaunchArgument("world", default_value="grid",
+                              description="the world maze_sim hosts, built from the maze "
+                                          "(grid, pointmaze: MuJoCo's PointMaze); the agent "
+                                          "nodes take its senses"),
         DeclareLaunchArgument("goal", default_value="G",
                               description="initial goal: a goal name ('G', '1'-'9') or 'row,col'"),
         DeclareLaunchArgument("seed", default_value="0",

@@ -46,3 +46,22 @@ def named_world_senses(name: str, **kwargs) -> Senses:
         from maze_sim.pointmaze_world import PRIMITIVES
         return Senses(4 if kwargs.get("velocity") else 2, PRIMITIVES)
     raise ValueError(f"unknown world {name!r}; worlds: grid, pointmaze")
+
+
+def drawn_at(name: str, sensation) -> tuple[float, float]:
+    """Where a sensation of world ``name`` lies in the simulator's ``maze`` frame (its map
+    markers, its /agent_pose): the grid's (row, col) at x = col, y = row; PointMaze's
+    (x, y) as it is."""
+    if name == "pointmaze":
+        return float(sensation[0]), float(sensation[1]) if len(sensation) > 1 else 0.0
+    return float(sensation[1]) if len(sensation) > 1 else 0.0, float(sensation[0])
+
+
+def node_senses(name: str) -> Senses:
+    """:func:`named_world_senses` of a node's ``world`` parameter; an unknown world is a
+    parameter error naming it (the node does not start)."""
+    from tmgwr_common.params import ParamError
+    try:
+        return named_world_senses(name)
+    except ValueError as exc:
+        raise ParamError(f"parameter 'world' = {name!r}: {exc}") from None
