@@ -188,6 +188,7 @@ class MazeSimNode(Node):
         self.t_start = None
         self.t_warm = None
         self.timer = CallbackTimer()
+        self.world_timer = CallbackTimer()   # the world's own step (physics) within it
         # the counters, goal and layout survive any stop (tmgwr_common.checkpoint)
         self.checkpoints = Checkpointer("maze_sim", p, self.get_logger(),
                                         {"maze": maze_fingerprint(maze)}, self.get_namespace())
@@ -232,7 +233,8 @@ class MazeSimNode(Node):
             if msg.action >= N_ACTIONS:
                 self.get_logger().error(f"step {msg.step_id}: invalid action {msg.action}")
                 return
-            obs, _, terminated, truncated, info = self.world.step(msg.action)
+            with self.world_timer:
+                obs, _, terminated, truncated, info = self.world.step(msg.action)
             self.episode_len += 1
             if info.reached_goal:
                 self.goals_reached += 1
@@ -382,6 +384,10 @@ class MazeSimNode(Node):
         if self.p["trajectory_path"] and self.current is not None:
             self.write_trajectory()
         print(f"maze_sim: {self.timer.summary()}", flush=True)
+        w = self.world_timer
+        k = 1e6 / w.n if w.n else 0.0
+        print(f"maze_sim world {self.p['world']}: {w.n} world steps, mean {k * w.total:.0f} "
+              f"us, cpu mean {k * w.cpu:.0f} us", flush=True)
         self.checkpoints.stop(self.step_id, self.run_id, self.checkpoint_state)
 
     # ------------------------------------------------------------------ checkpoint
