@@ -110,3 +110,9 @@ def test_the_graph_runs_on_pointmaze_and_the_bag_reads_back(ros_domain, tmp_path
 
     report = tmgwr_cli("report", str(bag))
     assert report.returncode == 0, report.stdout + report.stderr
+
+
+def test_up_refuses_an_unknown_world_before_starting_nodes():
+    out = tmgwr_cli("up", "--world", "mars", "--no-record")
+    assert out.returncode == 2, out.stdout + out.stderr
+    assert "unknown world 'mars'" in out.stderr and "Traceback" not in out.stderr
