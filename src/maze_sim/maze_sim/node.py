@@ -1,6 +1,8 @@
 """``ros2 run maze_sim maze_sim``: the grid world as a ROS 2 node (docs/graph.md).
 
-Owns a :class:`~maze_sim.world.GridWorld` and drives the lockstep ring: it publishes one
+Hosts a world by name (parameter ``world``, :mod:`maze_sim.worlds`: ``grid``, our
+:class:`~maze_sim.world.GridWorld`, or ``pointmaze``, MuJoCo's PointMaze built from the maze
+file, :mod:`maze_sim.pointmaze_world`) and drives the lockstep ring: it publishes one
 ``Observation`` per step and steps the world only when the ``Action`` carrying that
 observation's ``run_id`` and ``step_id`` arrives. The answer to a terminal observation is
 ``Action.NONE``; the simulator then starts the next episode. While it waits it resends the
@@ -30,7 +32,11 @@ wall in the start, the goal, the agent or the last route to the goal.
 Also published: the maze as ``nav_msgs/OccupancyGrid`` (latched, republished on change;
 cell (row, col) is centred at x = col, y = row, resolution 1), the current goal as
 ``geometry_msgs/PointStamped`` (latched, x = col, y = row), the agent pose at
-``pose_rate`` Hz, and a line per goal/cell/event change on ``/maze_events``.
+``pose_rate`` Hz, and a line per goal/cell/event change on ``/maze_events``. In a
+continuous world (PointMaze) the frame is the world's own: the grid's cells centred where
+the env puts them (x, y in metres, row 0 at the top), the goal at its cell's centre, the
+pose where the point is, and ``/set_goal`` takes a position in that frame (the goal is the
+cell it lies in).
 """
 
 from __future__ import annotations
@@ -50,7 +56,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from maze_sim.maze import DEFAULT_MAZE, N_ACTIONS, Maze, MazeError, maze_file
-from maze_sim.world import GridWorld
+from maze_sim.worlds import WorldError, make_world
 from tmgwr_common import topics
 from tmgwr_common.cdr import codec
 from tmgwr_common.checkpoint import CHECKPOINT_SPECS, Checkpoint, Checkpointer, CheckpointError
@@ -65,7 +71,7 @@ from tmgwr_common.node import (
     run,
     subscribe_decoded,
 )
-from tmgwr_common.params import Param, ParamError
+from tmgwr_common.params import WORLD_PARAM, Param, ParamError
 from tmgwr_common.share import DataFileError
 from tmgwr_common.text import shown
 from tmgwr_interfaces.msg import Action, Observation
@@ -86,6 +92,7 @@ def new_run_id() -> int:
     return max(time.time_ns(), 1)
 
 SPECS = (
+    WORLD_PARAM,
     Param("maze", DEFAULT_MAZE, "maze file (docs/mazes.md, Maze format): absolute, relative to "
           "the working directory, or a file name shipped in share/maze_sim/mazes"),
     Param("goal", "G", "initial goal: a goal name of the maze ('G', '1'..'9') or 'row,col'"),
@@ -132,11 +139,17 @@ class MazeSimNode(Node):
         except DataFileError as exc:
             raise ParamError(f"parameter 'maze': {exc}") from None
         maze = Maze.from_file(path)
+        noise = {"sensor_noise": p["sensor_noise"]} if p["sensor_noise"] else {}
         try:
-            self.world = GridWorld(maze, parse_goal(maze, p["goal"]), p["sensor_noise"],
-                                   p["max_episode_steps"] or None, seed=p["seed"])
+            self.world = make_world(p["world"], maze, parse_goal(maze, p["goal"]),
+                                    p["max_episode_steps"] or None, seed=p["seed"], **noise)
+        except WorldError as exc:
+            raise ParamError(f"parameter 'world' = {p['world']!r}: {exc}") from None
         except MazeError as exc:
             raise ParamError(f"parameter 'goal' = {p['goal']!r}: {exc}") from None
+        # where the world's cells, goal and agent are drawn: the grid's (x = col, y = row)
+        # or the world's own continuous frame (PointMaze: the env's x, y in metres)
+        self.continuous = hasattr(self.world, "xy")
         self.maze_path = path
 
         self.obs_pub = self.create_publisher(Observation, topics.OBSERVATION, STEP_QOS)
@@ -175,6 +188,7 @@ class MazeSimNode(Node):
         self.t_start = None
         self.t_warm = None
         self.timer = CallbackTimer()
+        self.world_timer = CallbackTimer()   # the world's own step (physics) within it
         # the counters, goal and layout survive any stop (tmgwr_common.checkpoint)
         self.checkpoints = Checkpointer("maze_sim", p, self.get_logger(),
                                         {"maze": maze_fingerprint(maze)}, self.get_namespace())
@@ -187,9 +201,9 @@ class MazeSimNode(Node):
         self._start_timer = self.create_timer(max(p["start_delay"], 0.01), self.start)
         self.t_ready = time.monotonic()
         self.get_logger().info(
-            f"maze_sim ready: run {self.run_id}, maze {path} ({maze.walls.shape[0]}x"
-            f"{maze.walls.shape[1]}), goal {self.world.goal}, seed {p['seed']}, "
-            f"max_steps {p['max_steps'] or 'none'}")
+            f"maze_sim ready: run {self.run_id}, world {p['world']}, maze {path} "
+            f"({maze.walls.shape[0]}x{maze.walls.shape[1]}), goal {self.world.goal}, "
+            f"seed {p['seed']}, max_steps {p['max_steps'] or 'none'}")
 
     # ------------------------------------------------------------------ the ring
     def start(self):
@@ -219,7 +233,8 @@ class MazeSimNode(Node):
             if msg.action >= N_ACTIONS:
                 self.get_logger().error(f"step {msg.step_id}: invalid action {msg.action}")
                 return
-            obs, _, terminated, truncated, info = self.world.step(msg.action)
+            with self.world_timer:
+                obs, _, terminated, truncated, info = self.world.step(msg.action)
             self.episode_len += 1
             if info.reached_goal:
                 self.goals_reached += 1
@@ -369,6 +384,10 @@ class MazeSimNode(Node):
         if self.p["trajectory_path"] and self.current is not None:
             self.write_trajectory()
         print(f"maze_sim: {self.timer.summary()}", flush=True)
+        w = self.world_timer
+        k = 1e6 / w.n if w.n else 0.0
+        print(f"maze_sim world {self.p['world']}: {w.n} world steps, mean {k * w.total:.0f} "
+              f"us, cpu mean {k * w.cpu:.0f} us", flush=True)
         self.checkpoints.stop(self.step_id, self.run_id, self.checkpoint_state)
 
     # ------------------------------------------------------------------ checkpoint
@@ -402,7 +421,7 @@ class MazeSimNode(Node):
     def restore(self, ck: Checkpoint | None) -> None:
         if ck is None:
             return
-        w, s = self.world, ck.state
+        w, s = getattr(self.world, "grid", self.world), ck.state   # the book-keeper
         w.walls, w.fired = ck.arrays["walls"].astype(bool), [str(e) for e in s["fired"]]
         w.set_goal(tuple(int(v) for v in s["goal"]))
         w.episode, w.total_steps = int(s["episode"]), int(s["total_steps"])
@@ -412,6 +431,8 @@ class MazeSimNode(Node):
             self.get_logger().warning(f"noise generator not restored ({exc})")
         if s.get("pending_goal"):
             self.pending_goal = w.request_goal(tuple(int(v) for v in s["pending_goal"]))
+        if w is not self.world:                # the hosted world follows its book-keeper
+            self.world.sync()
         self.step_id = ck.step_id              # the next observation is step_id + 1
         self.goals_reached = int(s.get("goals_reached", 0))
         self.goal_changes = [(int(a), tuple(c)) for a, c in s.get("goal_changes", [])]
@@ -439,13 +460,18 @@ class MazeSimNode(Node):
         asked = f"goal (x={x:.6g}, y={y:.6g})"      # never 301 digits for x = 1e300
         rows, cols = self.world.walls.shape
         replaced, refusal = self.pending_goal, None
+        x0, y0 = self.frame_origin()
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(req.goal.z)):
             refusal = "not finite"
-        elif not (-0.5 <= x < cols - 0.5 and -0.5 <= y < rows - 0.5):
+        elif self.continuous and not (x0 <= x < x0 + cols and y0 <= y < y0 + rows):
+            refusal = (f"outside the {rows}x{cols} maze (x in [{x0:g}, {x0 + cols:g}), "
+                       f"y in [{y0:g}, {y0 + rows:g}))")
+        elif not self.continuous and not (-0.5 <= x < cols - 0.5 and -0.5 <= y < rows - 0.5):
             refusal = (f"outside the {rows}x{cols} maze (x in 0..{cols - 1}, "
                        f"y in 0..{rows - 1})")
         else:
-            col, row = int(math.floor(x + 0.5)), int(math.floor(y + 0.5))
+            row, col = self.world.cell_of((x, y)) if self.continuous else \
+                (int(math.floor(y + 0.5)), int(math.floor(x + 0.5)))
             try:
                 # checked now and kept free by cell and event edits until it applies
                 self.pending_goal = self.world.request_goal((row, col))
@@ -456,7 +482,8 @@ class MazeSimNode(Node):
             self.get_logger().warning(resp.message)
             return resp
         resp.accepted = True
-        resp.message = (f"goal set to row {row}, col {col} (x={col}, y={row}); it applies "
+        gx, gy = self.cell_position((row, col))
+        resp.message = (f"goal set to row {row}, col {col} (x={gx:g}, y={gy:g}); it applies "
                         f"from step {self.step_id + 1}")
         if replaced is not None and replaced != self.pending_goal:
             resp.message += (f" (replaces the change to row {replaced[0]}, col {replaced[1]}"
@@ -512,16 +539,17 @@ class MazeSimNode(Node):
         g.header.frame_id = FRAME
         g.info.resolution = 1.0
         g.info.width, g.info.height = cols, rows
-        g.info.origin.position.x = g.info.origin.position.y = -0.5
+        g.info.origin.position.x, g.info.origin.position.y = self.frame_origin()
         g.info.origin.orientation.w = 1.0
-        g.data = (self.world.walls.astype(np.int8) * 100).ravel().tolist()
+        walls = self.world.walls[::-1] if self.continuous else self.world.walls  # y up: last row
+        g.data = (walls.astype(np.int8) * 100).ravel().tolist()
         self.grid_pub.publish(g)
 
     def publish_goal(self):
         m = PointStamped()
         m.header.stamp = self.get_clock().now().to_msg()
         m.header.frame_id = FRAME
-        m.point.x, m.point.y = float(self.world.goal[1]), float(self.world.goal[0])
+        m.point.x, m.point.y = self.cell_position(self.world.goal)
         self.goal_pub.publish(m)
 
     def publish_pose(self):
@@ -530,9 +558,29 @@ class MazeSimNode(Node):
         m = PoseStamped()
         m.header.stamp = self.get_clock().now().to_msg()
         m.header.frame_id = FRAME
-        m.pose.position.x, m.pose.position.y = float(self.world.cell[1]), float(self.world.cell[0])
+        if self.continuous:             # where the point is, not its cell
+            m.pose.position.x, m.pose.position.y = (float(v) for v in self.world.data.qpos[:2])
+        else:
+            m.pose.position.x, m.pose.position.y = self.cell_position(self.world.cell)
         m.pose.orientation.w = 1.0
         self.pose_pub.publish(m)
+
+    def frame_origin(self) -> tuple[float, float]:
+        """The (x, y) of the maze's lower-left corner in the ``maze`` frame: the grid's
+        (-0.5, -0.5) (cell (row, col) centred at x = col, y = row), or the continuous
+        world's (the env's frame, row 0 at the top: cell centres at :meth:`cell_position`)."""
+        if not self.continuous:
+            return -0.5, -0.5
+        rows, cols = self.world.walls.shape
+        x, y = self.world.xy((rows - 1, 0))
+        return float(x) - 0.5, float(y) - 0.5
+
+    def cell_position(self, cell) -> tuple[float, float]:
+        """The centre of ``cell`` (row, col) in the ``maze`` frame."""
+        if self.continuous:
+            x, y = self.world.xy(cell)
+            return float(x), float(y)
+        return float(cell[1]), float(cell[0])
 
 
 def maze_fingerprint(maze: Maze) -> str:

@@ -185,10 +185,13 @@ def graph_nodes(context, watch: ExitWatch):
     watch.window = float_argument(context, "respawn_window")
     respawn = {"respawn": watch.limit > 0,
                "respawn_delay": float_argument(context, "respawn_delay")}
+    world = {"world": LaunchConfiguration("world")}   # the simulator's and the agent's senses
     overrides = {
         "maze_sim": {"maze": LaunchConfiguration("maze"), "goal": LaunchConfiguration("goal"),
-                     "seed": seed},
-        "action_selector": {"seed": seed},
+                     "seed": seed, **world},
+        "action_selector": {"seed": seed, **world},
+        "map_learner": dict(world),
+        "motivation_estimator": dict(world),
     }
     run_dir = launch_run_dir(context)
     for name in CHECKPOINTED:
@@ -229,6 +232,10 @@ def generate_launch_description():
         DeclareLaunchArgument("maze", default_value="paper_13x17.txt",
                               description="maze file: a path, or a file name in "
                                           "share/maze_sim/mazes"),
+        DeclareLaunchArgument("world", default_value="grid",
+                              description="the world maze_sim hosts, built from the maze "
+                                          "(grid, pointmaze: MuJoCo's PointMaze); the agent "
+                                          "nodes take its senses"),
         DeclareLaunchArgument("goal", default_value="G",
                               description="initial goal: a goal name ('G', '1'-'9') or 'row,col'"),
         DeclareLaunchArgument("seed", default_value="0",

@@ -1,9 +1,11 @@
-"""The senses the grid world gives an agent (:class:`~tmgwr_agent.core.senses.Senses`).
+"""The senses a world gives an agent (:class:`~tmgwr_agent.core.senses.Senses`).
 
 The maze simulator's observation is the agent's (row, col) and its four actions move one
 cell up, down, left or right: its declared motor primitives are those unit vectors
-(``maze_sim.maze.ACTION_VECTORS``). This is the one place outside the simulator that says
-so; the core is handed the result and knows nothing of mazes.
+(``maze_sim.maze.ACTION_VECTORS``). Another world (``maze_sim.worlds``) declares its own:
+its sensation as ``observation_space``, its actions as ``action_space`` and their motor
+vectors as ``primitive_vectors`` (:func:`world_senses`). This is the one place outside the
+simulator that says so; the core is handed the result and knows nothing of mazes.
 """
 
 from __future__ import annotations
@@ -23,3 +25,43 @@ def env_senses(env) -> Senses:
     (``primitive_vectors`` of the unwrapped env) when it has them."""
     return Senses.from_spaces(env.observation_space, env.action_space,
                               getattr(env.unwrapped, "primitive_vectors", None))
+
+
+def world_senses(world) -> Senses:
+    """The senses of a world hosted by name (``maze_sim.worlds``): the grid world's
+    (:func:`maze_senses`), or those a world declares (``observation_space``,
+    ``action_space``, ``primitive_vectors``)."""
+    if not hasattr(world, "observation_space"):
+        return maze_senses()
+    return Senses.from_spaces(world.observation_space, world.action_space,
+                              getattr(world, "primitive_vectors", None))
+
+
+def named_world_senses(name: str, **kwargs) -> Senses:
+    """The senses of world ``name`` without building it (what the agent nodes are given:
+    they host no world): the grid's, or PointMaze's (``velocity``: 4 values)."""
+    if name == "grid":
+        return maze_senses()
+    if name == "pointmaze":
+        from maze_sim.pointmaze_world import PRIMITIVES
+        return Senses(4 if kwargs.get("velocity") else 2, PRIMITIVES)
+    raise ValueError(f"unknown world {name!r}; worlds: grid, pointmaze")
+
+
+def drawn_at(name: str, sensation) -> tuple[float, float]:
+    """Where a sensation of world ``name`` lies in the simulator's ``maze`` frame (its map
+    markers, its /agent_pose): the grid's (row, col) at x = col, y = row; PointMaze's
+    (x, y) as it is."""
+    if name == "pointmaze":
+        return float(sensation[0]), float(sensation[1]) if len(sensation) > 1 else 0.0
+    return float(sensation[1]) if len(sensation) > 1 else 0.0, float(sensation[0])
+
+
+def node_senses(name: str) -> Senses:
+    """:func:`named_world_senses` of a node's ``world`` parameter; an unknown world is a
+    parameter error naming it (the node does not start)."""
+    from tmgwr_common.params import ParamError
+    try:
+        return named_world_senses(name)
+    except ValueError as exc:
+        raise ParamError(f"parameter 'world' = {name!r}: {exc}") from None

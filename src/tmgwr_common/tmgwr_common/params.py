@@ -269,6 +269,13 @@ def _flatten(d: Mapping[str, Any], prefix: str, out: dict[str, Any]) -> None:
 # ----------------------------------------------------------------------------- registry
 #: ament index resource type listing, per package, the ``module:attribute`` of the
 #: parameter declarations of its nodes (Config classes or Param tuples), one a line.
+#: The world the simulator hosts and the agent nodes sense and act in (maze_sim.worlds):
+#: one parameter of every node that needs to know it (the simulator, and the agent nodes
+#: that take the world's motor primitives).
+WORLD_PARAM = Param("world", "grid", "the world the simulator hosts, by name (grid: our grid "
+                    "world; pointmaze: MuJoCo's PointMaze built from the maze file); the "
+                    "agent nodes take its senses (dimension, motor primitives)")
+
 RESOURCE_TYPE = "tmgwr_parameters"
 
 

@@ -11,6 +11,8 @@
   episodes; the first episode, a random walk over the whole maze, takes about a minute).
   Reported: median (its targets: docs, Benchmarks),
   mean, p10, p90, p99, max, and the map's node count.
+* ``worlds``: per world (grid, pointmaze; :func:`bench_worlds`), the CPU per step of the
+  TMGWR agent and of the world's own ``step`` (PointMaze: the MuJoCo physics), apart.
 * ``cpu_to_convergence``: per agent, CPU seconds (``time.process_time``) of the training
   episodes from scratch to convergence on goal G of the default maze, STAT over
   ``--trials`` trials with the seeds of :mod:`.parallel` (the same for every agent), run
@@ -115,6 +117,66 @@ def bench_large(seed: int, steps: int, max_episodes: int = 20) -> dict:
     return out
 
 
+def time_split(world, agent, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """CPU nanoseconds (``time.thread_time_ns``) of the agent (``act`` + ``observe``) and
+    of the world (``step``), apart, over ``n`` steps of training episodes."""
+    agent_ns = np.empty(n, dtype=np.int64)
+    world_ns = np.empty(n, dtype=np.int64)
+    clock = time.thread_time_ns
+    i = 0
+    while i < n:
+        obs, _ = world.reset()
+        agent.begin_episode(obs, world.cell)
+        while i < n:
+            t0 = clock()
+            a = agent.act()
+            t1 = clock()
+            obs, _, term, trunc, info = world.step(a)
+            t2 = clock()
+            agent.observe(obs, info)
+            t3 = clock()
+            agent_ns[i], world_ns[i] = (t1 - t0) + (t3 - t2), t2 - t1
+            i += 1
+            if term or trunc:
+                break
+    return agent_ns, world_ns
+
+
+#: The worlds whose agent and world CPU per step ``bench_worlds`` measures.
+BENCH_WORLDS = ("grid", "pointmaze")
+
+
+def bench_worlds(seed: int, steps: int, warmup: int = 2000) -> dict:
+    """Per world (:data:`BENCH_WORLDS`, built from the default maze): CPU per step of the
+    TMGWR agent and of the world, apart, over ``steps`` steps of training episodes after
+    ``warmup`` steps of them (the map built, epsilon falling). ``agent_over_world``: the
+    agent's median over the world's (below 1: the world, not the agent, is the
+    bottleneck). A world this build cannot load is recorded as ``error``."""
+    from maze_sim.worlds import make_world as make_named_world
+    from tmgwr_agent.world_senses import world_senses
+    maze = Maze.from_file(DEFAULT_MAZE)
+    caps = Caps.for_maze(maze)
+    out: dict = {}
+    for name in BENCH_WORLDS:
+        try:
+            world = make_named_world(name, maze, "G", caps.episode_steps, seed)
+        except Exception as exc:  # noqa: BLE001 -- recorded, the others still run
+            out[name] = {"error": repr(exc)}
+            continue
+        agent = make_agent("tmgwr", maze, np.random.default_rng(seed),
+                           senses=world_senses(world))
+        set_goal(world, agent, "G")
+        time_split(world, agent, warmup)
+        a_ns, w_ns = time_split(world, agent, steps)
+        a_us, w_us = np.median(a_ns) / 1e3, np.median(w_ns) / 1e3
+        out[name] = {"steps": steps, "warmup": warmup, "nodes": int(agent.map.size),
+                     "agent_cpu_median_us": float(a_us), "agent_cpu_mean_us":
+                     float(a_ns.mean() / 1e3), "world_cpu_median_us": float(w_us),
+                     "world_cpu_mean_us": float(w_ns.mean() / 1e3),
+                     "agent_over_world": float(a_us / w_us) if w_us else None}
+    return out
+
+
 def _convergence_trial(spec, t, seed, maze_path):
     maze = Maze.from_file(maze_path)
     caps = Caps.for_maze(maze)
@@ -165,6 +227,8 @@ def run(args) -> int:
     t0 = time.perf_counter()
     result.update(scaling(args.seed))
     result["scaling_wall_s"] = round(time.perf_counter() - t0, 1)
+    print("bench: agent and world CPU per step in each world ...", file=sys.stderr)
+    result["worlds"] = bench_worlds(args.seed, args.steps)
     print("bench: CPU seconds to convergence ...", file=sys.stderr)
     result["cpu_to_convergence"] = cpu_to_convergence(args.trials, args.seed, args.jobs)
     if not getattr(args, "no_graph", False):
@@ -248,6 +312,12 @@ def ratio_rows(result: dict) -> list[list[str]]:
                          f"{num(part['last_quarter_steps_per_s'], 1)} steps/s",
                          num(ratios.get(key.replace("graph_", "") + "_last_quarter_over_ring")),
                          ">= 0.6"])
+    rate_row("graph, 5 processes, PointMaze (default maze)", "graph_pointmaze",
+             "pointmaze_graph_over_ring")
+    ws = (g.get("graph_pointmaze") or {}).get("world_step") or {}
+    if ws:
+        rows.append(["  PointMaze physics in maze_sim, per step",
+                     f"mean {ws.get('mean_us')} us (cpu {ws.get('cpu_mean_us')} us)", "", ""])
     rate_row("composed graph, 1 process", "composed", "composed_over_ring", ">= 1.5")
     rate_row("two hosts (netns + veth), 5 processes", "two_hosts", "two_hosts_over_ring")
     for key, what in (("graph", "default maze"), ("graph_large", "generated 51x51"),
@@ -277,6 +347,16 @@ def ratio_rows(result: dict) -> list[list[str]]:
         rows.append(["recorder, lossless", "FAILED: " + bag["error"].splitlines()[0]
                      if bag.get("error") else f"{num(bag.get('recorder_lossless_msg_per_s'))} "
                      "msg/s", "", ""])
+    for name, w in (result.get("worlds") or {}).items():
+        if w.get("error"):
+            rows.append([f"agent / world CPU per step, {name}", "FAILED: " + w["error"], "",
+                         ""])
+            continue
+        rows.append([f"agent / world CPU per step, {name} ({w.get('nodes')} nodes)",
+                     f"agent {num(w.get('agent_cpu_median_us'), 1)} us, world "
+                     f"{num(w.get('world_cpu_median_us'), 1)} us (medians)",
+                     num(w.get("agent_over_world")),
+                     "agent < world" if name == "pointmaze" else ""])
     for key, what in (("step_default", "default maze"), ("step_large", "generated 51x51")):
         st = result.get(key) or {}
         if st.get("median_us") is not None:

@@ -23,6 +23,8 @@ Measured in one run, on the same machine and middleware settings:
 (f) **large mazes**: the graph for ``large_seconds`` seconds on the generated 51 x 51
     maze of ``step_large`` (about 1300 free cells) and on a 200 x 200 open maze, where the
     map keeps growing: steps/s over the window and over its last quarter.
+(g) **PointMaze**: the graph of (b) with maze_sim hosting MuJoCo's PointMaze (``world``
+    pointmaze) on the same maze; the physics (maze_sim's ``world.step``) timed apart.
 
 Bytes per step: after the timed window of (b) and (f) the observer subscribes (raw, the
 recorder's QoS rule) to every topic the graph publishes and counts the CDR bytes of each
@@ -49,6 +51,8 @@ from pathlib import Path
 from tmgwr_agent.graph.output import say
 
 CALLBACKS = re.compile(r"(\d+) step callbacks, mean (\d+) us, total ([\d.]+) s")
+WORLD_STEPS = re.compile(r"maze_sim world (\S+): (\d+) world steps, mean (\d+) us, "
+                         r"cpu mean (\d+) us")
 
 
 def _opt(args, name, default):
@@ -87,11 +91,14 @@ def ring(size: int, laps: int, warmup: int = 100, timeout: float = 120.0) -> dic
 # ------------------------------------------------------------------------------ (b) graph
 def graph_rate(steps: int | None = 2000, warmup: int = 200, seed: int = 0,
                maze: str | None = None, timeout: float = 300.0, composed: bool = False,
-               seconds: float | None = None, bytes_steps: int = 0) -> dict:
+               seconds: float | None = None, bytes_steps: int = 0,
+               world: str | None = None) -> dict:
     """Steps/s of the lockstep graph after ``warmup`` steps, over ``steps`` steps or, with
     ``seconds``, over that many seconds (then also over the window's last quarter, which
     shows a rate that falls as the map grows); ``composed``: the one-process graph. With
     ``bytes_steps``, then the bytes per step of every topic (:func:`bytes_per_step`).
+    ``world``: the world maze_sim hosts (default grid); its own step time (the physics of
+    PointMaze) is reported apart (``world_step``), from maze_sim's shutdown line.
 
     Timed by the observations' header stamps (maze_sim's clock when it publishes), not by
     when this process gets them: an observer slower than the graph (one rclpy executor in
@@ -102,7 +109,7 @@ def graph_rate(steps: int | None = 2000, warmup: int = 200, seed: int = 0,
     from tmgwr_common import topics
     from tmgwr_interfaces.msg import Observation
 
-    run = GraphRun(maze=maze, seed=seed, record=False, echo=False)
+    run = GraphRun(maze=maze, seed=seed, world=world, record=False, echo=False)
     if composed:
         run.specs = run.supervisor.specs = composed_specs(run.specs)
     run.start(ready_timeout=120.0)
@@ -142,8 +149,14 @@ def graph_rate(steps: int | None = 2000, warmup: int = 200, seed: int = 0,
     finally:
         codes = run.stop()
     callbacks = {}
+    world_step = None
     for p in run.supervisor.processes:
         for line in p.tail:                 # composed: one process prints all five lines
+            w = WORLD_STEPS.search(line)
+            if w:
+                world_step = {"world": w.group(1), "steps": int(w.group(2)),
+                              "mean_us": int(w.group(3)), "cpu_mean_us": int(w.group(4))}
+                continue
             m = CALLBACKS.search(line)
             if m and not line.startswith("SUMMARY"):
                 who = line.split(":", 1)[0].split("]")[-1].strip() if composed else p.label
@@ -160,7 +173,8 @@ def graph_rate(steps: int | None = 2000, warmup: int = 200, seed: int = 0,
            "steps_per_s": round(rate, 1), "step_us": round(step_us),
            "callbacks": callbacks, "callbacks_us_per_step": compute_us,
            "messaging_us_per_step": round(step_us - compute_us),
-           "missed_observations": mon.missed, "exit_codes": codes}
+           "missed_observations": mon.missed, "exit_codes": codes,
+           "world": world or "grid", "world_step": world_step}
     if seconds is not None:
         t_q = marks["t0"] + 0.75 * seconds_measured
         t1, s1 = next((t, s) for t, s in samples if t >= t_q)
@@ -489,6 +503,12 @@ def run(args=None) -> dict:
             f"{g['callbacks_us_per_step']} us in the nodes' callbacks, "
             f"{g['messaging_us_per_step']} us messaging and executors), "
             f"{g.get('bytes', {}).get('bytes_per_step')} bytes a step")
+    pm = part("graph_pointmaze", "graph on PointMaze, 5 processes", lambda: graph_rate(
+        steps, seed=seed, maze=maze, world="pointmaze"))
+    if pm:
+        ws = pm.get("world_step") or {}
+        say(f"  graph on PointMaze: {pm['steps_per_s']} steps/s ({pm['step_us']} us a step, "
+            f"of which the physics {ws.get('mean_us')} us in maze_sim)")
     c = part("composed", "composed graph, 1 process", lambda: graph_rate(
         steps, seed=seed, maze=maze, composed=True))
     if c:
@@ -525,6 +545,7 @@ def run(args=None) -> dict:
         for key, name in (("graph", "graph_over_ring"), ("composed", "composed_over_ring"),
                           ("two_hosts", "two_hosts_over_ring"),
                           ("graph_large", "large_graph_over_ring"),
+                          ("graph_pointmaze", "pointmaze_graph_over_ring"),
                           ("graph_open200", "open200_graph_over_ring")):
             if out.get(key, {}).get("steps_per_s"):
                 ratios[name] = round(out[key]["steps_per_s"] / ring_rate, 3)

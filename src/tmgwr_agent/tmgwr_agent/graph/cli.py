@@ -35,6 +35,9 @@ def register(subparsers) -> None:
     p.add_argument("--seed", type=int, metavar="S", help="seed of the simulator and the "
                    "exploration policy")
     p.add_argument("--goal", metavar="NAME", help="initial goal name in the maze (G, 1-9)")
+    p.add_argument("--world", metavar="NAME", help="the world the simulator hosts, built "
+                   "from the maze: grid (default) or pointmaze (MuJoCo's PointMaze); the "
+                   "agent nodes take its senses")
     p.add_argument("--no-record", action="store_true", help="do not start the recorder")
     p.add_argument("--record-dir", metavar="DIR", help="record here instead of "
                    "runs/<UTC timestamp>/")
@@ -185,7 +188,12 @@ def _run_settings(args) -> tuple[dict, Path | None, Path | None]:
             raise resume.ResumeError(f"--maze: {exc}") from None
     given = {"maze": maze, "goal": args.goal, "seed": args.seed,
              "params_files": [str(Path(f).expanduser().resolve()) for f in args.params_file],
-             "composed": args.composed}
+             "composed": args.composed, "world": args.world}
+    if args.world is not None:
+        from maze_sim.worlds import WORLDS
+        if args.world not in WORLDS:
+            raise resume.ResumeError(f"--world: unknown world {args.world!r}; worlds: "
+                                     f"{', '.join(WORLDS)}")
     if not args.resume:
         run_dir = None if args.no_record else Path(args.record_dir or default_run_dir())
         return given, run_dir, run_dir
@@ -211,7 +219,8 @@ def cmd_up(args) -> int:
     try:
         settings, run_dir, bag_dir = _run_settings(args)
         run = GraphRun(maze=settings["maze"], seed=settings["seed"], goal=settings["goal"],
-                       record=bag_dir is not None, record_dir=bag_dir, run_dir=run_dir,
+                       world=settings.get("world"), record=bag_dir is not None,
+                       record_dir=bag_dir, run_dir=run_dir,
                        echo=not args.quiet, params_files=settings["params_files"] or [],
                        namespace=args.namespace)
         if run_dir is not None and not args.resume:

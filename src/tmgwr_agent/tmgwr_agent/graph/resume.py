@@ -24,7 +24,7 @@ from typing import Any
 from tmgwr_common.checkpoint import SUFFIX, CheckpointError, decode, read_regular
 
 RUN_FILE = "graph.json"
-SETTINGS = ("maze", "goal", "seed", "params_files", "composed")
+SETTINGS = ("maze", "goal", "seed", "params_files", "composed", "world")
 
 
 class ResumeError(ValueError):
@@ -79,7 +79,7 @@ def merged_settings(run_dir: Path, given: dict[str, Any]) -> dict[str, Any]:
         if key == "seed" and saved and saved.get(key) is None:
             raise ResumeError(f"--seed {value}: the run was started without a seed "
                               f"({run_dir / RUN_FILE}): a resumed run keeps its settings")
-        if key in ("maze", "goal", "seed") and saved.get(key) is not None:
+        if key in ("maze", "goal", "seed", "world") and saved.get(key) is not None:
             if str(value) != str(saved[key]):
                 raise ResumeError(f"--{key} {value} differs from the run's {key} "
                                   f"{saved[key]} ({run_dir / RUN_FILE}): a resumed run keeps "

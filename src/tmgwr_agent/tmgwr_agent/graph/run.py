@@ -32,7 +32,7 @@ def describe_exit(p: ManagedProcess) -> str:
 
 class GraphRun:
     def __init__(self, maze: str | None = None, seed: int | None = None,
-                 goal: str | None = None, record: bool = True,
+                 goal: str | None = None, world: str | None = None, record: bool = True,
                  record_dir: str | Path | None = None, echo=True,
                  node_params: Mapping[str, Mapping[str, object]] | None = None,
                  params_files=(), run_dir: str | Path | None = None,
@@ -44,7 +44,8 @@ class GraphRun:
             self.record_dir = Path(record_dir) if record_dir else default_run_dir()
         self.run_dir = Path(run_dir) if run_dir is not None else self.record_dir
         self.namespace = "/" + namespace.strip("/")
-        self.specs = graph_specs(maze=maze, seed=seed, goal=goal, record_dir=self.record_dir,
+        self.specs = graph_specs(maze=maze, seed=seed, goal=goal, world=world,
+                                 record_dir=self.record_dir,
                                  node_params=node_params, params_files=params_files,
                                  run_dir=self.run_dir, namespace=namespace)
         self.supervisor = GraphSupervisor(self.specs, env=os.environ, echo=echo)

@@ -297,15 +297,21 @@ def _print_line(line: str) -> None:
 
 
 # ---------------------------------------------------------------------- the graph itself
+#: The nodes that declare ``world`` (tmgwr_common.params.WORLD_PARAM): the simulator hosts
+#: it, the agent nodes take its motor primitives.
+WORLD_NODES = ("maze_sim", "map_learner", "motivation_estimator", "action_selector")
+
+
 def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | None = None,
-                record_dir: str | Path | None = None,
+                world: str | None = None, record_dir: str | Path | None = None,
                 node_params: Mapping[str, Mapping[str, object]] | None = None,
                 params_files: Sequence[str | Path] = (),
                 run_dir: str | Path | None = None,
                 namespace: str = "") -> list[NodeSpec]:
     """The recorder (when ``record_dir``) and the five nodes, with parameter files and
     overrides. ``maze``, ``seed`` and ``goal`` are the simulator's (and, for the seed, the
-    action selector's) parameters; ``node_params`` adds overrides per executable;
+    action selector's) parameters; ``world`` that of :data:`WORLD_NODES`; ``node_params``
+    adds overrides per executable;
     ``params_files`` (ROS 2 parameter files, ``/**`` or per-node sections) go to every node
     of the five, checked first (a malformed file or an unknown name raises ParamError).
     Without them every node runs on its specs' defaults. ``run_dir`` (default
@@ -348,6 +354,8 @@ def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | No
         if exe in CHECKPOINTED and run_dir is not None:
             params["checkpoint_dir"] = str(run_dir.resolve())
             params["resume"] = True
+        if world is not None and exe in WORLD_NODES:
+            params["world"] = str(world)
         if seed is not None and exe in ("maze_sim", "action_selector"):
             params["seed"] = int(seed)
         params.update(node_params.get(exe, {}))

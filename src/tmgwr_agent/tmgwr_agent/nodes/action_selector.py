@@ -21,7 +21,7 @@ from rclpy.node import Node
 from tmgwr_agent.core.action_selector import ActionSelector, SelectorConfig
 from tmgwr_agent.core.sensorimotor_map import Links
 from tmgwr_agent.nodes.step_messages import outcome_of
-from tmgwr_agent.world_senses import maze_senses
+from tmgwr_agent.world_senses import node_senses
 from tmgwr_common import topics
 from tmgwr_common.cdr import codec
 from tmgwr_common.checkpoint import (
@@ -42,12 +42,13 @@ from tmgwr_common.node import (
     run,
     subscribe_decoded,
 )
-from tmgwr_common.params import Param
+from tmgwr_common.params import WORLD_PARAM, Param
 from tmgwr_interfaces.msg import Action, MotivationField
 
 ACTION = codec(Action)                # the per-step messages go serialized (tmgwr_common.cdr)
 
 NODE_SPECS = (
+    WORLD_PARAM,
     Param("seed", 0, "seed of the selector's generator (exploration and tie-breaks)",
           low=0, high=2 ** 63 - 1, integer=True),
     Param("explore", True, "epsilon-greedy exploration (false: greedy Eq. 6 only)"),
@@ -60,7 +61,7 @@ class ActionSelectorNode(Node):
         super().__init__("action_selector", **NODE_OPTIONS)
         config, self.p = declare_parameters(self, SelectorConfig, NODE_SPECS)
         self.core = ActionSelector(np.random.default_rng(self.p["seed"]), config,
-                                  primitives=maze_senses().primitives)
+                                  primitives=node_senses(self.p["world"]).primitives)
         self.prev_winner = -1               # the winner this selector last acted from
         pub = self.create_publisher(Action, topics.ACTION, STEP_QOS)
         self.lockstep = Lockstep(pub, logger=self.get_logger(), what="motivation field")

@@ -74,7 +74,6 @@ from std_msgs.msg import ColorRGBA
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from maze_sim.maze import ACTION_VECTORS
 from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap
 from tmgwr_agent.map_replica import ChangeEncoder
 from tmgwr_agent.map_store import (
@@ -85,6 +84,7 @@ from tmgwr_agent.map_store import (
     validate_state,
 )
 from tmgwr_agent.nodes.step_messages import fill_change, outcome_of
+from tmgwr_agent.world_senses import drawn_at, node_senses
 from tmgwr_common import topics
 from tmgwr_common.cdr import codec
 from tmgwr_common.checkpoint import CHECKPOINT_SPECS, Checkpoint, Checkpointer, CheckpointError
@@ -102,7 +102,7 @@ from tmgwr_common.node import (
     subscribe_decoded,
     wait_for_acknowledgments,
 )
-from tmgwr_common.params import Param
+from tmgwr_common.params import WORLD_PARAM, Param
 from tmgwr_interfaces.msg import (
     Features,
     MapLink,
@@ -118,6 +118,7 @@ from tmgwr_interfaces.srv import LoadMap, SaveMap
 STATE, SNAPSHOT = codec(SensorimotorState), codec(SensorimotorSnapshot)
 
 NODE_SPECS = (
+    WORLD_PARAM,
     Param("map_dir", "", "directory of this learner's maps (empty = "
           "$ROS_HOME/tmgwr/domain<ROS_DOMAIN_ID>[_<namespace>], ROS_HOME defaulting to "
           "~/.ros); one learner per directory"),
@@ -147,6 +148,7 @@ class MapLearnerNode(LifecycleNode):
     def __init__(self):
         super().__init__("map_learner", **NODE_OPTIONS)
         self.config, self.p = declare_parameters(self, MapConfig, NODE_SPECS)
+        self.primitives = node_senses(self.p["world"]).primitives   # the world's motor vectors
         if self.p["map_path"]:                              # the old form: DIR/NAME.npz
             old = Path(self.p["map_path"])
             self.p["map_dir"], self.p["map_name"] = str(old.parent), old.name
@@ -210,7 +212,7 @@ class MapLearnerNode(LifecycleNode):
             self.store.path(self.p["map_name"])          # a bad name stops us now, not later
         if self.p["initial_map"]:
             self.map, last_step, run_id = self.read_initial_map(self.p["initial_map"])
-            self.map.primitives = ACTION_VECTORS          # the simulator's motor primitives
+            self.map.primitives = self.primitives         # the world's motor primitives
             self.get_logger().info(f"started from {self.p['initial_map']}: {self.map.size} nodes, "
                                    f"{self.map.link_count()} links, step {last_step} "
                                    f"(run {run_id or 'unknown'})")
@@ -395,8 +397,8 @@ class MapLearnerNode(LifecycleNode):
     def learn(self, f) -> bytes:
         x = np_f64(f.features)
         if self.map is None:
-            self.map = SensorimotorMap(dim=len(x), action_dim=ACTION_VECTORS.shape[1],
-                                       config=self.config, primitives=ACTION_VECTORS)
+            self.map = SensorimotorMap(dim=len(x), action_dim=self.primitives.shape[1],
+                                       config=self.config, primitives=self.primitives)
         self.gain = f.gain or 1.0
         outcome = outcome_of(f)
         self.prev_winner = -1 if outcome.episode_start else int(self.map.prev)
@@ -518,9 +520,9 @@ class MapLearnerNode(LifecycleNode):
         self.next_map_time = started + took / self.p["map_publish_share"]
 
     def position(self, i: int) -> Point:
-        """A node drawn where it is sensed: weight / gain = (row, col) -> x = col, y = row."""
-        w = self.map.w[i] / self.gain
-        return Point(x=float(w[1] if len(w) > 1 else 0.0), y=float(w[0]), z=0.0)
+        """A node drawn where it is sensed (weight / gain), in the simulator's frame."""
+        x, y = drawn_at(self.p["world"], self.map.w[i] / self.gain)
+        return Point(x=x, y=y, z=0.0)
 
     def markers(self, stamp, ids, src, tgt, E) -> MarkerArray:
         nodes = Marker(ns="nodes", id=0, type=Marker.SPHERE_LIST, action=Marker.ADD)
@@ -591,7 +593,7 @@ class MapLearnerNode(LifecycleNode):
             self.get_logger().warning(resp.message)
             return resp
         self.map = m
-        self.map.primitives = ACTION_VECTORS
+        self.map.primitives = self.primitives
         self.lockstep.forget(self.lockstep.last_step)   # the cached state is of the old map
         resp.success = True
         resp.message = (f"loaded {self.map.size} nodes, {self.map.link_count()} links from "
@@ -610,7 +612,7 @@ class MapLearnerNode(LifecycleNode):
                             "run_id": np.array(ck.run_id, dtype=np.uint64)}, str(ck.path))
             m = SensorimotorMap(dim=ck.arrays["w"].shape[1],
                                 action_dim=ck.arrays["a"].shape[2], config=self.config,
-                                primitives=ACTION_VECTORS)
+                                primitives=self.primitives)
             m.load_state_dict(ck.arrays)
         except (MapStoreError, KeyError, ValueError, IndexError) as exc:
             raise CheckpointError(str(exc)) from None

@@ -44,7 +44,7 @@ from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
 from tmgwr_agent.core.sensorimotor_map import Links
 from tmgwr_agent.map_replica import APPLIED, GAP, Replica
 from tmgwr_agent.nodes.step_messages import change_of, outcome_of
-from tmgwr_agent.world_senses import maze_senses
+from tmgwr_agent.world_senses import node_senses
 from tmgwr_common import topics
 from tmgwr_common.cdr import codec
 from tmgwr_common.checkpoint import (
@@ -67,7 +67,7 @@ from tmgwr_common.node import (
     run,
     subscribe_decoded,
 )
-from tmgwr_common.params import Param
+from tmgwr_common.params import WORLD_PARAM, Param
 from tmgwr_interfaces.msg import (
     Action,
     MotivationField,
@@ -79,6 +79,7 @@ from tmgwr_interfaces.msg import (
 FIELD = codec(MotivationField)        # the per-step messages go serialized (tmgwr_common.cdr)
 
 NODE_SPECS = (
+    WORLD_PARAM,
     Param("field_period", 100, "steps between two latched publications of every node's "
           "potential (/potentials, for inspection)", low=1, high=1e9, integer=True),
     *CHECKPOINT_SPECS,
@@ -89,7 +90,8 @@ class MotivationEstimatorNode(Node):
     def __init__(self):
         super().__init__("motivation_estimator", **NODE_OPTIONS)
         config, self.p = declare_parameters(self, MotivationConfig, NODE_SPECS)
-        self.core = MotivationEstimator(config, primitives=maze_senses().primitives)
+        self.core = MotivationEstimator(config,
+                                        primitives=node_senses(self.p["world"]).primitives)
         self._ids = np.zeros(0, dtype=np.int32)
         pub = self.create_publisher(MotivationField, topics.MOTIVATION, STEP_QOS)
         self.lockstep = Lockstep(pub, logger=self.get_logger(), what="state")

@@ -1,0 +1,550 @@
+"""PointMaze (Gymnasium-Robotics, MuJoCo) built from one of our maze files: the world contract.
+
+A point mass in a MuJoCo maze (``gymnasium_robotics.envs.maze.point_maze.PointMazeEnv``):
+continuous position and velocity, a force action in ``[-1, 1]^2`` (``gear`` 100 N per
+unit), physics in between. :class:`PointMazeWorld` offers the surface of the experiments'
+grid world (:class:`maze_sim.world.GridWorld`), so every scenario drives it unchanged.
+
+Geometry (the env's own, ``maze_size_scaling`` 1): the maze file's ``#`` cells are the env's
+``maze_map`` walls (1), every other cell is free (0). Our cell ``(row, col)`` is the env's
+``(i, j)``; its centre is at::
+
+    x = (col + 1/2) * S - cols * S / 2        y = rows * S / 2 - (row + 1/2) * S
+
+with ``S`` = :data:`CELL_SIZE` = 1 m (so ``x`` grows with the column, ``y`` *falls* with the
+row, and the maze is centred on the origin), the env's ``Maze.cell_rowcol_to_xy``. The
+reverse, ``Maze.cell_xy_to_rowcol`` (``floor``), is the cell a position lies in.
+
+Sensation: the point's position ``(x, y)`` in metres (``velocity=True``: and its velocity
+``(vx, vy)``, m/s). The goal sensation is the goal cell's centre (with zero velocity).
+
+Motor primitives (:data:`PRIMITIVES`, the four force directions ``up`` = +y, ``down`` = -y,
+``left`` = -x, ``right`` = +x, in the order of :data:`maze_sim.maze.ACTIONS`). A primitive
+is ``K = K_push + K_brake`` physics steps of the env's own dynamics
+(:func:`physics_step`, what ``PointEnv.step`` does): full force along the direction for
+``K_push`` steps, then a brake, the force opposing the velocity (``-v`` scaled so that one
+physics step would stop the point, clipped to full force) for up to ``K_brake`` steps or
+until the point is at rest. So a primitive is a move of about one cell that ends at rest:
+the next primitive starts from rest and the position alone tells where the point is
+(without the brake the point, damped by 1 N s/m for its 4.2 kg, would glide on for seconds
+and a position would not tell what a force does next).
+
+``K_push`` and ``K_brake`` are derived from the world by :func:`primitive_steps`, measured
+once per process on the env's point model in free space (no walls, the same XML): the
+point at rest pushed for ``n`` steps and braked to rest travels ``d(n)``; ``K_push`` is
+the ``n`` whose ``d(n)`` is nearest one cell ``S``, ``K_brake`` the number of steps the
+brake took to bring that move to rest, plus :data:`BRAKE_MARGIN` (a move that ran into a
+wall may need a few more).
+
+Outcome: ``bumped`` is the touch sensor: during the primitive the point met a wall ahead
+of its push (a MuJoCo contact between the point's geom and a ``block_*`` geom whose normal
+is within 60 degrees of the push direction; a wall slid along does not count). A goal counts
+as reached by the env's own success test (``PointMazeEnv.compute_terminated`` of an
+episodic env: within 0.45 m of the goal), checked after every physics step: the primitive
+stops at the step that reaches it, as the env's episode would.
+
+Tabular state (``info.cell``, :attr:`PointMazeWorld.state`, what Q-learning and Dyna-Q+
+key on): the cell the sensed position lies in (the floor discretisation above at the
+resolution of one maze cell, the usual discretisation of PointMaze's position), never an
+index the point cannot sense.
+
+Oracle (:meth:`PointMazeWorld.shortest_path_length`): the primitive steps a scripted
+controller takes on the same physics: the point at rest at the start cell's centre, each
+step it applies the primitive towards the next cell of a BFS shortest path from the cell it
+is in, until the env's success test holds. Measured once per layout and goal (cached).
+
+Events, cell edits and goal changes are validated by a :class:`~maze_sim.world.GridWorld`
+kept as the book-keeper (the same refusals as the grid world); an edit of the walls rebuilds
+the MuJoCo model from the new ``maze_map`` and puts the point back where it was, at the
+same velocity. The agent is not told (its map is its own).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from maze_sim.maze import N_ACTIONS, Cell, Maze, MazeError, bfs_distances
+from maze_sim.world import GridWorld, StepInfo
+
+#: The env's ``maze_size_scaling`` (PointMazeEnv fixes it): metres per maze cell.
+CELL_SIZE = 1.0
+#: The env's success test: the point within this distance of the goal (maze_v4.py).
+SUCCESS_RADIUS = 0.45
+#: Force direction of each action (unit ``ctrl``), in the order of ``maze_sim.maze.ACTIONS``
+#: (up, down, left, right): up is +y (a smaller row), right is +x (a larger column).
+PRIMITIVES = np.array([(0.0, 1.0), (0.0, -1.0), (-1.0, 0.0), (1.0, 0.0)])
+#: PointEnv clips the velocity to this before every physics step (point.py).
+MAX_SPEED = 5.0
+#: Extra brake steps over those a free move needs (a move that bounced off a wall).
+BRAKE_MARGIN = 4
+#: A wall contact whose normal is within 60 degrees of the push blocks the move (cosine).
+BUMP_COSINE = 0.5
+#: Speed (m/s) below which the brake counts the point at rest.
+REST_SPEED = 1e-3
+
+
+def _gym_robotics():
+    """The PointMaze classes (imported on first use: MuJoCo is loaded only by this world)."""
+    try:
+        from gymnasium_robotics.envs.maze.point import PointEnv
+        from gymnasium_robotics.envs.maze.point_maze import PointMazeEnv
+    except ImportError as exc:   # pragma: no cover - packaging
+        raise MazeError(f"the pointmaze world needs gymnasium-robotics and mujoco "
+                        f"(pip install gymnasium-robotics mujoco): {exc}") from None
+    return PointEnv, PointMazeEnv
+
+
+def physics_step(model, data, ctrl: np.ndarray) -> None:
+    """One physics step as ``PointEnv.step`` makes it: the control clipped to [-1, 1], the
+    velocity clipped to +-MAX_SPEED, one ``mj_step`` (its ``frame_skip`` is 1)."""
+    import mujoco
+    np.clip(data.qvel, -MAX_SPEED, MAX_SPEED, out=data.qvel)
+    data.ctrl[:] = np.clip(ctrl, -1.0, 1.0)
+    mujoco.mj_step(model, data)
+
+
+def brake_ctrl(model, data) -> np.ndarray:
+    """The control that would stop the point in one physics step (clipped to full force
+    by :func:`physics_step`): ``-v m / (gear dt)`` per axis."""
+    gain = _brake_gain(model)
+    return -data.qvel[:2] * gain
+
+
+def _brake_gain(model) -> np.ndarray:
+    mass = model.body_mass[model.jnt_bodyid[:2]]
+    gear = model.actuator_gear[:2, 0]
+    return mass / (gear * model.opt.timestep)
+
+
+def step_length(cell: float = CELL_SIZE, radius: float = SUCCESS_RADIUS) -> float:
+    """The distance a primitive moves the point from rest: the largest ``cell / n`` not
+    longer than ``sqrt 2 * radius`` (module doc)."""
+    return cell / math.ceil(cell / (math.sqrt(2.0) * radius))
+
+
+@lru_cache(maxsize=8)
+def primitive_steps(distance: float) -> tuple[int, int]:
+    """``(K_push, K_brake)`` for a move of ``distance`` metres, measured on the env's point
+    model in free space (module doc)."""
+    PointEnv, _ = _gym_robotics()
+    env = PointEnv()                      # the point model alone: no maze, no walls
+    try:
+        model, data = env.model, env.data
+        best: tuple[float, int, int] | None = None
+        for n in range(1, 200):
+            env.set_state(np.zeros(model.nq), np.zeros(model.nv))
+            for _ in range(n):
+                physics_step(model, data, np.array([1.0, 0.0]))
+            brake = 0
+            while np.abs(data.qvel[:2]).max() > REST_SPEED and brake < 1000:
+                physics_step(model, data, brake_ctrl(model, data))
+                brake += 1
+            err = abs(float(data.qpos[0]) - distance)
+            if best is not None and err > best[0]:
+                break                     # d(n) grows with n: past the nearest
+            best = (err, n, brake)
+        assert best is not None
+        return best[1], best[2] + BRAKE_MARGIN
+    finally:
+        env.close()
+
+
+def maze_map(walls: np.ndarray) -> list[list[int]]:
+    """The env's ``maze_map`` of a wall layout: 1 wall, 0 free."""
+    return [[int(w) for w in row] for row in walls]
+
+
+@dataclass(frozen=True)
+class Primitive:
+    """What one primitive did."""
+
+    bumped: bool
+    reached: bool        # the env's success test held (the primitive stopped there)
+    steps: int           # physics steps taken
+
+
+class PointMazeWorld:
+    """PointMaze built from ``maze`` (module doc), the world contract of the experiments.
+
+    Parameters
+    ----------
+    maze : Maze
+    goal : goal name ('G', '1'..'9') or (row, col) cell
+    max_episode_steps : truncate an episode after this many primitive steps (None = never)
+    seed : seed of the env's generator (nothing here draws from it: no position noise)
+    velocity : sense the velocity too (a 4-D sensation) rather than the position alone
+    """
+
+    identity = True                       # the state *is* the discretised sensation
+    n_actions = N_ACTIONS
+    action_vectors = PRIMITIVES
+    name = "pointmaze"
+
+    def __init__(self, maze: Maze, goal: str | Cell = "G", max_episode_steps: int | None = None,
+                 seed: int | None = None, velocity: bool = False):
+        self.grid = GridWorld(maze, goal, 0.0, max_episode_steps, seed)
+        self.maze = maze
+        self.velocity = bool(velocity)
+        self.step_length = step_length()
+        self.per_cell = round(CELL_SIZE / self.step_length)
+        self.k_push, self.k_brake = primitive_steps(self.step_length)
+        self.seed = seed
+        self._oracle: dict[tuple, int] = {}
+        self.env = None
+        self._build(self.grid.walls)
+        self._place(self.grid.cell)
+
+    # ------------------------------------------------------------------ the env
+    def _build(self, walls: np.ndarray) -> None:
+        """(Re)build the env's MuJoCo model from ``walls``; the point keeps its state."""
+        _, PointMazeEnv = _gym_robotics()
+        old = None if self.env is None else (self.data.qpos.copy(), self.data.qvel.copy())
+        env = PointMazeEnv(maze_map=maze_map(walls), continuing_task=False)
+        try:
+            os.remove(env.tmp_xml_file_path)   # compiled already; the env never removes it
+        except OSError:
+            pass
+        env.position_noise_range = 0.0         # the point and the goal at cell centres
+        env.reset(seed=self.seed, options={"goal_cell": np.array(self.grid.goal),
+                                           "reset_cell": np.array(self.grid.cell)})
+        if self.env is not None:
+            self.env.close()
+        self.env = env
+        self.model, self.data = env.point_env.model, env.point_env.data
+        self._point_geom = env._model_names.geom_name2id["particle_geom"]
+        self._wall_geoms = {i for name, i in env._model_names.geom_name2id.items()
+                            if name and name.startswith("block_")}
+        self._set_goal_xy()
+        if old is not None:
+            env.point_env.set_state(*old)
+
+    def _set_goal_xy(self) -> None:
+        self.env.goal = self.xy(self.grid.goal)
+        self.env.update_target_site_pos()
+
+    def xy(self, cell: Cell) -> np.ndarray:
+        """The centre of ``cell`` (row, col) in the env's (x, y) metres (module doc)."""
+        return self.env.maze.cell_rowcol_to_xy(np.array(cell, dtype=float))
+
+    def cell_of(self, xy: np.ndarray) -> Cell:
+        """The cell (row, col) a position lies in (module doc)."""
+        i, j = self.env.maze.cell_xy_to_rowcol(np.asarray(xy, dtype=float))
+        return int(i), int(j)
+
+    def _place(self, cell: Cell) -> None:
+        """The point at rest at the centre of ``cell``."""
+        qpos = np.zeros(self.model.nq)
+        qpos[:2] = self.xy(cell)
+        self.env.point_env.set_state(qpos, np.zeros(self.model.nv))
+
+    def _blocked(self, push: np.ndarray) -> bool:
+        """The touch sensor: the point touches a wall geom head-on, the contact's normal
+        within 60 degrees of the push (a wall alongside, touched while sliding past, does
+        not block the move)."""
+        d = self.data
+        for k in range(d.ncon):
+            g1, g2 = int(d.contact.geom1[k]), int(d.contact.geom2[k])
+            if self._point_geom in (g1, g2) and (g1 in self._wall_geoms
+                                                 or g2 in self._wall_geoms):
+                normal = d.contact.frame[k][:2]
+                if abs(float(normal @ push)) > BUMP_COSINE * float(np.linalg.norm(normal)):
+                    return True
+        return False
+
+    def _success(self, goal_xy: np.ndarray) -> bool:
+        """The env's own success test (episodic: terminated within 0.45 m)."""
+        return bool(self.env.compute_terminated(self.data.qpos[:2].copy(), goal_xy, {}))
+
+    def _primitive(self, action: int, goals: list[np.ndarray]) -> tuple[Primitive, int]:
+        """Run primitive ``action``; stop at the first physics step at which the env's test
+        holds for one of ``goals`` (its index, else -1)."""
+        model, data = self.model, self.data
+        push = PRIMITIVES[action]
+        bumped = False
+        steps = 0
+        for k in range(self.k_push + self.k_brake):
+            if k >= self.k_push:
+                if np.abs(data.qvel[:2]).max() <= REST_SPEED:
+                    break
+                ctrl = brake_ctrl(model, data)
+            else:
+                ctrl = push
+            physics_step(model, data, ctrl)
+            steps += 1
+            bumped = bumped or self._blocked(push)
+            for gi, g in enumerate(goals):
+                if self._success(g):
+                    return Primitive(bumped, True, steps), gi
+        return Primitive(bumped, False, steps), -1
+
+    # ------------------------------------------------------------------ sensing
+    def sense(self) -> np.ndarray:
+        """The sensation: position (and velocity with ``velocity``)."""
+        n = 4 if self.velocity else 2
+        return np.concatenate([self.data.qpos[:2], self.data.qvel[:2]])[:n].astype(float)
+
+    def goal_observation(self) -> np.ndarray:
+        """The goal's sensation: the goal cell's centre (at rest)."""
+        g = self.xy(self.grid.goal)
+        return np.concatenate([g, np.zeros(2)]) if self.velocity else g
+
+    @property
+    def sensation_dim(self) -> int:
+        return 4 if self.velocity else 2
+
+    @property
+    def observation_space(self):
+        """The sensation as a Gymnasium space (what ``Senses.from_spaces`` reads)."""
+        from gymnasium import spaces
+        return spaces.Box(-np.inf, np.inf, shape=(self.sensation_dim,), dtype=np.float64)
+
+    @property
+    def action_space(self):
+        from gymnasium import spaces
+        return spaces.Discrete(N_ACTIONS)
+
+    #: The declared motor vector of each action (``Senses``): its force direction.
+    primitive_vectors = PRIMITIVES
+
+    # ------------------------------------------------------------------ the contract
+    @property
+    def cell(self) -> Cell:
+        """The cell the point's position lies in (the tabular state)."""
+        return self.grid.cell
+
+    @property
+    def state(self) -> Cell:
+        return self.grid.cell
+
+    @property
+    def goal(self) -> Cell:
+        return self.grid.goal
+
+    @property
+    def goal_state(self) -> Cell:
+        return self.grid.goal
+
+    @property
+    def max_episode_steps(self) -> int | None:
+        return self.grid.max_episode_steps
+
+    def __getattr__(self, name: str):
+        # the book-keeper's state: walls, fired, episode, total_steps, previous_goal, ...
+        if name == "grid":
+            raise AttributeError(name)
+        return getattr(self.grid, name)
+
+    def reset(self, seed: int | None = None, start: Cell | None = None):
+        """A new episode: the point at rest at the centre of the start cell (or ``start``)."""
+        _, info = self.grid.reset(seed, start)
+        self._place(self.grid.cell)
+        return self.sense(), info
+
+    def end_episode(self) -> None:
+        self.grid.end_episode()
+
+    def step(self, action: int):
+        if not 0 <= int(action) < N_ACTIONS:
+            raise ValueError(f"action must be in 0..{N_ACTIONS - 1}, got {action}")
+        g = self.grid
+        goals = [self.env.goal.copy()]
+        if g.previous_goal is not None:
+            goals.append(self.xy(g.previous_goal))
+        prim, which = self._primitive(int(action), goals)
+        g.cell = self.cell_of(self.data.qpos[:2])
+        g.total_steps += 1
+        g.episode_steps += 1
+        info = StepInfo(cell=g.cell, action=int(action), bumped=prim.bumped,
+                        reached_goal=which == 0, reached_previous_goal=which == 1,
+                        step=g.total_steps, episode=g.episode)
+        truncated = (g.max_episode_steps is not None
+                     and g.episode_steps >= g.max_episode_steps and not info.terminated)
+        if info.terminated or truncated:
+            g.in_episode = False
+        return (self.sense(), 1.0 if info.reached_goal else 0.0, info.terminated, truncated,
+                info)
+
+    # ------------------------------------------------------------------ edits
+    def check_goal(self, goal: str | Cell) -> Cell:
+        return self.grid.check_goal(goal)
+
+    def request_goal(self, goal: str | Cell) -> Cell:
+        return self.grid.request_goal(goal)
+
+    def set_goal(self, goal: str | Cell, keep_previous: bool = False) -> Cell:
+        cell = self.grid.set_goal(goal, keep_previous)
+        self._set_goal_xy()
+        return cell
+
+    def sync(self) -> None:
+        """Rebuild the env from the book-keeper's walls and goal (after they were restored
+        directly, e.g. from a checkpoint)."""
+        self._build(self.grid.walls)
+
+    def _rebuild_if_changed(self, before: np.ndarray) -> None:
+        if not np.array_equal(before, self.grid.walls):
+            self._build(self.grid.walls)
+
+    def fire_event(self, name: str) -> None:
+        """Fire a maze event (the grid world's rules and refusals); the MuJoCo model is
+        rebuilt with the new walls, the point where it was."""
+        before = self.grid.walls.copy()
+        self.grid.fire_event(name)
+        self._rebuild_if_changed(before)
+
+    def set_cell(self, r: int, c: int, blocked: bool) -> None:
+        before = self.grid.walls.copy()
+        self.grid.set_cell(r, c, blocked)
+        self._rebuild_if_changed(before)
+
+    # ------------------------------------------------------------------ the oracle
+    def shortest_path_length(self, a: Cell | None = None, b: Cell | None = None) -> int:
+        """Primitive steps of the scripted controller from ``a`` (default: the start) to
+        ``b`` (default: the goal) in the current layout (module doc); -1 when ``b`` cannot
+        be reached. The point's state is restored afterwards."""
+        a = tuple(a or self.maze.start)
+        b = tuple(b or self.grid.goal)
+        walls = self.grid.walls
+        key = (walls.tobytes(), a, b)
+        if key not in self._oracle:
+            self._oracle[key] = self._scripted(walls, a, b)
+        return self._oracle[key]
+
+    def _scripted(self, walls: np.ndarray, a: Cell, b: Cell) -> int:
+        if bfs_distances(walls, b)[a] < 0:
+            return -1
+        saved = (self.data.qpos.copy(), self.data.qvel.copy())
+        try:
+            return self._drive(walls, a, b)
+        finally:
+            self.env.point_env.set_state(*saved)
+
+    def shortest_steps(self, walls: np.ndarray, goal: str | Cell = "G") -> int:
+        """The oracle (scripted controller) from S to ``goal`` in the layout ``walls``."""
+        target = self.maze.goal_cell(goal) if isinstance(goal, str) else tuple(goal)
+        if np.array_equal(walls, self.grid.walls):
+            return self.shortest_path_length(self.maze.start, target)
+        return self._in_layout(walls, lambda: self._scripted(walls, self.maze.start, target))
+
+    def event_oracle_steps(self, event: str, goal: str | Cell = "G") -> int:
+        """The env-change bound of the grid (``env_change.oracle_steps``: an agent that
+        knows the old maze walks an old shortest path up to the first blocked cell on it,
+        bumps once, then walks a shortest path of the new maze) *measured* on the physics:
+        the route of that bound (the old path to the cell ``c`` before the block, found on
+        the grid) driven by the scripted controller: to ``c`` in the old layout, one
+        primitive into the block, then to the goal in the new layout."""
+        if event not in self.maze.events:
+            raise MazeError(f"no event named {event!r}", self.maze.source)
+        target = self.maze.goal_cell(goal) if isinstance(goal, str) else tuple(goal)
+        old, new = self.maze.walls, self.maze.walls_after([event])
+        route = _bump_route(old, new, self.maze.start, target)
+        if route is None:                 # an old shortest path avoids the block
+            return self.shortest_steps(old, target)
+        c, into = route
+        return self._in_layout(new, lambda: self._bump_then_go(old, new, c, into, target))
+
+    def _in_layout(self, walls: np.ndarray, fn):
+        """``fn()`` with the env built from ``walls``, the world's own layout restored."""
+        keep = self.grid.walls
+        if np.array_equal(walls, keep):
+            return fn()
+        saved = (self.data.qpos.copy(), self.data.qvel.copy())
+        self._build(walls)
+        try:
+            return fn()
+        finally:
+            self._build(keep)
+            self.env.point_env.set_state(*saved)
+
+    def _bump_then_go(self, old, new, c: Cell, into: int, target: Cell) -> int:
+        saved = (self.data.qpos.copy(), self.data.qvel.copy())
+        try:
+            n = self._drive(old, self.maze.start, c, stop_in_cell=True) if c != \
+                self.maze.start else 0
+            self._primitive(into, [])     # the bump
+            return n + 1 + self._drive(new, None, target)
+        finally:
+            self.env.point_env.set_state(*saved)
+
+    def _drive(self, walls: np.ndarray, a: Cell | None, b: Cell,
+               stop_in_cell: bool = False) -> int:
+        """Scripted primitives from ``a`` (None: where the point is) to ``b``: until the
+        env's success test holds at ``b`` (or, ``stop_in_cell``, the point is in ``b``)."""
+        to_b = bfs_distances(walls, b)
+        if a is not None:
+            self._place(a)
+        here = self.cell_of(self.data.qpos[:2])
+        if to_b[here] < 0:
+            raise MazeError(f"{b} cannot be reached from {here}", self.maze.source)
+        goal = [self.xy(b)]
+        cap = 4 * int(to_b[here]) * self.per_cell + 8
+        for n in range(0, cap + 1):
+            if (stop_in_cell and self.cell_of(self.data.qpos[:2]) == b) or \
+                    (not stop_in_cell and n == 0 and self._success(goal[0])):
+                return n
+            if n == cap:
+                break
+            action = self._towards(walls, to_b, b)
+            _, which = self._primitive(action, [] if stop_in_cell else goal)
+            if which == 0:
+                return n + 1
+        raise MazeError(f"the scripted controller did not reach {b} within {cap} primitive "
+                        f"steps", self.maze.source)
+
+    def _towards(self, walls: np.ndarray, to_b: np.ndarray, b: Cell) -> int:
+        """The scripted controller's primitive: in ``b``, the one along the larger offset
+        from its centre; elsewhere, the one towards the neighbour one BFS step nearer ``b``
+        (the axis of that step)."""
+        xy = self.data.qpos[:2]
+        cell = self.cell_of(xy)
+        if cell == b:
+            off = xy - self.xy(b)
+            axis = int(np.argmax(np.abs(off)))
+            return (3 if off[0] < 0 else 2) if axis == 0 else (0 if off[1] < 0 else 1)
+        rows, cols = walls.shape
+        best, best_a = None, 0
+        for a, (dr, dc) in enumerate(((-1, 0), (1, 0), (0, -1), (0, 1))):
+            r, c = cell[0] + dr, cell[1] + dc
+            if 0 <= r < rows and 0 <= c < cols and to_b[r, c] >= 0 and \
+                    (best is None or to_b[r, c] < best):
+                best, best_a = int(to_b[r, c]), a
+        return best_a
+
+def _bump_route(old: np.ndarray, new: np.ndarray, start: Cell,
+                target: Cell) -> tuple[Cell, int] | None:
+    """The route of the grid's env-change bound: the cell ``c`` on an old shortest path
+    (reached from S along unblocked old shortest-path cells) and the action from ``c``
+    into a blocked cell of that path minimising ``ds[c] + 1 + dnew[c]``; None when an old
+    shortest path avoids every blocked cell."""
+    ds, dg, dnew = bfs_distances(old, start), bfs_distances(old, target), \
+        bfs_distances(new, target)
+    d = int(ds[target])
+    blocked = new & ~old
+    rows, cols = old.shape
+    frontier, best = {start}, None
+    for _ in range(d + 1):
+        nxt = set()
+        for c in frontier:
+            if c == target:
+                return None
+            for a, (dr, dc) in enumerate(((-1, 0), (1, 0), (0, -1), (0, 1))):
+                n = (c[0] + dr, c[1] + dc)
+                if not (0 <= n[0] < rows and 0 <= n[1] < cols) or ds[n] != ds[c] + 1 \
+                        or dg[n] < 0 or ds[n] + dg[n] != d:
+                    continue
+                if blocked[n]:
+                    if dnew[c] >= 0:
+                        total = int(ds[c]) + 1 + int(dnew[c])
+                        if best is None or total < best[0]:
+                            best = (total, c, a)
+                else:
+                    nxt.add(n)
+        frontier = nxt
+    if best is None:
+        raise MazeError("the goal cannot be reached after the event")
+    return best[1], best[2]

@@ -1,0 +1,118 @@
+"""The node graph on PointMaze (``./tmgwr up --world pointmaze``) over real DDS, recorded.
+
+``./tmgwr up`` starts the five nodes and the recorder as separate processes with
+``--world pointmaze`` on a small maze: maze_sim hosts MuJoCo's PointMaze built from it, the
+agent nodes take its senses (a 2-D position, four force primitives). The test waits for the
+first goal, changes the goal by a position in the world's frame and fires an event, then
+stops the graph and reads the bag back: the ring answered every step, the sensations are
+continuous positions inside the maze, the pose, grid and markers are in the world's frame,
+and ``./tmgwr report`` rebuilds the map from the recording.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+from ros_helpers import ROOT, RosProcess, ros_env
+from test_recorder import mcap_files, tmgwr_cli
+
+pytest.importorskip("gymnasium_robotics")
+pytest.importorskip("mujoco")
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+# 5 x 7: cell (row, col) centred at x = col - 3, y = 2 - row (PointMaze's frame, metres)
+MAZE = """\
+#######
+#S.a.G#
+#.###.#
+#.1...#
+#######
+"""
+GOAL = re.compile(r"\[maze_sim\].*episode (\d+): goal \((\d+), (\d+)\) reached in (\d+) steps")
+PER_STEP = ("/observation", "/features", "/sensorimotor_state", "/motivation", "/action")
+
+
+def goals_reached(up: RosProcess) -> int:
+    return sum(1 for line in up.lines if GOAL.search(line))
+
+
+def test_the_graph_runs_on_pointmaze_and_the_bag_reads_back(ros_domain, tmp_path):
+    maze = tmp_path / "small.txt"
+    maze.write_text(MAZE)
+    bag = tmp_path / "run"
+    up = RosProcess([str(ROOT / ".venv/bin/python"), "-m", "tmgwr_agent.cli", "up",
+                     "--world", "pointmaze", "--maze", str(maze), "--seed", "3",
+                     "--record-dir", str(bag), "--domain-id", str(ros_domain)],
+                    ros_env(ros_domain), name="up")
+    with up:
+        up.wait_for_line(r"world pointmaze", timeout=90)
+        up.wait_for_line(r"^recording to ", timeout=90)
+        up.wait_for_line(GOAL.pattern, timeout=240)          # a first goal, by the agent
+        # goal (row 3, col 2) by its centre in the world's frame: x = -1, y = -1
+        goal = tmgwr_cli("goal", "-1.2", "-0.9", "--domain-id", str(ros_domain),
+                         domain=ros_domain)
+        assert goal.returncode == 0 and "accepted" in goal.stdout, goal.stdout + goal.stderr
+        up.wait_for_line(r"goal -> row 3, col 2", timeout=30)
+        refused = tmgwr_cli("goal", "40", "0", "--domain-id", str(ros_domain),
+                            domain=ros_domain)
+        assert refused.returncode == 1 and "outside" in refused.stdout, refused.stdout
+        for _ in range(20):                 # refused while the point stands on the cell
+            event = tmgwr_cli("event", "a", "--domain-id", str(ros_domain), domain=ros_domain)
+            if "would wall in the agent" not in event.stdout:
+                break
+        assert event.returncode == 0 and "accepted" in event.stdout, \
+            event.stdout + event.stderr
+        up.wait_for_line(r"event 'a' fired", timeout=30)
+        up.proc.send_signal(2)              # Ctrl-C: the nodes stop, the recorder last
+        up.wait_for_line(r"^recording: ", timeout=60)
+        up.wait(timeout=60, check=False)
+    assert up.proc.returncode == 0, up.describe("./tmgwr up failed")
+
+    from rosbags.highlevel import AnyReader
+    steps: dict[str, list[int]] = {}
+    sensed, poses, grids, markers = [], [], [], []
+    with AnyReader(mcap_files(bag)) as reader:
+        for conn, _t, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            if conn.topic in PER_STEP:
+                steps.setdefault(conn.topic, []).append(int(msg.step_id))
+            if conn.topic == "/observation":
+                sensed.append(np.array(msg.sensors, dtype=float))
+            elif conn.topic == "/agent_pose":
+                poses.append((msg.pose.position.x, msg.pose.position.y))
+            elif conn.topic == "/maze_grid":
+                grids.append(msg)
+            elif conn.topic == "/map_markers":
+                markers.append(msg)
+    for topic in PER_STEP:
+        ids = sorted(set(steps[topic]))
+        assert ids[0] == 0 and ids == list(range(ids[-1] + 1)), topic
+    xy = np.array(sensed)
+    assert xy.shape[1] == 2
+    # inside the free cells of the maze (x in [-2.5, 2.5], y in [-1.5, 1.5]), and off the
+    # integer lattice of the grid world (the point stops against walls)
+    assert (xy[:, 0] > -2.5).all() and (xy[:, 0] < 2.5).all()
+    assert (xy[:, 1] > -1.5).all() and (xy[:, 1] < 1.5).all()
+    assert np.abs(xy - np.round(xy)).max() > 0.1
+    g = grids[-1]
+    assert (g.info.origin.position.x, g.info.origin.position.y) == (-3.5, -2.5)
+    walls = np.array(g.data).reshape(g.info.height, g.info.width)[::-1] > 0
+    assert walls[1, 3]                      # event 'a' walled (row 1, col 3)
+    assert not walls[1, 1] and walls[0].all()
+    if poses:                               # /agent_pose is made only while someone listens
+        p = np.array(poses)
+        assert (np.abs(p[:, 0]) < 2.5).all() and (np.abs(p[:, 1]) < 1.5).all()
+    nodes = [pt for m in markers for mk in m.markers if mk.ns == "nodes" for pt in mk.points]
+    assert nodes and all(-2.5 < pt.x < 2.5 and -1.5 < pt.y < 1.5 for pt in nodes)
+
+    report = tmgwr_cli("report", str(bag))
+    assert report.returncode == 0, report.stdout + report.stderr
+
+
+def test_up_refuses_an_unknown_world_before_starting_nodes():
+    out = tmgwr_cli("up", "--world", "mars", "--no-record")
+    assert out.returncode == 2, out.stdout + out.stderr
+    assert "unknown world 'mars'" in out.stderr and "Traceback" not in out.stderr

@@ -1,0 +1,166 @@
+"""PointMaze built from our maze files (maze_sim/pointmaze_world.py): geometry, the primitive
+length and its physics steps, the env's success test, the scripted oracle, an event that
+rebuilds the MuJoCo model, goals and the senses the agent is given."""
+
+import numpy as np
+import pytest
+
+pytest.importorskip("gymnasium_robotics")
+pytest.importorskip("mujoco")
+
+from maze_sim.maze import Maze, MazeError  # noqa: E402
+from maze_sim.pointmaze_world import (  # noqa: E402
+    PRIMITIVES,
+    SUCCESS_RADIUS,
+    PointMazeWorld,
+    primitive_steps,
+    step_length,
+)
+from maze_sim.world import EditRefused  # noqa: E402
+from maze_sim.worlds import WorldError, make_world  # noqa: E402
+
+# Rows 0-4, cols 0-6. A block event 'a' at (1, 3) leaves the way round by row 3.
+SMALL = """\
+#######
+#S.a.G#
+#.###.#
+#.....#
+#######
+"""
+UP, DOWN, LEFT, RIGHT = range(4)
+
+
+@pytest.fixture(scope="module")
+def world():
+    return PointMazeWorld(Maze.from_text(SMALL), "G")
+
+
+def test_walls_and_cells_at_the_documented_coordinates(world):
+    rows, cols = 5, 7
+    for r, c in [(0, 0), (1, 1), (3, 5), (4, 6)]:
+        x, y = world.xy((r, c))
+        assert (x, y) == (c + 0.5 - cols / 2, rows / 2 - r - 0.5)
+        assert world.cell_of((x, y)) == (r, c)
+    # every '#' is a MuJoCo box at its cell's centre, nothing else is
+    names = world.env._model_names.geom_name2id
+    blocks = {tuple(map(int, n.split("_")[1:])) for n in names if n and n.startswith("block_")}
+    assert blocks == {tuple(map(int, rc)) for rc in zip(*np.nonzero(world.maze.walls))}
+    for r, c in blocks:
+        pos = world.model.geom_pos[names[f"block_{r}_{c}"]][:2]
+        assert np.allclose(pos, world.xy((r, c)))
+
+
+def test_step_length_and_k_are_derived_from_the_physics():
+    # the largest cell / n within sqrt 2 * 0.45: half a cell
+    assert step_length() == 0.5
+    assert step_length(1.0, 0.8) == 1.0
+    k_push, k_brake = primitive_steps(0.5)
+    assert k_push > 0 and k_brake > 0
+    # a longer move needs a longer push
+    assert primitive_steps(1.0)[0] > k_push
+
+
+def test_a_primitive_moves_half_a_cell_and_ends_at_rest(world):
+    obs, info = world.reset()
+    assert np.allclose(obs, world.xy((1, 1))) and info["cell"] == (1, 1)
+    obs, _, _, _, info = world.step(RIGHT)
+    assert obs[0] - world.xy((1, 1))[0] == pytest.approx(0.5, abs=0.02)
+    assert obs[1] == pytest.approx(world.xy((1, 1))[1], abs=1e-6)
+    assert np.abs(world.data.qvel[:2]).max() < 1e-2
+    assert not info.bumped
+    obs, _, _, _, info = world.step(RIGHT)
+    assert info.cell == (1, 2) and not info.bumped
+
+
+def test_a_wall_ahead_bumps_a_wall_alongside_does_not(world):
+    world.reset()
+    _, _, _, _, info = world.step(UP)            # row 0 is wall: touched head-on
+    assert info.bumped and info.cell == (1, 1)
+    _, _, _, _, info = world.step(UP)
+    assert info.bumped
+    _, _, _, _, info = world.step(RIGHT)         # sliding along the top wall: not a bump
+    assert not info.bumped
+
+
+def test_the_goal_is_reached_by_the_envs_success_test():
+    w = PointMazeWorld(Maze.from_text(SMALL), "G")
+    w.reset(start=(1, 4))
+    obs, reward, terminated, _, info = w.step(RIGHT)
+    assert not terminated                        # half way: 0.5 m from the goal's centre
+    obs, reward, terminated, _, info = w.step(RIGHT)
+    assert terminated and info.reached_goal and reward == 1.0
+    assert np.linalg.norm(obs - w.goal_observation()) <= SUCCESS_RADIUS
+    assert w.env.compute_terminated(obs, w.env.goal, {})
+
+
+def test_oracle_by_the_scripted_controller(world):
+    # S (1,1) to G (1,5): 4 m straight right, half a metre a primitive; the success test
+    # holds 0.45 m before the goal's centre: 7 or 8 primitives, as many as RIGHT takes
+    n = world.shortest_path_length()
+    assert n in (7, 8)
+    world.reset()
+    for k in range(1, 9):
+        if world.step(RIGHT)[2]:
+            break
+    assert k == n
+    assert world.shortest_path_length((1, 4), (1, 5)) in (1, 2)
+    before = world.data.qpos.copy()
+    world.shortest_path_length((3, 1), (1, 5))
+    assert np.array_equal(world.data.qpos, before)   # the point is put back
+
+
+def test_an_event_rebuilds_the_model_and_the_oracle_follows():
+    w = PointMazeWorld(Maze.from_text(SMALL), "G")
+    w.reset()
+    w.step(RIGHT)
+    here = w.data.qpos.copy()
+    old_model = w.model
+    w.fire_event("a")
+    assert w.model is not old_model and np.array_equal(w.data.qpos, here)
+    assert w.walls[1, 3] and "block_1_3" in w.env._model_names.geom_name2id
+    # round by row 3: 2 + 4 + 2 = 8 cells, two primitives a cell, corners cut at most
+    assert 12 <= w.shortest_path_length() <= 16
+    # the point cannot enter the new wall
+    w.reset(start=(1, 2))
+    _, _, _, _, info = w.step(RIGHT)
+    _, _, _, _, info = w.step(RIGHT)
+    assert info.bumped and info.cell == (1, 2)
+    assert w.event_oracle_steps("a") >= w.shortest_path_length()
+
+
+def test_edits_are_refused_as_in_the_grid_world():
+    w = PointMazeWorld(Maze.from_text(SMALL), "G")
+    w.reset()
+    with pytest.raises(EditRefused, match="wall in the start"):
+        w.set_cell(1, 1, True)
+    with pytest.raises(MazeError, match="no event named 'z'"):
+        w.fire_event("z")
+
+
+def test_set_goal_moves_the_target_and_the_goal_sensation():
+    w = PointMazeWorld(Maze.from_text(SMALL), "G")
+    assert w.set_goal((3, 1)) == (3, 1)
+    assert np.allclose(w.env.goal, w.xy((3, 1)))
+    assert np.allclose(w.goal_observation(), w.xy((3, 1)))
+    assert w.goal_state == (3, 1)
+    assert 3 <= w.shortest_path_length() <= 4
+
+
+def test_senses_from_the_world():
+    from tmgwr_agent.world_senses import named_world_senses, world_senses
+
+    w = PointMazeWorld(Maze.from_text(SMALL), "G", velocity=True)
+    s = world_senses(w)
+    assert s.dim == 4 and np.array_equal(s.primitives, PRIMITIVES)
+    assert len(w.reset()[0]) == 4 and len(w.goal_observation()) == 4
+    assert named_world_senses("pointmaze").dim == 2
+    assert np.array_equal(named_world_senses("grid").primitives[0], (-1, 0))
+
+
+def test_make_world_by_name():
+    m = Maze.from_text(SMALL)
+    assert isinstance(make_world("pointmaze", m, "G", 10), PointMazeWorld)
+    with pytest.raises(WorldError, match="unknown world 'mars'"):
+        make_world("mars", m)
+    with pytest.raises(WorldError, match="unexpected keyword"):
+        make_world("pointmaze", m, colour="red")
