@@ -293,7 +293,7 @@ def table_bench(root: Path) -> str:
 #: The sensors of the sensing table, and the results file of each.
 SENSORS = (("identity", "sensing_identity"), ("scale=1:2", "sensing_scale-1_2"),
            ("scale=1:5", "sensing_scale-1_5"), ("rotate=30", "sensing_rotate-30"),
-           ("noise=0.1", "sensing_noise-0p1"))
+           ("noise=0.1", "sensing_noise-0p1"), ("noise=0.2", "sensing_noise-0p2"))
 
 
 def table_sensing(root: Path) -> str:
@@ -329,6 +329,31 @@ def table_sensing(root: Path) -> str:
             + _source(*(d for _, d in docs)))
 
 
+def table_view(root: Path) -> str:
+    """A local view (``--sensor view=K``) on the default maze, per agent: the trials that
+    reached the goal after the block and their steps over the oracle, the trials that ever
+    converged, and the mean steps of the last training episodes."""
+    d = load("sensing_view-1", root)
+    r = d["result"]
+    rows = []
+    for a, v in r["agents"].items():
+        done = [s for s in v["steps"]["values"] if s is not None]
+        conv = [e for e in v["train_episodes"]["values"] if e is not None]
+        learn = [s for s in v["learning_steps"]["values"] if s is not None]
+        n = len(v["steps"]["values"])
+        rows.append([f"`{a}`", f"{len(done)} of {n}",
+                     " / ".join(f"{s / r['oracle_steps']:.0f}" for s in sorted(done)) or "-",
+                     f"{len(conv)} of {n}",
+                     f"{sum(learn) / len(learn):.0f}" if learn else "-"])
+    header = ["agent", "reached the goal after the block", "steps / oracle", "converged",
+              "learning episode steps"]
+    return (_md(header, rows)
+            + f"\n\nDefault maze, event `{r['event']}` (oracle {r['oracle_steps']} steps), sensor "
+            f"`{r['sensor']}`, {r['trials']} trials; training stops at the caps "
+            f"({r['caps']['max_episodes']} episodes or {r['caps']['budget_steps']} steps). "
+            + _source(d))
+
+
 #: Marked table name -> the function that generates it from results/.
 TABLES: dict[str, Callable[[Path], str]] = {
     "headline": table_headline,
@@ -340,6 +365,7 @@ TABLES: dict[str, Callable[[Path], str]] = {
     "suite-openings": table_suite_openings,
     "bench": table_bench,
     "sensing": table_sensing,
+    "sensing-view": table_view,
     "rivals-blocks": lambda root: table_suite(root, "rivals_blocks"),
     "rivals-openings": lambda root: table_suite_openings(root, "rivals_openings"),
 }
