@@ -144,6 +144,48 @@ def test_replica_equals_the_map_after_every_step(case):
     assert np.mean(late) < 8 and np.mean(late) < 0.2 * replica.n, (np.mean(late), replica.n)
 
 
+@pytest.mark.parametrize("case", ["paper", "churn"])
+def test_the_maps_change_log_lists_every_row_a_step_changed(case):
+    """The map's RowLog (what the estimator reads instead of comparing every row) lists,
+    after every step, each row whose weights, alive flag, links, reliabilities or terminal
+    flag changed: goal changes, deleted nodes and reused slots included; or, rarely, says
+    it no longer knows (it forgets its oldest rows). A replica's log lists the slots of
+    each change it applied."""
+    maze, goals, events, config, noise = CASES[case]()
+    replica, encoder = Replica(), ChangeEncoder(map_id=3)
+    before, pos, rpos, forgot = None, 0, 0, 0
+    for k, agent in evolve(maze, 1500, seed=5, goals=goals, events=events, config=config,
+                           noise=noise):
+        m = agent.map
+        replica.apply(encoder.encode(m))
+        if before is not None:
+            n = max(m.n, len(before["alive"]))
+            changed = set()
+            for name in ("w", "alive", "out", "E", "terminal"):
+                a, b = _rows_of(before[name], n), _rows_of(getattr(m, name)[: m.n], n)
+                changed |= set(np.flatnonzero((a != b).any(axis=1)).tolist())
+            for log, at in ((m.log, pos), (replica.log, rpos)):
+                logged = log.since(at)
+                if logged is None:          # the log forgot its oldest rows: allowed
+                    forgot += 1
+                else:
+                    assert changed <= set(logged.tolist()), k
+        pos, rpos = m.log.pos, replica.log.pos
+        before = {name: getattr(m, name)[: m.n].copy()
+                  for name in ("w", "alive", "out", "E", "terminal")}
+    assert forgot < 10                        # (once every few thousand rows)
+    m.load_state_dict(m.state_dict())
+    assert m.log.since(pos) is None           # a loaded map: every row may have changed
+
+
+def _rows_of(a: np.ndarray, n: int) -> np.ndarray:
+    """``a`` as n rows of 64 columns (rows and columns it lacks: -7, a value no array
+    holds), for comparing maps before and after a step that added rows or columns."""
+    b = np.full((n, 64), -7.0)
+    b[: len(a), : a[0].size if len(a) else 0] = a.reshape(len(a), -1)
+    return b
+
+
 def test_widened_link_rows_and_reused_slots_replicate_exactly():
     """A node linked to six others (K grows 4 -> 8); then a walk between it and one of
     them ages the other links away (max_age) and removes their nodes; a new node takes

@@ -79,23 +79,89 @@ def incident_neighbours(out, n, b):
 
 
 @njit(cache=True)
-def goal_rewards(w, alive, n, g, sigma, floor, R):
-    """Eq. 10: R_i = sim(i, g) = exp(-|w_i - w_g|^2 / (2 sigma^2)), 0 below ``floor``."""
+def goal_reward(w, alive, i, g, inv, cut, floor):
+    """Eq. 10 for node i: sim(i, g) = exp(-|w_i - w_g|^2 inv), 0 below ``floor`` (no exp
+    beyond ``cut``, where it would be below it) and for dead slots."""
+    if not alive[i]:
+        return 0.0
+    d = 0.0
+    for k in range(w.shape[1]):
+        t = w[i, k] - w[g, k]
+        d += t * t
+    if d * inv > cut:
+        return 0.0
+    r = np.exp(-d * inv)
+    return r if r >= floor else 0.0
+
+
+@njit(cache=True)
+def goal_rewards(w, alive, n, g, sigma, floor, R, rows, k):
+    """Eq. 10: R_i = sim(i, g) = exp(-|w_i - w_g|^2 / (2 sigma^2)), 0 below ``floor``, for
+    every node (``k`` < 0) or for the nodes ``rows[:k]`` only (the others unchanged)."""
     inv = 1.0 / (2.0 * sigma * sigma)
     cut = 1.0 - np.log(floor) if floor > 0.0 else np.inf   # exp(-cut) < floor: no exp
-    for i in range(n):
+    for q in range(n if k < 0 else k):
+        i = q if k < 0 else rows[q]
+        R[i] = goal_reward(w, alive, i, g, inv, cut, floor)
+
+
+@njit(cache=True)
+def nearest_weight_among(w, alive, x, best, rows, k):
+    """:func:`nearest_weight` when only the nodes ``rows[:k]`` changed since it answered
+    ``best`` (which did not): the nearest of ``best`` and those (ties: the lowest id, as
+    the scan)."""
+    best_d = 0.0
+    for c in range(x.shape[0]):
+        t = x[c] - w[best, c]
+        best_d += t * t
+    for q in range(k):
+        i = rows[q]
         if not alive[i]:
-            R[i] = 0.0
             continue
         d = 0.0
-        for k in range(w.shape[1]):
-            t = w[i, k] - w[g, k]
+        for c in range(x.shape[0]):
+            t = x[c] - w[i, c]
             d += t * t
-        if d * inv > cut:
-            R[i] = 0.0
+        if d < best_d or (d == best_d and i < best):
+            best, best_d = i, d
+    return best
+
+
+@njit(cache=True)
+def frame_coords(w, T, rows, k, out):
+    """Frame coordinates ``out[i] = T w_i`` (frame.py) of every row of w (``k`` < 0) or
+    of the rows ``rows[:k]`` only."""
+    for q in range(w.shape[0] if k < 0 else k):
+        i = q if k < 0 else rows[q]
+        for r in range(T.shape[0]):
+            s = 0.0
+            for c in range(T.shape[1]):
+                s += T[r, c] * w[i, c]
+            out[i, r] = s
+
+
+@njit(cache=True)
+def absorbing_flags(terminal, use_terminal, closed, use_closed, R, goal_r, n, rows, k,
+                    absorbing, terminal_only, count):
+    """The absorbing nodes of Eq. 4-5' (motivation.py): ``absorbing[i]`` = (terminal or
+    closed) and ``R_i < goal_r``, and ``terminal_only[i]`` = terminal and ``R_i < goal_r``
+    (``use_terminal`` / ``use_closed`` False: no node is), for every node (``k`` < 0,
+    ``count`` ignored) or the nodes ``rows[:k]`` only; returns the number of
+    ``terminal_only`` nodes (``count``: before the call)."""
+    if k < 0:
+        count = 0
+    for q in range(n if k < 0 else k):
+        i = q if k < 0 else rows[q]
+        if i >= n:
             continue
-        r = np.exp(-d * inv)
-        R[i] = r if r >= floor else 0.0
+        below = R[i] < goal_r
+        t = use_terminal and terminal[i] and below
+        if k >= 0:
+            count -= terminal_only[i]
+        count += t
+        terminal_only[i] = t
+        absorbing[i] = t or (use_closed and closed[i] and below)
+    return count
 
 
 @njit(cache=True)
@@ -556,18 +622,24 @@ def prioritized_sweep(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U,
 
 
 @njit(cache=True)
-def changed_rows(out, E, R, absorbing, out0, E0, R0, absorbing0, n, seeds):
+def changed_rows(out, E, R, absorbing, out0, E0, R0, absorbing0, n, seeds, rows, k):
     """The rows whose links, reliabilities, reward or absorbing flag differ from the copy
     (``out0`` ...) of the last solve, written into ``seeds``, and the copy brought up to
-    date. Returns (count, lost, relinked): ``lost`` when a change may cut a node off its
-    sources (a link removed or retargeted or its E gone to 0, a node made absorbing, a
-    reward gone to 0), which prioritized sweeping only follows geometrically;
-    ``relinked`` when a link changed its target (:func:`predecessors` must be rebuilt)."""
+    date; every row (``k`` < 0), or only the rows ``rows[:k]`` (the only ones that may
+    have changed: the map's change log; repeats are seeded once, in ascending order as
+    by the scan, so that the sweep that follows is the same). Returns (count, lost,
+    relinked): ``lost`` when a change may cut a node off its sources (a link removed or
+    retargeted or its E gone to 0, a node made absorbing, a reward gone to 0), which
+    prioritized sweeping only follows geometrically; ``relinked`` when a link changed its
+    target (:func:`predecessors` must be rebuilt)."""
     K = out.shape[1]
     c = 0
     lost = False
     relinked = False
-    for i in range(n):
+    for q in range(n if k < 0 else k):
+        i = q if k < 0 else rows[q]
+        if i >= n:
+            continue
         diff = R[i] != R0[i] or absorbing[i] != absorbing0[i]
         if R0[i] > 0.0 and R[i] <= 0.0:
             lost = True
@@ -590,6 +662,14 @@ def changed_rows(out, E, R, absorbing, out0, E0, R0, absorbing0, n, seeds):
             for s in range(K):
                 out0[i, s] = out[i, s]
                 E0[i, s] = E[i, s]
+    if k >= 0:              # ascending, as a scan of every row seeds them (insertion sort)
+        for q in range(1, c):
+            v = seeds[q]
+            p = q - 1
+            while p >= 0 and seeds[p] > v:
+                seeds[p + 1] = seeds[p]
+                p -= 1
+            seeds[p + 1] = v
     return c, lost, relinked
 
 
@@ -1042,18 +1122,25 @@ def habituate(h, i, tau, kappa):
 
 @njit(cache=True)
 def adapt(w, c, h, out, n, b, x, C, eps_b, eps_n, tau_b, tau_n, kappa):
-    """Move the winner and its linked neighbours towards (x, C), then habituate them."""
+    """Move the winner and its linked neighbours towards (x, C), then habituate them;
+    returns the nodes moved (b first)."""
     rate = eps_b * h[b]
     for k in range(x.shape[0]):
         w[b, k] += rate * (x[k] - w[b, k])
         c[b, k] += rate * (C[k] - c[b, k])
     habituate(h, b, tau_b, kappa)
-    for nb in incident_neighbours(out, n, b):
+    nbs = incident_neighbours(out, n, b)
+    moved = np.empty(len(nbs) + 1, dtype=np.int64)
+    moved[0] = b
+    for q in range(len(nbs)):
+        nb = nbs[q]
+        moved[q + 1] = nb
         rate = eps_n * h[nb]
         for k in range(x.shape[0]):
             w[nb, k] += rate * (x[k] - w[nb, k])
             c[nb, k] += rate * (C[k] - c[nb, k])
         habituate(h, nb, tau_n, kappa)
+    return moved
 
 
 @njit(cache=True)
@@ -1181,7 +1268,9 @@ def match(w, c, h, alive, out, n, prev, x, C, alpha_c, beta_c, a_T, h_T, learn, 
     itself at an episode start, ``prev`` < 0), finds the winner b = argmin d_n and, when
     learning, applies the GWR test: returns ``(b, True)`` when a node must be inserted (an
     empty map, or activity ``exp(-sqrt(d_b)) < a_T`` with ``h_b <= h_T``: the caller
-    inserts), else adapts b and its neighbours towards (x, C) and returns ``(b, False)``."""
+    inserts), else adapts b and its neighbours towards (x, C) and returns ``(b, False)``;
+    a third value lists the nodes whose weights moved (empty when none did)."""
+    none = np.empty(0, dtype=np.int64)
     if prev >= 0:
         for k in range(C.shape[0]):
             C[k] = (1.0 - beta_c) * w[prev, k] + beta_c * c[prev, k]
@@ -1189,11 +1278,10 @@ def match(w, c, h, alive, out, n, prev, x, C, alpha_c, beta_c, a_T, h_T, learn, 
         C[:] = x
     b, d_b = merge_distance_argmin(w, c, alive, n, x, C, alpha_c)
     if not learn:
-        return b, False
+        return b, False, none
     if b < 0 or (np.exp(-np.sqrt(d_b)) < a_T and h[b] <= h_T):
-        return b, True
-    adapt(w, c, h, out, n, b, x, C, eps_b, eps_n, tau_b, tau_n, kappa)
-    return b, False
+        return b, True, none
+    return b, False, adapt(w, c, h, out, n, b, x, C, eps_b, eps_n, tau_b, tau_n, kappa)
 
 
 @njit(cache=True)
@@ -1204,9 +1292,10 @@ def link_step(out, E, A, age, alive, terminal, n, i, j, a, alpha, sigma_a, eta_a
     caller widens the rows and calls again); else :func:`update_links`, then GWR's removal
     of the end nodes of deleted links that are left without any link (never ``keep1`` or
     ``keep2``, nor a node flagged ``terminal``), and returns the number of structural
-    changes: 1 when a link was created or deleted, plus one per node removed."""
+    changes: 1 when a link was created or deleted, plus one per node removed; and the rows
+    it changed besides row i (the ends of deleted links, the nodes removed)."""
     if needs_wider_rows(out, i, j):
-        return -1
+        return -1, np.empty(0, dtype=np.int64)
     created, ends = update_links(out, E, A, age, n, i, j, a, alpha, sigma_a, eta_a, E_init,
                                  E_min, max_age, credit)
     changes = 1 if created or len(ends) else 0
@@ -1224,7 +1313,7 @@ def link_step(out, E, A, age, alive, terminal, n, i, j, a, alpha, sigma_a, eta_a
         if not linked:
             alive[k] = False
             changes += 1
-    return changes
+    return changes, ends
 
 
 # ---------------------------------------------------------------- the on-disk cache
