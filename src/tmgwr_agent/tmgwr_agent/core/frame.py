@@ -82,6 +82,8 @@ class LearntFrame:
         self.version = 0                     # bumped whenever T changes
         self._w = np.zeros((0, 0))           # the last coordinates of the map's weights
         self._w_version = -1                 # the basis they were computed in
+        self._goal_key: tuple = ()           # (basis, goal) of the goal's coordinates
+        self._goal = np.zeros(0)
 
     def refresh(self, delta: np.ndarray, moves: np.ndarray, L: float,
                 again: bool = True) -> None:
@@ -147,7 +149,10 @@ class LearntFrame:
                 self._w_version = self.version
             elif len(rows):
                 kernels.frame_coords(w, T, rows, len(rows), x)
-        return Frame(x, np.ascontiguousarray(T @ goal),
+        if self._goal_key != (self.version, goal.tobytes()):
+            self._goal_key = (self.version, goal.tobytes())
+            self._goal = np.ascontiguousarray(T @ goal)
+        return Frame(x, self._goal,
                      np.ascontiguousarray(delta @ T.T), 1.0)
 
 

@@ -649,34 +649,36 @@ class MotivationEstimator:
             self._scale = self.link_scale(m) or 1.0
             self._scale_version = m.version
         F = self._in_frame(m, rows)
-        g = self._nearest_goal(m, n, rows)
+        g, g_moved = self._nearest_goal(m, n, rows)
         if g < 0 or (self.value_unknown                   # represented only once sensed
-                     and math.dist(F.w[g], F.goal) > 0.5 * F.L):
+                     and math.dist(F.w[g].tolist(), F.goal.tolist()) > 0.5 * F.L):
             self.R = np.zeros(n)
             self._R_key = None
             self._epoch += 1
             return n
         self.goal_node = g
-        moved = rows is not None and not np.any(rows == g)
-        self.R = self.rewards(F, m, g, rows if moved else None)
+        self.R = self.rewards(F, m, g, None if g_moved else rows)
         return n
 
-    def _nearest_goal(self, m: SensorimotorMap, n: int, rows: np.ndarray | None) -> int:
+    def _nearest_goal(self, m: SensorimotorMap, n: int, rows: np.ndarray | None
+                      ) -> tuple[int, bool]:
         """The node nearest the goal sensation (Algorithm 1, line 2; -1: no goal or no
         node): among the last one and the changed ``rows`` when the last one's did not
         change, else by a scan (:meth:`~tmgwr_agent.core.sensorimotor_map.
-        SensorimotorMap.nearest_by_weight`)."""
+        SensorimotorMap.nearest_by_weight`); and whether its row is among ``rows``
+        (True when ``rows`` is None)."""
+        g0 = self._g_raw
+        moved = rows is None or g0 in rows.tolist()
         if self.goal_x is None or not n:
             g = -1
-        elif rows is not None and self._R_key is not None and self._R_key[0] == n \
-                and 0 <= self._g_raw < n and m.alive[self._g_raw] \
-                and not np.any(rows == self._g_raw):
-            g = int(kernels.nearest_weight_among(m.w, m.alive, self.goal_x, self._g_raw,
-                                                 rows, len(rows)))
+        elif not moved and self._R_key is not None and self._R_key[0] == n \
+                and 0 <= g0 < n and m.alive[g0]:
+            g = int(kernels.nearest_weight_among(m.w, m.alive, self.goal_x, g0, rows,
+                                                 len(rows)))
         else:
             g = m.nearest_by_weight(self.goal_x)
         self._g_raw = g
-        return g
+        return g, moved or g != g0
 
     def _in_frame(self, m: SensorimotorMap, rows: np.ndarray | None = None) -> Frame:
         """The map's weights, the goal and the forward model in the frame of the value of

@@ -146,7 +146,14 @@ class RowLog:
 
     def touch(self, rows) -> None:
         """Rows changed (an int or an array of ints)."""
-        rows = np.atleast_1d(np.asarray(rows, dtype=np.int64))
+        if isinstance(rows, (int, np.integer)):
+            if self._len < len(self._rows):       # most calls: one row, room for it
+                self._rows[self._len] = rows
+                self._len += 1
+                return
+            rows = (rows,)
+        if not isinstance(rows, np.ndarray) or rows.dtype != np.int64:
+            rows = np.atleast_1d(np.asarray(rows, dtype=np.int64))
         k = len(rows)
         if self._len + k > len(self._rows):
             if self._len + k > 4096:          # forget the oldest: readers that far behind
