@@ -62,20 +62,58 @@ def nearest_weight(w, alive, n, x):
 
 
 @njit(cache=True)
-def incident_neighbours(out, n, b):
-    """Nodes linked to b in either direction (sorted, unique)."""
-    mark = np.zeros(n, dtype=np.bool_)
+def incident_neighbours(out, inn, n, b):
+    """Nodes linked to b in either direction (sorted, unique): its links' targets and the
+    sources of the links into it (``inn``, :func:`in_links`)."""
+    found = np.empty(out.shape[1] + inn.shape[1], dtype=np.int64)
+    c = 0
     for s in range(out.shape[1]):
-        t = out[b, s]
-        if t >= 0:
-            mark[t] = True
+        if out[b, s] >= 0 and out[b, s] != b:
+            found[c] = out[b, s]
+            c += 1
+    for s in range(inn.shape[1]):
+        if inn[b, s] >= 0 and inn[b, s] != b:
+            found[c] = inn[b, s]
+            c += 1
+    found = np.sort(found[:c])
+    keep = np.empty(c, dtype=np.int64)
+    k = 0
+    for q in range(c):
+        if k == 0 or found[q] != keep[k - 1]:
+            keep[k] = found[q]
+            k += 1
+    return keep[:k]
+
+
+@njit(cache=True)
+def in_links(out, n, inn):
+    """The sources of the links into every node: ``inn[j]`` lists each i with a link
+    i -> j once (-1: empty slots), the reverse of ``out``; returns False when some row of
+    ``inn`` is too narrow (nothing is then to be trusted)."""
+    inn[:] = -1
     for i in range(n):
         for s in range(out.shape[1]):
-            if out[i, s] == b:
-                mark[i] = True
-                break
-    mark[b] = False
-    return np.flatnonzero(mark)
+            j = out[i, s]
+            if j >= 0 and not _in_link_add(inn, j, i):
+                return False
+    return True
+
+
+@njit(cache=True)
+def _in_link_add(inn, j, i):
+    for s in range(inn.shape[1]):
+        if inn[j, s] < 0:
+            inn[j, s] = i
+            return True
+    return False
+
+
+@njit(cache=True)
+def _in_link_remove(inn, j, i):
+    for s in range(inn.shape[1]):
+        if inn[j, s] == i:
+            inn[j, s] = -1
+            return
 
 
 @njit(cache=True)
@@ -1121,7 +1159,7 @@ def habituate(h, i, tau, kappa):
 
 
 @njit(cache=True)
-def adapt(w, c, h, out, n, b, x, C, eps_b, eps_n, tau_b, tau_n, kappa):
+def adapt(w, c, h, out, inn, n, b, x, C, eps_b, eps_n, tau_b, tau_n, kappa):
     """Move the winner and its linked neighbours towards (x, C), then habituate them;
     returns the nodes moved (b first)."""
     rate = eps_b * h[b]
@@ -1129,7 +1167,7 @@ def adapt(w, c, h, out, n, b, x, C, eps_b, eps_n, tau_b, tau_n, kappa):
         w[b, k] += rate * (x[k] - w[b, k])
         c[b, k] += rate * (C[k] - c[b, k])
     habituate(h, b, tau_b, kappa)
-    nbs = incident_neighbours(out, n, b)
+    nbs = incident_neighbours(out, inn, n, b)
     moved = np.empty(len(nbs) + 1, dtype=np.int64)
     moved[0] = b
     for q in range(len(nbs)):
@@ -1154,10 +1192,11 @@ def sim_action(a_ij, a, sigma_a):
 
 
 @njit(cache=True)
-def needs_wider_rows(out, i, j):
-    """Whether i -> j would be a new link (i != j) while row i has no free slot, so the
-    caller must widen the link rows before :func:`update_links` (a numpy test of the row
-    costs more than the rest of the link update)."""
+def needs_wider_rows(out, inn, i, j):
+    """Whether i -> j would be a new link (i != j) while row i, or row j of the links in
+    (``inn``), has no free slot, so the caller must widen the link rows before
+    :func:`update_links` (a numpy test of the row costs more than the rest of the link
+    update)."""
     if i == j:
         return False
     free = False
@@ -1167,11 +1206,16 @@ def needs_wider_rows(out, i, j):
             return False
         if t < 0:
             free = True
-    return not free
+    if not free:
+        return True
+    for s in range(inn.shape[1]):
+        if inn[j, s] < 0:
+            return False
+    return True
 
 
 @njit(cache=True)
-def reinforce_link(out, E, A, age, i, j, a, alpha, sigma_a, eta_a, E_init):
+def reinforce_link(out, E, A, age, inn, i, j, a, alpha, sigma_a, eta_a, E_init):
     """Eq. 1-2 on the traversed link i -> j (i != j), then a_ij follows the action a.
 
     A transition never seen before creates the link (labelled a, reliability ``E_init``)
@@ -1194,6 +1238,7 @@ def reinforce_link(out, E, A, age, i, j, a, alpha, sigma_a, eta_a, E_init):
         A[i, slot, :] = a
         E[i, slot] = E_init
         age[i, slot] = 0
+        _in_link_add(inn, j, i)
         created = True
     # Eq. 1-2 with I{i != j} = 1: E[i, j] += alpha (sim(a_ij, a) - E[i, j])
     E[i, slot] += alpha * (sim_action(A[i, slot], a, sigma_a) - E[i, slot])
@@ -1214,7 +1259,7 @@ def credit_other_links(out, E, A, i, slot, a, alpha, sigma_a):
 
 
 @njit(cache=True)
-def age_links(out, E, age, n, i, slot, E_min, max_age):
+def age_links(out, E, age, inn, n, i, slot, E_min, max_age):
     """GWR ageing: every link incident to i (in or out) ages by one, the traversed link
     (row i, ``slot``; -1 for none) restarts at 0. Links older than ``max_age`` and links
     out of i less reliable than ``E_min`` are deleted.
@@ -1223,7 +1268,14 @@ def age_links(out, E, age, n, i, slot, E_min, max_age):
     which the caller checks (GWR removes nodes without links).
     """
     ends = []
-    for src in range(n):
+    rows = np.empty(inn.shape[1] + 1, dtype=np.int64)     # i and the sources into it
+    rows[0] = i
+    c = 1
+    for s in range(inn.shape[1]):
+        if inn[i, s] >= 0 and inn[i, s] != i:
+            rows[c] = inn[i, s]
+            c += 1
+    for src in np.sort(rows[:c]):                          # in row order, as a scan
         for s in range(out.shape[1]):
             t = out[src, s]
             if t < 0 or (src != i and t != i):
@@ -1235,13 +1287,14 @@ def age_links(out, E, age, n, i, slot, E_min, max_age):
             if age[src, s] > max_age or (src == i and E[src, s] < E_min):
                 out[src, s] = -1
                 E[src, s] = 0.0
+                _in_link_remove(inn, t, src)
                 ends.append(src)
                 ends.append(t)
     return np.array(ends, dtype=np.int64)
 
 
 @njit(cache=True)
-def update_links(out, E, A, age, n, i, j, a, alpha, sigma_a, eta_a, E_init, E_min,
+def update_links(out, E, A, age, inn, n, i, j, a, alpha, sigma_a, eta_a, E_init, E_min,
                  max_age, credit):
     """The link update of one transition i -> j under action a: Eq. 1-2 on the traversed
     link, the credit rule on the other links out of i (``credit``), then GWR ageing.
@@ -1253,16 +1306,16 @@ def update_links(out, E, A, age, n, i, j, a, alpha, sigma_a, eta_a, E_init, E_mi
     slot = -1
     created = False
     if i != j:
-        slot, created = reinforce_link(out, E, A, age, i, j, a, alpha, sigma_a, eta_a,
+        slot, created = reinforce_link(out, E, A, age, inn, i, j, a, alpha, sigma_a, eta_a,
                                        E_init)
     if credit:
         credit_other_links(out, E, A, i, slot, a, alpha, sigma_a)
-    return created, age_links(out, E, age, n, i, slot, E_min, max_age)
+    return created, age_links(out, E, age, inn, n, i, slot, E_min, max_age)
 
 
 @njit(cache=True)
-def match(w, c, h, alive, out, n, prev, x, C, alpha_c, beta_c, a_T, h_T, learn, eps_b, eps_n,
-          tau_b, tau_n, kappa):
+def match(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T, learn, eps_b,
+          eps_n, tau_b, tau_n, kappa):
     """The matching and adaptation of one input x (sensorimotor_map.py, one call a step):
     writes its Merge-GNG context ``C_t = (1 - beta_c) w_prev + beta_c c_prev`` into C (x
     itself at an episode start, ``prev`` < 0), finds the winner b = argmin d_n and, when
@@ -1281,23 +1334,24 @@ def match(w, c, h, alive, out, n, prev, x, C, alpha_c, beta_c, a_T, h_T, learn, 
         return b, False, none
     if b < 0 or (np.exp(-np.sqrt(d_b)) < a_T and h[b] <= h_T):
         return b, True, none
-    return b, False, adapt(w, c, h, out, n, b, x, C, eps_b, eps_n, tau_b, tau_n, kappa)
+    return b, False, adapt(w, c, h, out, inn, n, b, x, C, eps_b, eps_n, tau_b, tau_n, kappa)
 
 
 @njit(cache=True)
-def link_step(out, E, A, age, alive, terminal, n, i, j, a, alpha, sigma_a, eta_a, E_init,
-              E_min, max_age, credit, keep1, keep2):
+def link_step(out, E, A, age, inn, alive, terminal, n, i, j, a, alpha, sigma_a, eta_a,
+              E_init, E_min, max_age, credit, keep1, keep2):
     """The link stage of one transition i -> j (sensorimotor_map.py): returns -1, having
-    changed nothing, when i -> j would be a new link and row i has no free slot (the
-    caller widens the rows and calls again); else :func:`update_links`, then GWR's removal
+    changed nothing, when i -> j would be a new link and row i (or row j of the links in,
+    ``inn``, :func:`in_links`, kept up to date) has no free slot (the caller widens the
+    rows and calls again); else :func:`update_links`, then GWR's removal
     of the end nodes of deleted links that are left without any link (never ``keep1`` or
     ``keep2``, nor a node flagged ``terminal``), and returns the number of structural
     changes: 1 when a link was created or deleted, plus one per node removed; and the rows
     it changed besides row i (the ends of deleted links, the nodes removed)."""
-    if needs_wider_rows(out, i, j):
+    if needs_wider_rows(out, inn, i, j):
         return -1, np.empty(0, dtype=np.int64)
-    created, ends = update_links(out, E, A, age, n, i, j, a, alpha, sigma_a, eta_a, E_init,
-                                 E_min, max_age, credit)
+    created, ends = update_links(out, E, A, age, inn, n, i, j, a, alpha, sigma_a, eta_a,
+                                 E_init, E_min, max_age, credit)
     changes = 1 if created or len(ends) else 0
     for k in ends:
         if k == keep1 or k == keep2 or not alive[k] or terminal[k]:
@@ -1306,10 +1360,9 @@ def link_step(out, E, A, age, alive, terminal, n, i, j, a, alpha, sigma_a, eta_a
         for s in range(out.shape[1]):
             if out[k, s] >= 0:
                 linked = True
-        for r in range(n):
-            for s in range(out.shape[1]):
-                if out[r, s] == k:
-                    linked = True
+        for s in range(inn.shape[1]):
+            if inn[k, s] >= 0:
+                linked = True
         if not linked:
             alive[k] = False
             changes += 1

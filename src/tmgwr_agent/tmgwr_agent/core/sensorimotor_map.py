@@ -250,14 +250,15 @@ class SensorimotorMap:
         self.a = np.zeros((cap, degree, self.action_dim))       # action vectors a_ij
         self.age = np.zeros((cap, degree), dtype=np.int64)
         self.terminal = np.zeros(cap, dtype=bool)   # an episode ended on the node
+        self.inn = np.full((cap, degree), -1, dtype=np.int64)   # sources of links in
 
     def _grow_nodes(self) -> None:
         old = (self.w, self.c, self.h, self.alive, self.out, self.E, self.a, self.age,
-               self.terminal)
+               self.terminal, self.inn)
         cap = 2 * len(self.w)
         self._alloc(cap, self.out.shape[1])
         for new, arr in zip((self.w, self.c, self.h, self.alive, self.out, self.E, self.a,
-                             self.age, self.terminal), old):
+                             self.age, self.terminal, self.inn), old):
             new[: len(arr)] = arr
 
     def _grow_degree(self) -> None:
@@ -267,6 +268,7 @@ class SensorimotorMap:
         self.E = np.concatenate([self.E, np.zeros((cap, pad))], axis=1)
         self.a = np.concatenate([self.a, np.zeros((cap, pad, self.action_dim))], axis=1)
         self.age = np.concatenate([self.age, np.zeros((cap, pad), np.int64)], axis=1)
+        self.inn = np.concatenate([self.inn, np.full((cap, pad), -1, np.int64)], axis=1)
 
     @property
     def size(self) -> int:
@@ -370,7 +372,8 @@ class SensorimotorMap:
         C = self.C_t    # written by match: context(), x at an episode start (neutral)
         self.inserted = False
         # winner, GWR test, adaptation of the winner and its neighbours
-        b, insert, moved = kernels.match(self.w, self.c, self.h, self.alive, self.out, self.n,
+        b, insert, moved = kernels.match(self.w, self.c, self.h, self.alive, self.out,
+                                         self.inn, self.n,
                                   self.prev, x, C, self.alpha_c, self.beta_c, self.a_T,
                                   self.h_T, learn, self.eps_b, self.eps_n, self.tau_b,
                                   self.tau_n, self.kappa_h)
@@ -407,12 +410,15 @@ class SensorimotorMap:
             self.n += 1
         self.w[r], self.c[r], self.h[r], self.alive[r] = w, c, 1.0, True
         self.terminal[r] = False
+        stale = bool((self.out[r] >= 0).any() or (self.inn[r] >= 0).any())
         self.out[r] = -1
         self.E[r] = 0.0
         self.age[r] = 0
         self.version += 1
         self.inserted = True
         self.log.touch(r)
+        if stale:               # (a freed slot has no links: removed only when unlinked)
+            self.rebuild_in_links()
         return r
 
     def _habituate(self, i: int, tau: float) -> None:
@@ -424,8 +430,8 @@ class SensorimotorMap:
         previous and current winner; :func:`kernels.link_step`)."""
         for _ in range(2):      # again once the rows are wider, when a new link needs it
             changes, ends = kernels.link_step(
-                self.out, self.E, self.a, self.age, self.alive, self.terminal, self.n, i, j,
-                a, self.alpha, self.sigma_a, self.eta_a, self.E_init, self.E_min,
+                self.out, self.E, self.a, self.age, self.inn, self.alive, self.terminal,
+                self.n, i, j, a, self.alpha, self.sigma_a, self.eta_a, self.E_init, self.E_min,
                 self.max_age, self.link_rule == "credit", self.prev, self.winner)
             if changes >= 0:
                 self.version += changes
@@ -457,6 +463,14 @@ class SensorimotorMap:
         self.n = n
         self.version, self.prev, self.winner = (int(v) for v in s["meta"])
         self.log.invalidate()
+        self.rebuild_in_links()
+
+    def rebuild_in_links(self) -> None:
+        """``inn``, the sources of the links into each node (what the step reads instead
+        of scanning every row for links into a node), from ``out``: after a load, or an
+        edit of ``out`` by hand. The link kernels keep it up to date."""
+        while not kernels.in_links(self.out, self.n, self.inn):
+            self._grow_degree()
 
     def save(self, path: str | Path, step_id: int = -1, run_id: int = 0) -> Path:
         """Write the whole map and the last step it learnt (``step_id`` of the graph's run
