@@ -238,6 +238,7 @@ class SensorimotorMap:
         self.inserted = False      # whether the last update inserted a node
         self.C_t = np.zeros(dim)   # Merge-GNG context of the last input (kernels.match)
         self.log = RowLog()        # the rows each change touched (the estimator's input)
+        self.rebuild_in_links()    # (none yet: compiles the kernel where maps are made)
 
     # ------------------------------------------------------------------ storage
     def _alloc(self, cap: int, degree: int) -> None:
