@@ -31,9 +31,15 @@ solve's stopping rule, and V is as close to the fixed point as the synchronous s
 (test_incremental_vi.py). A goal change, a new map size, a change that may cut a node off
 its sources (a link removed, an E or R gone to 0, a node made absorbing, a last option
 gone: V = 0 is then reached only geometrically by sweeping) and a sweep of more updates
-than nodes fall back to the synchronous solve. Both are solutions within ``vi_tol``, not
-the same bits: where two of a node's links are worth the same within that tolerance
-Eq. 6 may choose the other one, and the trajectory goes on differently from there.
+than nodes fall back to the synchronous solve. Those rows are not searched for: the map
+keeps a log of the rows each step changed (:class:`~tmgwr_agent.core.sensorimotor_map.
+RowLog`; a replica, of the slots each change wrote), and the copy, the frame coordinates,
+the rewards, the goal node and the absorbing masks are brought up to date on those rows
+alone; whatever changes R or the masks on other rows (a full recompute of R, the closed
+cells, the goal made terminal) bumps ``_epoch`` and the next solve compares every row.
+Both are solutions within ``vi_tol``, not the same bits: where two of a node's links are
+worth the same within that tolerance Eq. 6 may choose the other one, and the trajectory
+goes on differently from there.
 
 **Exactly 0 without a route.** Before the sweeps a reverse breadth-first search from the
 sources (nodes with R > 0, or with an option below) over the links with E > 0 finds the
