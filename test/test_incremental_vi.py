@@ -8,6 +8,8 @@ import pytest
 from tmgwr_agent.core import kernels
 from tmgwr_agent.core.value_iteration import Options, solve
 
+NONE = np.zeros(0, dtype=np.int64)    # no row list: changed_rows compares every row
+
 GAMMA, BETA, TOL, FLOOR = 0.97, 0.8, 1e-4, 1e-150
 
 
@@ -108,17 +110,38 @@ def test_changed_rows_finds_the_edits_and_flags_a_removal():
     s = np.flatnonzero(out[4] >= 0)[0]
     E[4, s] *= 0.5
     R[9] += 0.1
-    c, lost, relinked = kernels.changed_rows(out, E, R, absorbing, out0, E0, R0, a0, n, seeds)
+    c, lost, relinked = kernels.changed_rows(out, E, R, absorbing, out0, E0, R0, a0, n, seeds,
+                                             NONE, -1)
     assert sorted(seeds[:c]) == [4, 9] and not lost and not relinked
     assert np.array_equal(E0, E)
     out[7, np.flatnonzero(out[7] >= 0)[0]] = -1
-    c, lost, relinked = kernels.changed_rows(out, E, R, absorbing, out0, E0, R0, a0, n, seeds)
+    c, lost, relinked = kernels.changed_rows(out, E, R, absorbing, out0, E0, R0, a0, n, seeds,
+                                             NONE, -1)
     assert list(seeds[:c]) == [7] and lost and relinked
+
+
+def test_changed_rows_of_the_logged_rows_only():
+    """Given the rows the map's log lists, only those are compared (a repeat is seeded
+    once, in ascending order as by a scan); an edit elsewhere is not seen, which is why
+    every writer of the map must log."""
+    rng = np.random.default_rng(1)
+    n = 30
+    out, E, R, absorbing, alive, o = random_map(rng, n)
+    out0, E0, R0, a0 = out.copy(), E.copy(), R.copy(), absorbing.copy()
+    seeds = np.empty(2 * n, np.int64)
+    R[[3, 5, 9]] += 0.1
+    rows = np.array([9, 5, 9], dtype=np.int64)
+    c, lost, relinked = kernels.changed_rows(out, E, R, absorbing, out0, E0, R0, a0, n, seeds,
+                                             rows, len(rows))
+    assert list(seeds[:c]) == [5, 9] and not lost and not relinked
+    assert R0[9] == R[9] and R0[3] != R[3]
 
 
 def test_the_agent_solving_incrementally_meets_the_full_solves_stopping_rule(monkeypatch):
     """Every solve of a training run on the default maze (a goal change and a block
-    included), incremental or in full, leaves every node with |beta (T(i) - V(i))| <=
+    included): the rows brought up to date from the map's change log (the solve's copy of
+    its inputs, the frame coordinates, the rewards, the goal node) equal a recompute of
+    every row; incremental or in full, the solve leaves every node with |beta (T(i) - V(i))| <=
     vi_tol V(i) (T: the right-hand side of Eq. 4-5', kernels.node_target), the stopping
     rule of the synchronous solve; and V within vi_tol / (beta (1 - gamma)) of the exact
     fixed point, the bound that rule gives."""
@@ -135,6 +158,18 @@ def test_the_agent_solving_incrementally_meets_the_full_solves_stopping_rule(mon
     def checked(self, m, n, R, absorbing):
         sweeps = original(self, m, n, R, absorbing)
         seen["incremental" if sweeps == 0 else "full"] += 1
+        # what was brought up to date from the map's change log alone equals a recompute
+        inc = self._inc
+        assert np.array_equal(inc.out0, m.out[:n]) and np.array_equal(inc.E0, m.E[:n])
+        assert np.array_equal(inc.R0, R[:n]) and np.array_equal(inc.abs0, absorbing[:n])
+        F = self.frame.of(m.w, self.goal_x, self.delta, self._F.L, cache=False)
+        assert np.array_equal(F.w[:n], self._F.w[:n])
+        assert self._g_raw == m.nearest_by_weight(self.goal_x)
+        if self.goal_node >= 0:
+            R_full = np.empty(n)
+            kernels.goal_rewards(F.w, m.alive, n, self.goal_node, self.goal_sigma * F.L,
+                                 self.goal_sim_floor, R_full, NONE, -1)
+            assert np.array_equal(R_full, self.R[:n])
         T = np.array([kernels.node_target(i, m.out, m.E, R, self.V, self.gamma, absorbing,
                                           m.alive, self.U, self.rho, self.osucc, self.onb,
                                           self.ong) for i in range(n)])

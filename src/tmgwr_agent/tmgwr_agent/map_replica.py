@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tmgwr_agent.core.sensorimotor_map import MapSnapshot
+from tmgwr_agent.core.sensorimotor_map import MapSnapshot, RowLog
 
 FULL = 0                 # base of a change that holds the whole map
 
@@ -131,6 +131,7 @@ class Replica:
         self.version = 0
         self.n, self.degree, self.dim = 0, 0, 0
         self.arrays = {name: np.zeros((0,), dtype) for name, (dtype, _) in ROWS.items()}
+        self.log = RowLog()         # the slots each change wrote (the estimator's input)
 
     @property
     def synced(self) -> bool:
@@ -160,6 +161,7 @@ class Replica:
         if status != APPLIED:
             return status
         if c.full or c.dim != self.dim:
+            self.log.invalidate()
             self.dim, self.n = c.dim, 0
             self.arrays = {name: np.zeros((0, c.dim) if name == "w" else
                                           (0, c.degree) if name in ("out", "E") else (0,),
@@ -168,6 +170,8 @@ class Replica:
         self.resize(c.n, c.degree)
         for name in ROWS:
             self.arrays[name][c.slots] = getattr(c, name)
+        if not c.full:
+            self.log.touch(c.slots)
         self.map_id, self.sequence, self.version = c.map_id, c.sequence, c.version
         self.run_id, self.step_id = c.run_id, c.step_id
         return APPLIED
@@ -206,7 +210,8 @@ class Replica:
         n = self.n
         a = self.arrays
         return MapSnapshot(w=a["w"][:n], alive=a["alive"][:n], out=a["out"][:n],
-                           E=a["E"][:n], terminal=a["terminal"][:n], version=self.version)
+                           E=a["E"][:n], terminal=a["terminal"][:n], version=self.version,
+                           log=self.log)
 
     def full_change(self) -> MapChange:
         """The whole replica as a change (:data:`FULL`): what a snapshot carries."""

@@ -34,6 +34,10 @@ from typing import NamedTuple
 
 import numpy as np
 
+from tmgwr_agent.core import kernels
+
+_NO_ROWS = np.zeros(0, dtype=np.int64)
+
 
 class Frame(NamedTuple):
     """Sensations, goal and forward model in frame coordinates, and the frame's step
@@ -57,7 +61,8 @@ class SensorFrame:
                 again: bool = True) -> None:
         """Nothing to learn."""
 
-    def of(self, w: np.ndarray, goal: np.ndarray, delta: np.ndarray, L: float) -> Frame:
+    def of(self, w: np.ndarray, goal: np.ndarray, delta: np.ndarray, L: float,
+           rows: np.ndarray | None = None, cache: bool = True) -> Frame:
         return Frame(w, goal, delta, L)
 
 
@@ -76,6 +81,9 @@ class LearntFrame:
         self.chosen: tuple[int, ...] = ()    # the primitives of the basis
         self.version = 0                     # bumped whenever T changes
         self._w = np.zeros((0, 0))           # the last coordinates of the map's weights
+        self._w_version = -1                 # the basis they were computed in
+        self._goal_key: tuple = ()           # (basis, goal) of the goal's coordinates
+        self._goal = np.zeros(0)
 
     def refresh(self, delta: np.ndarray, moves: np.ndarray, L: float,
                 again: bool = True) -> None:
@@ -119,14 +127,32 @@ class LearntFrame:
         """The basis spans the sensation (no direction measured in link lengths)."""
         return self.T is not None and len(self.chosen) == len(self.T)
 
-    def of(self, w: np.ndarray, goal: np.ndarray, delta: np.ndarray, L: float) -> Frame:
+    def of(self, w: np.ndarray, goal: np.ndarray, delta: np.ndarray, L: float,
+           rows: np.ndarray | None = None, cache: bool = True) -> Frame:
+        """Weights ``w``, the goal and the forward model in frame coordinates. With
+        ``cache`` the coordinates of w are kept (in one array, rewritten by the next
+        call) and ``rows``, when given, are the only rows of w that changed since the last
+        call (the map's change log): the others are kept when the basis and the size of w
+        are the same. ``cache`` False: w's coordinates in a fresh array."""
         if self.T is None:
             return Frame(w, goal, delta, L)
         T = self.T
-        if self._w.shape != (len(w), len(T)):
-            self._w = np.empty((len(w), len(T)))
-        np.matmul(w, T.T, out=self._w)                  # into the last step's array
-        return Frame(self._w, np.ascontiguousarray(T @ goal),
+        if not cache:
+            x = np.empty((len(w), len(T)))
+            kernels.frame_coords(w, T, _NO_ROWS, -1, x)
+        else:
+            x = self._w
+            if rows is None or x.shape != (len(w), len(T)) or self._w_version != self.version:
+                if x.shape != (len(w), len(T)):
+                    x = self._w = np.empty((len(w), len(T)))
+                kernels.frame_coords(w, T, _NO_ROWS, -1, x)
+                self._w_version = self.version
+            elif len(rows):
+                kernels.frame_coords(w, T, rows, len(rows), x)
+        if self._goal_key != (self.version, goal.tobytes()):
+            self._goal_key = (self.version, goal.tobytes())
+            self._goal = np.ascontiguousarray(T @ goal)
+        return Frame(x, self._goal,
                      np.ascontiguousarray(delta @ T.T), 1.0)
 
 

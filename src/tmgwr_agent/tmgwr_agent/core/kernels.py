@@ -62,40 +62,144 @@ def nearest_weight(w, alive, n, x):
 
 
 @njit(cache=True)
-def incident_neighbours(out, n, b):
-    """Nodes linked to b in either direction (sorted, unique)."""
-    mark = np.zeros(n, dtype=np.bool_)
+def incident_neighbours(out, inn, n, b):
+    """Nodes linked to b in either direction (sorted, unique): its links' targets and the
+    sources of the links into it (``inn``, :func:`in_links`)."""
+    found = np.empty(out.shape[1] + inn.shape[1], dtype=np.int64)
+    c = 0
     for s in range(out.shape[1]):
-        t = out[b, s]
-        if t >= 0:
-            mark[t] = True
-    for i in range(n):
-        for s in range(out.shape[1]):
-            if out[i, s] == b:
-                mark[i] = True
-                break
-    mark[b] = False
-    return np.flatnonzero(mark)
+        if out[b, s] >= 0 and out[b, s] != b:
+            found[c] = out[b, s]
+            c += 1
+    for s in range(inn.shape[1]):
+        if inn[b, s] >= 0 and inn[b, s] != b:
+            found[c] = inn[b, s]
+            c += 1
+    found = np.sort(found[:c])
+    keep = np.empty(c, dtype=np.int64)
+    k = 0
+    for q in range(c):
+        if k == 0 or found[q] != keep[k - 1]:
+            keep[k] = found[q]
+            k += 1
+    return keep[:k]
 
 
 @njit(cache=True)
-def goal_rewards(w, alive, n, g, sigma, floor, R):
-    """Eq. 10: R_i = sim(i, g) = exp(-|w_i - w_g|^2 / (2 sigma^2)), 0 below ``floor``."""
+def in_links(out, n, inn):
+    """The sources of the links into every node: ``inn[j]`` lists each i with a link
+    i -> j once (-1: empty slots), the reverse of ``out``; returns False when some row of
+    ``inn`` is too narrow (nothing is then to be trusted)."""
+    inn[:] = -1
+    for i in range(n):
+        for s in range(out.shape[1]):
+            j = out[i, s]
+            if j >= 0 and not _in_link_add(inn, j, i):
+                return False
+    return True
+
+
+@njit(cache=True)
+def _in_link_add(inn, j, i):
+    for s in range(inn.shape[1]):
+        if inn[j, s] < 0:
+            inn[j, s] = i
+            return True
+    return False
+
+
+@njit(cache=True)
+def _in_link_remove(inn, j, i):
+    for s in range(inn.shape[1]):
+        if inn[j, s] == i:
+            inn[j, s] = -1
+            return
+
+
+@njit(cache=True)
+def goal_reward(w, alive, i, g, inv, cut, floor):
+    """Eq. 10 for node i: sim(i, g) = exp(-|w_i - w_g|^2 inv), 0 below ``floor`` (no exp
+    beyond ``cut``, where it would be below it) and for dead slots."""
+    if not alive[i]:
+        return 0.0
+    d = 0.0
+    for k in range(w.shape[1]):
+        t = w[i, k] - w[g, k]
+        d += t * t
+    if d * inv > cut:
+        return 0.0
+    r = np.exp(-d * inv)
+    return r if r >= floor else 0.0
+
+
+@njit(cache=True)
+def goal_rewards(w, alive, n, g, sigma, floor, R, rows, k):
+    """Eq. 10: R_i = sim(i, g) = exp(-|w_i - w_g|^2 / (2 sigma^2)), 0 below ``floor``, for
+    every node (``k`` < 0) or for the nodes ``rows[:k]`` only (the others unchanged)."""
     inv = 1.0 / (2.0 * sigma * sigma)
     cut = 1.0 - np.log(floor) if floor > 0.0 else np.inf   # exp(-cut) < floor: no exp
-    for i in range(n):
+    for q in range(n if k < 0 else k):
+        i = q if k < 0 else rows[q]
+        R[i] = goal_reward(w, alive, i, g, inv, cut, floor)
+
+
+@njit(cache=True)
+def nearest_weight_among(w, alive, x, best, rows, k):
+    """:func:`nearest_weight` when only the nodes ``rows[:k]`` changed since it answered
+    ``best`` (which did not): the nearest of ``best`` and those (ties: the lowest id, as
+    the scan)."""
+    best_d = 0.0
+    for c in range(x.shape[0]):
+        t = x[c] - w[best, c]
+        best_d += t * t
+    for q in range(k):
+        i = rows[q]
         if not alive[i]:
-            R[i] = 0.0
             continue
         d = 0.0
-        for k in range(w.shape[1]):
-            t = w[i, k] - w[g, k]
+        for c in range(x.shape[0]):
+            t = x[c] - w[i, c]
             d += t * t
-        if d * inv > cut:
-            R[i] = 0.0
+        if d < best_d or (d == best_d and i < best):
+            best, best_d = i, d
+    return best
+
+
+@njit(cache=True)
+def frame_coords(w, T, rows, k, out):
+    """Frame coordinates ``out[i] = T w_i`` (frame.py) of every row of w (``k`` < 0) or
+    of the rows ``rows[:k]`` only."""
+    for q in range(w.shape[0] if k < 0 else k):
+        i = q if k < 0 else rows[q]
+        for r in range(T.shape[0]):
+            s = 0.0
+            for c in range(T.shape[1]):
+                s += T[r, c] * w[i, c]
+            out[i, r] = s
+
+
+@njit(cache=True)
+def absorbing_flags(terminal, use_terminal, closed, use_closed, R, goal_r, n, rows, k,
+                    absorbing, terminal_only, count):
+    """The absorbing nodes of Eq. 4-5' (motivation.py): ``absorbing[i]`` = (terminal or
+    closed) and ``R_i < goal_r``, and ``terminal_only[i]`` = terminal and ``R_i < goal_r``
+    (``use_terminal`` / ``use_closed`` False: no node is), for every node (``k`` < 0,
+    ``count`` ignored) or the nodes ``rows[:k]`` only; returns the number of
+    ``terminal_only`` nodes (``count``: before the call)."""
+    if k < 0:
+        count = 0
+    for q in range(n if k < 0 else k):
+        i = q if k < 0 else rows[q]
+        if i >= n:
             continue
-        r = np.exp(-d * inv)
-        R[i] = r if r >= floor else 0.0
+        below = R[i] < goal_r
+        t = use_terminal and terminal[i] and below
+        if k >= 0:
+            count -= terminal_only[i]
+        count += t
+        terminal_only[i] = t
+        absorbing[i] = t or (use_closed and closed[i] and below)
+    return count
 
 
 @njit(cache=True)
@@ -556,18 +660,24 @@ def prioritized_sweep(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U,
 
 
 @njit(cache=True)
-def changed_rows(out, E, R, absorbing, out0, E0, R0, absorbing0, n, seeds):
+def changed_rows(out, E, R, absorbing, out0, E0, R0, absorbing0, n, seeds, rows, k):
     """The rows whose links, reliabilities, reward or absorbing flag differ from the copy
     (``out0`` ...) of the last solve, written into ``seeds``, and the copy brought up to
-    date. Returns (count, lost, relinked): ``lost`` when a change may cut a node off its
-    sources (a link removed or retargeted or its E gone to 0, a node made absorbing, a
-    reward gone to 0), which prioritized sweeping only follows geometrically;
-    ``relinked`` when a link changed its target (:func:`predecessors` must be rebuilt)."""
+    date; every row (``k`` < 0), or only the rows ``rows[:k]`` (the only ones that may
+    have changed: the map's change log; repeats are seeded once, in ascending order as
+    by the scan, so that the sweep that follows is the same). Returns (count, lost,
+    relinked): ``lost`` when a change may cut a node off its sources (a link removed or
+    retargeted or its E gone to 0, a node made absorbing, a reward gone to 0), which
+    prioritized sweeping only follows geometrically; ``relinked`` when a link changed its
+    target (:func:`predecessors` must be rebuilt)."""
     K = out.shape[1]
     c = 0
     lost = False
     relinked = False
-    for i in range(n):
+    for q in range(n if k < 0 else k):
+        i = q if k < 0 else rows[q]
+        if i >= n:
+            continue
         diff = R[i] != R0[i] or absorbing[i] != absorbing0[i]
         if R0[i] > 0.0 and R[i] <= 0.0:
             lost = True
@@ -590,6 +700,14 @@ def changed_rows(out, E, R, absorbing, out0, E0, R0, absorbing0, n, seeds):
             for s in range(K):
                 out0[i, s] = out[i, s]
                 E0[i, s] = E[i, s]
+    if k >= 0:              # ascending, as a scan of every row seeds them (insertion sort)
+        for q in range(1, c):
+            v = seeds[q]
+            p = q - 1
+            while p >= 0 and seeds[p] > v:
+                seeds[p + 1] = seeds[p]
+                p -= 1
+            seeds[p + 1] = v
     return c, lost, relinked
 
 
@@ -1041,19 +1159,26 @@ def habituate(h, i, tau, kappa):
 
 
 @njit(cache=True)
-def adapt(w, c, h, out, n, b, x, C, eps_b, eps_n, tau_b, tau_n, kappa):
-    """Move the winner and its linked neighbours towards (x, C), then habituate them."""
+def adapt(w, c, h, out, inn, n, b, x, C, eps_b, eps_n, tau_b, tau_n, kappa):
+    """Move the winner and its linked neighbours towards (x, C), then habituate them;
+    returns the nodes moved (b first)."""
     rate = eps_b * h[b]
     for k in range(x.shape[0]):
         w[b, k] += rate * (x[k] - w[b, k])
         c[b, k] += rate * (C[k] - c[b, k])
     habituate(h, b, tau_b, kappa)
-    for nb in incident_neighbours(out, n, b):
+    nbs = incident_neighbours(out, inn, n, b)
+    moved = np.empty(len(nbs) + 1, dtype=np.int64)
+    moved[0] = b
+    for q in range(len(nbs)):
+        nb = nbs[q]
+        moved[q + 1] = nb
         rate = eps_n * h[nb]
         for k in range(x.shape[0]):
             w[nb, k] += rate * (x[k] - w[nb, k])
             c[nb, k] += rate * (C[k] - c[nb, k])
         habituate(h, nb, tau_n, kappa)
+    return moved
 
 
 @njit(cache=True)
@@ -1067,10 +1192,11 @@ def sim_action(a_ij, a, sigma_a):
 
 
 @njit(cache=True)
-def needs_wider_rows(out, i, j):
-    """Whether i -> j would be a new link (i != j) while row i has no free slot, so the
-    caller must widen the link rows before :func:`update_links` (a numpy test of the row
-    costs more than the rest of the link update)."""
+def needs_wider_rows(out, inn, i, j):
+    """Whether i -> j would be a new link (i != j) while row i, or row j of the links in
+    (``inn``), has no free slot, so the caller must widen the link rows before
+    :func:`update_links` (a numpy test of the row costs more than the rest of the link
+    update)."""
     if i == j:
         return False
     free = False
@@ -1080,11 +1206,16 @@ def needs_wider_rows(out, i, j):
             return False
         if t < 0:
             free = True
-    return not free
+    if not free:
+        return True
+    for s in range(inn.shape[1]):
+        if inn[j, s] < 0:
+            return False
+    return True
 
 
 @njit(cache=True)
-def reinforce_link(out, E, A, age, i, j, a, alpha, sigma_a, eta_a, E_init):
+def reinforce_link(out, E, A, age, inn, i, j, a, alpha, sigma_a, eta_a, E_init):
     """Eq. 1-2 on the traversed link i -> j (i != j), then a_ij follows the action a.
 
     A transition never seen before creates the link (labelled a, reliability ``E_init``)
@@ -1107,6 +1238,7 @@ def reinforce_link(out, E, A, age, i, j, a, alpha, sigma_a, eta_a, E_init):
         A[i, slot, :] = a
         E[i, slot] = E_init
         age[i, slot] = 0
+        _in_link_add(inn, j, i)
         created = True
     # Eq. 1-2 with I{i != j} = 1: E[i, j] += alpha (sim(a_ij, a) - E[i, j])
     E[i, slot] += alpha * (sim_action(A[i, slot], a, sigma_a) - E[i, slot])
@@ -1127,7 +1259,7 @@ def credit_other_links(out, E, A, i, slot, a, alpha, sigma_a):
 
 
 @njit(cache=True)
-def age_links(out, E, age, n, i, slot, E_min, max_age):
+def age_links(out, E, age, inn, n, i, slot, E_min, max_age):
     """GWR ageing: every link incident to i (in or out) ages by one, the traversed link
     (row i, ``slot``; -1 for none) restarts at 0. Links older than ``max_age`` and links
     out of i less reliable than ``E_min`` are deleted.
@@ -1136,7 +1268,14 @@ def age_links(out, E, age, n, i, slot, E_min, max_age):
     which the caller checks (GWR removes nodes without links).
     """
     ends = []
-    for src in range(n):
+    rows = np.empty(inn.shape[1] + 1, dtype=np.int64)     # i and the sources into it
+    rows[0] = i
+    c = 1
+    for s in range(inn.shape[1]):
+        if inn[i, s] >= 0 and inn[i, s] != i:
+            rows[c] = inn[i, s]
+            c += 1
+    for src in np.sort(rows[:c]):                          # in row order, as a scan
         for s in range(out.shape[1]):
             t = out[src, s]
             if t < 0 or (src != i and t != i):
@@ -1148,13 +1287,14 @@ def age_links(out, E, age, n, i, slot, E_min, max_age):
             if age[src, s] > max_age or (src == i and E[src, s] < E_min):
                 out[src, s] = -1
                 E[src, s] = 0.0
+                _in_link_remove(inn, t, src)
                 ends.append(src)
                 ends.append(t)
     return np.array(ends, dtype=np.int64)
 
 
 @njit(cache=True)
-def update_links(out, E, A, age, n, i, j, a, alpha, sigma_a, eta_a, E_init, E_min,
+def update_links(out, E, A, age, inn, n, i, j, a, alpha, sigma_a, eta_a, E_init, E_min,
                  max_age, credit):
     """The link update of one transition i -> j under action a: Eq. 1-2 on the traversed
     link, the credit rule on the other links out of i (``credit``), then GWR ageing.
@@ -1166,22 +1306,24 @@ def update_links(out, E, A, age, n, i, j, a, alpha, sigma_a, eta_a, E_init, E_mi
     slot = -1
     created = False
     if i != j:
-        slot, created = reinforce_link(out, E, A, age, i, j, a, alpha, sigma_a, eta_a,
+        slot, created = reinforce_link(out, E, A, age, inn, i, j, a, alpha, sigma_a, eta_a,
                                        E_init)
     if credit:
         credit_other_links(out, E, A, i, slot, a, alpha, sigma_a)
-    return created, age_links(out, E, age, n, i, slot, E_min, max_age)
+    return created, age_links(out, E, age, inn, n, i, slot, E_min, max_age)
 
 
 @njit(cache=True)
-def match(w, c, h, alive, out, n, prev, x, C, alpha_c, beta_c, a_T, h_T, learn, eps_b, eps_n,
-          tau_b, tau_n, kappa):
+def match(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T, learn, eps_b,
+          eps_n, tau_b, tau_n, kappa):
     """The matching and adaptation of one input x (sensorimotor_map.py, one call a step):
     writes its Merge-GNG context ``C_t = (1 - beta_c) w_prev + beta_c c_prev`` into C (x
     itself at an episode start, ``prev`` < 0), finds the winner b = argmin d_n and, when
     learning, applies the GWR test: returns ``(b, True)`` when a node must be inserted (an
     empty map, or activity ``exp(-sqrt(d_b)) < a_T`` with ``h_b <= h_T``: the caller
-    inserts), else adapts b and its neighbours towards (x, C) and returns ``(b, False)``."""
+    inserts), else adapts b and its neighbours towards (x, C) and returns ``(b, False)``;
+    a third value lists the nodes whose weights moved (empty when none did)."""
+    none = np.empty(0, dtype=np.int64)
     if prev >= 0:
         for k in range(C.shape[0]):
             C[k] = (1.0 - beta_c) * w[prev, k] + beta_c * c[prev, k]
@@ -1189,26 +1331,27 @@ def match(w, c, h, alive, out, n, prev, x, C, alpha_c, beta_c, a_T, h_T, learn, 
         C[:] = x
     b, d_b = merge_distance_argmin(w, c, alive, n, x, C, alpha_c)
     if not learn:
-        return b, False
+        return b, False, none
     if b < 0 or (np.exp(-np.sqrt(d_b)) < a_T and h[b] <= h_T):
-        return b, True
-    adapt(w, c, h, out, n, b, x, C, eps_b, eps_n, tau_b, tau_n, kappa)
-    return b, False
+        return b, True, none
+    return b, False, adapt(w, c, h, out, inn, n, b, x, C, eps_b, eps_n, tau_b, tau_n, kappa)
 
 
 @njit(cache=True)
-def link_step(out, E, A, age, alive, terminal, n, i, j, a, alpha, sigma_a, eta_a, E_init,
-              E_min, max_age, credit, keep1, keep2):
+def link_step(out, E, A, age, inn, alive, terminal, n, i, j, a, alpha, sigma_a, eta_a,
+              E_init, E_min, max_age, credit, keep1, keep2):
     """The link stage of one transition i -> j (sensorimotor_map.py): returns -1, having
-    changed nothing, when i -> j would be a new link and row i has no free slot (the
-    caller widens the rows and calls again); else :func:`update_links`, then GWR's removal
+    changed nothing, when i -> j would be a new link and row i (or row j of the links in,
+    ``inn``, :func:`in_links`, kept up to date) has no free slot (the caller widens the
+    rows and calls again); else :func:`update_links`, then GWR's removal
     of the end nodes of deleted links that are left without any link (never ``keep1`` or
     ``keep2``, nor a node flagged ``terminal``), and returns the number of structural
-    changes: 1 when a link was created or deleted, plus one per node removed."""
-    if needs_wider_rows(out, i, j):
-        return -1
-    created, ends = update_links(out, E, A, age, n, i, j, a, alpha, sigma_a, eta_a, E_init,
-                                 E_min, max_age, credit)
+    changes: 1 when a link was created or deleted, plus one per node removed; and the rows
+    it changed besides row i (the ends of deleted links, the nodes removed)."""
+    if needs_wider_rows(out, inn, i, j):
+        return -1, np.empty(0, dtype=np.int64)
+    created, ends = update_links(out, E, A, age, inn, n, i, j, a, alpha, sigma_a, eta_a,
+                                 E_init, E_min, max_age, credit)
     changes = 1 if created or len(ends) else 0
     for k in ends:
         if k == keep1 or k == keep2 or not alive[k] or terminal[k]:
@@ -1217,14 +1360,13 @@ def link_step(out, E, A, age, alive, terminal, n, i, j, a, alpha, sigma_a, eta_a
         for s in range(out.shape[1]):
             if out[k, s] >= 0:
                 linked = True
-        for r in range(n):
-            for s in range(out.shape[1]):
-                if out[r, s] == k:
-                    linked = True
+        for s in range(inn.shape[1]):
+            if inn[k, s] >= 0:
+                linked = True
         if not linked:
             alive[k] = False
             changes += 1
-    return changes
+    return changes, ends
 
 
 # ---------------------------------------------------------------- the on-disk cache

@@ -31,9 +31,15 @@ solve's stopping rule, and V is as close to the fixed point as the synchronous s
 (test_incremental_vi.py). A goal change, a new map size, a change that may cut a node off
 its sources (a link removed, an E or R gone to 0, a node made absorbing, a last option
 gone: V = 0 is then reached only geometrically by sweeping) and a sweep of more updates
-than nodes fall back to the synchronous solve. Both are solutions within ``vi_tol``, not
-the same bits: where two of a node's links are worth the same within that tolerance
-Eq. 6 may choose the other one, and the trajectory goes on differently from there.
+than nodes fall back to the synchronous solve. Those rows are not searched for: the map
+keeps a log of the rows each step changed (:class:`~tmgwr_agent.core.sensorimotor_map.
+RowLog`; a replica, of the slots each change wrote), and the copy, the frame coordinates,
+the rewards, the goal node and the absorbing masks are brought up to date on those rows
+alone; whatever changes R or the masks on other rows (a full recompute of R, the closed
+cells, the goal made terminal) bumps ``_epoch`` and the next solve compares every row.
+Both are solutions within ``vi_tol``, not the same bits: where two of a node's links are
+worth the same within that tolerance Eq. 6 may choose the other one, and the trajectory
+goes on differently from there.
 
 **Exactly 0 without a route.** Before the sweeps a reverse breadth-first search from the
 sources (nodes with R > 0, or with an option below) over the links with E > 0 finds the
@@ -251,6 +257,7 @@ from tmgwr_common.params import Config, param
 
 #: Potentials below this are 0: gamma**d for d > 10,000 steps.
 V_FLOOR = 1e-150
+_NO_ROWS = np.zeros(0, dtype=np.int64)
 #: A node with R_i = sim(i, g) at least this represents the goal (a source of the
 #: reachability test; never absorbing).
 GOAL_R = 0.5
@@ -324,8 +331,12 @@ class IncrementalState:
     :func:`kernels.predecessors`) and the work arrays of the priority queue."""
 
     def __init__(self, n: int, goal_node: int, out0, E0, R0, abs0, rho0, U0, osucc0, onb0,
-                 ong0, first, pred):
+                 ong0, first, pred, log=None, epoch: int = 0):
         self.n, self.goal_node = n, goal_node
+        # the map's change log and its position at the copy, the estimator's epoch
+        # (MotivationEstimator._epoch): while both hold, only the rows logged since can
+        # differ from the copy
+        self.log, self.log_pos, self.epoch = log, (log.pos if log is not None else -1), epoch
         self.out0, self.E0, self.R0, self.abs0 = out0, E0, R0, abs0
         self.rho0, self.U0, self.osucc0, self.onb0, self.ong0 = rho0, U0, osucc0, onb0, ong0
         self.first, self.pred = first, pred
@@ -341,7 +352,8 @@ class IncrementalState:
         return cls(n, est.goal_node, m.out[:n].copy(), m.E[:n].copy(), R[:n].copy(),
                    absorbing[:n].copy(), est.rho.copy(), est.U.copy(), est.osucc.copy(),
                    est.onb.copy(), est.ong.copy(),
-                   *kernels.predecessors(m.out, n, m.alive, est.osucc, est.onb))
+                   *kernels.predecessors(m.out, n, m.alive, est.osucc, est.onb),
+                   log=getattr(m, "log", None), epoch=est._epoch)
 
 
 class MotivationEstimator:
@@ -420,6 +432,22 @@ class MotivationEstimator:
         self._bumps = 0                  # bumps recorded (a key of the stuck test)
         self._reach_key: tuple = ()
         self._reach = np.zeros(0, dtype=bool)
+        # What changed since the last _prepare: the map's change log (RowLog) and its
+        # position then; the inputs R was computed from (its rows are recomputed alone
+        # while they hold) and the nearest node to the goal then.
+        self._prep_log, self._prep_pos = None, -1
+        self._R_key: tuple | None = None
+        self._g_raw = -1
+        # Bumped whenever R or the absorbing mask may change on rows the map's log does
+        # not list (a full recompute of R, the closed cells, the goal terminal): the
+        # incremental solve then compares every row with its copy.
+        self._epoch = 0
+        self._broken_solved = False
+        # the absorbing masks (_absorbing), and the rows they were last brought up to
+        self._abs = self._abs_terminal = np.zeros(0, bool)
+        self._abs_key: tuple = ()
+        self._abs_log, self._abs_pos, self._abs_count = None, -1, 0
+        self._closed_none = np.zeros(0, bool)
 
     # ------------------------------------------------------------------ goal
     def set_goal(self, goal_x: np.ndarray) -> None:
@@ -429,6 +457,7 @@ class MotivationEstimator:
         self.route = 0.0                  # the route to the new goal is not known yet
         self.V[:] = 0.0
         self._inc = None
+        self._R_key = None
         self.V0[:] = 0.0
         self._v0_fresh = False
 
@@ -508,7 +537,8 @@ class MotivationEstimator:
         j = self.succ[node, a]
         if j == node or j >= len(w):
             return
-        F = self.frame.of(w[[node, j]], np.zeros(w.shape[1]), self.delta[[a]], self._scale)
+        F = self.frame.of(w[[node, j]], np.zeros(w.shape[1]), self.delta[[a]], self._scale,
+                          cache=False)
         if np.abs(F.w[1] - F.w[0] - F.delta[0]).max() < 0.5 * F.L:
             self._mark_closed(j, self.episode)
 
@@ -570,12 +600,23 @@ class MotivationEstimator:
         d = m.w[src] - m.w[m.out[src, tgt]]
         return float(np.median(np.sqrt(np.einsum("ij,ij->i", d, d))))
 
-    def rewards(self, F: Frame, m: SensorimotorMap, g: int) -> np.ndarray:
+    def rewards(self, F: Frame, m: SensorimotorMap, g: int,
+                rows: np.ndarray | None = None) -> np.ndarray:
         """Eq. 10: R_i = sim(i, g) = exp(-|w_i - w_g|^2 / (2 sigma_g^2)), 0 for dead slots
-        (the weights in the frame ``F``, ``sigma_g = goal_sigma L``)."""
-        R = np.empty(m.n)
+        (the weights in the frame ``F``, ``sigma_g = goal_sigma L``). With ``rows``
+        (nodes whose weights or alive flag changed since the last call, which had the same
+        goal node, frame and map size, and where the goal node's own did not) only those
+        are recomputed, in place; else a new array and a new :attr:`_epoch`."""
+        R, k = self.R, -1
+        key = (m.n, g, F.L, self.frame.version)
+        if rows is not None and key == self._R_key and len(R) == m.n:
+            k = len(rows)
+        else:
+            R, rows = np.empty(m.n), _NO_ROWS
+            self._epoch += 1
         kernels.goal_rewards(F.w, m.alive, m.n, g, self.goal_sigma * F.L,
-                             self.goal_sim_floor, R)
+                             self.goal_sim_floor, R, rows, k)
+        self._R_key = key
         return R
 
     def _size_forward_model(self, dim: int) -> None:
@@ -583,9 +624,21 @@ class MotivationEstimator:
         if self.delta.shape != (self.n_primitives, dim):
             self.delta = np.zeros((self.n_primitives, dim))
 
+    def _changed_since_prepare(self, m: SensorimotorMap) -> np.ndarray | None:
+        """The rows of m the map's change log lists since the last :meth:`_prepare` (None:
+        unknown, every row may have changed)."""
+        log = getattr(m, "log", None)
+        rows = log.since(self._prep_pos) if log is not None and log is self._prep_log \
+            else None
+        self._prep_log, self._prep_pos = log, (log.pos if log is not None else -1)
+        return rows
+
     def _prepare(self, m: SensorimotorMap) -> int:
-        """Sizes, goal node and rewards of this map; returns n."""
+        """Sizes, goal node and rewards of this map; returns n. Only the rows the map's
+        change log lists are looked at again when it can tell (:meth:`rewards`,
+        :func:`kernels.nearest_weight_among`, the frame's coordinates)."""
         n = m.n
+        rows = self._changed_since_prepare(m)
         self._size_forward_model(m.w.shape[1])
         if len(self.V) != n + 1:                      # the map grew: extend, keep values
             self.V = self._extended(self.V, n)
@@ -601,30 +654,50 @@ class MotivationEstimator:
         if self._scale_version != m.version:          # links only change with the version
             self._scale = self.link_scale(m) or 1.0
             self._scale_version = m.version
-        F = self._in_frame(m)
-        g = m.nearest_by_weight(self.goal_x) if self.goal_x is not None and n else -1
-        if g < 0:
+        F = self._in_frame(m, rows)
+        g, g_moved = self._nearest_goal(m, n, rows)
+        if g < 0 or (self.value_unknown                   # represented only once sensed
+                     and math.dist(F.w[g].tolist(), F.goal.tolist()) > 0.5 * F.L):
             self.R = np.zeros(n)
+            self._R_key = None
+            self._epoch += 1
             return n
-        if self.value_unknown:                        # represented only once sensed
-            if math.dist(F.w[g], F.goal) > 0.5 * F.L:
-                self.R = np.zeros(n)
-                return n
         self.goal_node = g
-        self.R = self.rewards(F, m, g)
+        self.R = self.rewards(F, m, g, None if g_moved else rows)
         return n
 
-    def _in_frame(self, m: SensorimotorMap) -> Frame:
+    def _nearest_goal(self, m: SensorimotorMap, n: int, rows: np.ndarray | None
+                      ) -> tuple[int, bool]:
+        """The node nearest the goal sensation (Algorithm 1, line 2; -1: no goal or no
+        node): among the last one and the changed ``rows`` when the last one's did not
+        change, else by a scan (:meth:`~tmgwr_agent.core.sensorimotor_map.
+        SensorimotorMap.nearest_by_weight`); and whether its row is among ``rows``
+        (True when ``rows`` is None)."""
+        g0 = self._g_raw
+        moved = rows is None or g0 in rows.tolist()
+        if self.goal_x is None or not n:
+            g = -1
+        elif not moved and self._R_key is not None and self._R_key[0] == n \
+                and 0 <= g0 < n and m.alive[g0]:
+            g = int(kernels.nearest_weight_among(m.w, m.alive, self.goal_x, g0, rows,
+                                                 len(rows)))
+        else:
+            g = m.nearest_by_weight(self.goal_x)
+        self._g_raw = g
+        return g, moved or g != g0
+
+    def _in_frame(self, m: SensorimotorMap, rows: np.ndarray | None = None) -> Frame:
         """The map's weights, the goal and the forward model in the frame of the value of
         the unknown (frame.py; the sensor's own for ``grid`` and ``none``), its basis
         chosen afresh at an episode's first solve and, within an episode, only when it
-        gains a direction."""
+        gains a direction; ``rows``: the only rows of the map changed since the last call
+        (None: unknown)."""
         again = self._frame_episode != self.episode
         if again or not self.frame.complete:
             self.frame.refresh(self.delta, self.moves, self._scale, again)
             self._frame_episode = self.episode
         goal = self.goal_x if self.goal_x is not None else np.zeros(m.w.shape[1])
-        self._F = self.frame.of(m.w, goal, self.delta, self._scale)
+        self._F = self.frame.of(m.w, goal, self.delta, self._scale, rows)
         return self._F
 
     @staticmethod
@@ -635,13 +708,33 @@ class MotivationEstimator:
         return W
 
     def _absorbing(self, m: SensorimotorMap, n: int, closed: bool = True) -> np.ndarray:
-        """Flagged terminal nodes, and with the value of the unknown the nodes of closed
-        cells while trusted (``stale_horizon`` episodes), except those of the current goal
-        (R >= 1/2)."""
-        absorbing = m.terminal[:n] if self.absorbing_terminals else np.zeros(n, bool)
-        if self.value_unknown and closed:
-            absorbing = absorbing | self.closed_cells(n)
-        return absorbing & (self.R[:n] < GOAL_R)
+        """Flagged terminal nodes, and with the value of the unknown (``closed``) the nodes
+        of closed cells while trusted (``stale_horizon`` episodes), except those of the
+        current goal (R >= 1/2). Both masks are kept (not to be written to) and only the
+        rows the map's log lists since the last :meth:`_prepare` are looked at again, while
+        R and the closed cells changed on no other row (:attr:`_epoch`)."""
+        cells = self.closed_cells(n) if self.value_unknown else self._no_cells(n)
+        log = getattr(m, "log", None)
+        rows = None
+        if self._abs_key == (n, self._epoch, id(self.R)) and log is not None \
+                and log is self._abs_log:
+            rows = log.since(self._abs_pos)
+        if rows is None:
+            self._abs, self._abs_terminal = np.zeros(n, bool), np.zeros(n, bool)
+        self._abs_count = kernels.absorbing_flags(
+            m.terminal, self.absorbing_terminals, cells, self.value_unknown, self.R, GOAL_R,
+            n, _NO_ROWS if rows is None else rows, -1 if rows is None else len(rows),
+            self._abs, self._abs_terminal, self._abs_count)
+        self._abs_key = (n, self._epoch, id(self.R))
+        # R is of the last _prepare: rows logged after it are looked at again next time
+        self._abs_log = log
+        self._abs_pos = self._prep_pos if log is self._prep_log else -1
+        return self._abs if closed else self._abs_terminal
+
+    def _no_cells(self, n: int) -> np.ndarray:
+        if len(self._closed_none) != n:
+            self._closed_none = np.zeros(n, bool)
+        return self._closed_none
 
     def _goal_terminal(self, n: int, absorbing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """R and the absorbing mask with the goal nodes (R >= GOAL_R) terminal states
@@ -659,6 +752,7 @@ class MotivationEstimator:
             e = self.closed_e[:k]
             self._closed = np.zeros(n, dtype=bool)
             self._closed[:k] = (e >= 0) & (self.episode - e < self.stale_horizon)
+            self._epoch += 1                # absorbing flags off the map's log
         return self._closed
 
     def stuck_clock(self, nodes: int) -> tuple[int, float]:
@@ -802,7 +896,7 @@ class MotivationEstimator:
         if self.goal_node < 0 or not 0 <= self._winner < n:
             return False
         absorbing = self._absorbing(m, n, closed=False)
-        key = (m.version, self.goal_node, np.count_nonzero(absorbing), self._bumps)
+        key = (m.version, self.goal_node, self._abs_count, self._bumps)
         if key != self._reach_key:
             self._reach_key = key
             self._reach = np.zeros(n, dtype=bool)
@@ -843,6 +937,9 @@ class MotivationEstimator:
             self._options(m, n)
             if self.broken:
                 R, absorbing = self._goal_terminal(n, absorbing)
+            if self.broken != self._broken_solved:
+                self._broken_solved = self.broken
+                self._epoch += 1            # the goal nodes' R and flags: off the log
         self.sweeps = self._solve(m, n, R, absorbing)          # Eq. 4-5'
         return self.V[:n]
 
@@ -881,8 +978,13 @@ class MotivationEstimator:
             return self._declined("goal")
         if inc.n != n or inc.out0.shape != m.out[:n].shape or inc.rho0.shape != self.rho.shape:
             return self._declined("size")
-        c, lost, relinked = kernels.changed_rows(m.out, m.E, R, absorbing, inc.out0, inc.E0,
-                                                 inc.R0, inc.abs0, n, inc.seeds)
+        log = getattr(m, "log", None)
+        logged = log.since(inc.log_pos) if log is not None and log is inc.log and \
+            inc.epoch == self._epoch else None       # None: compare every row
+        c, lost, relinked = kernels.changed_rows(
+            m.out, m.E, R, absorbing, inc.out0, inc.E0, inc.R0, inc.abs0, n, inc.seeds,
+            _NO_ROWS if logged is None else logged, -1 if logged is None else len(logged))
+        inc.log, inc.log_pos, inc.epoch = log, (log.pos if log is not None else -1), self._epoch
         relinked_o = False
         if rows is not None and not lost:
             c, lost_o, relinked_o = kernels.changed_options(

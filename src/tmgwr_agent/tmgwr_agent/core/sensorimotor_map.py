@@ -125,6 +125,60 @@ class Links(NamedTuple):
     actions: np.ndarray
 
 
+class RowLog:
+    """The node rows a map changed (weights, alive, links, reliabilities, terminal
+    flags: what Eq. 4-5' read), in order, so that a consumer asks for the rows changed since
+    it last looked (:meth:`since`) instead of comparing every row. A consumer keeps the
+    position :attr:`pos` it read up to; positions are absolute, and the log forgets its
+    oldest entries when it outgrows its bound, or all of them at a change it cannot list
+    (:meth:`invalidate`: a map loaded, rebuilt or replaced): :meth:`since` then answers
+    None and the consumer compares every row. Rows may repeat."""
+
+    def __init__(self):
+        self._rows = np.empty(256, dtype=np.int64)
+        self._len = 0             # entries held
+        self._start = 0           # absolute position of _rows[0]
+
+    @property
+    def pos(self) -> int:
+        """The position after the last entry."""
+        return self._start + self._len
+
+    def touch(self, rows) -> None:
+        """Rows changed (an int or an array of ints)."""
+        if isinstance(rows, (int, np.integer)):
+            if self._len < len(self._rows):       # most calls: one row, room for it
+                self._rows[self._len] = rows
+                self._len += 1
+                return
+            rows = (rows,)
+        if not isinstance(rows, np.ndarray) or rows.dtype != np.int64:
+            rows = np.atleast_1d(np.asarray(rows, dtype=np.int64))
+        k = len(rows)
+        if self._len + k > len(self._rows):
+            if self._len + k > 4096:          # forget the oldest: readers that far behind
+                self._start += self._len      # compare every row
+                self._len = 0
+            if k > len(self._rows):
+                self._rows = np.empty(2 * k, dtype=np.int64)
+            elif self._len + k > len(self._rows):
+                self._rows = np.concatenate([self._rows, np.empty_like(self._rows)])
+        self._rows[self._len: self._len + k] = rows
+        self._len += k
+
+    def invalidate(self) -> None:
+        """Every row may have changed: readers from before compare every row."""
+        self._start += self._len + 1
+        self._len = 0
+
+    def since(self, pos: int) -> np.ndarray | None:
+        """The rows changed after position ``pos`` (a view; may repeat), or None when the
+        log no longer holds them all."""
+        if pos < self._start or pos > self.pos:
+            return None
+        return self._rows[pos - self._start: self._len]
+
+
 @dataclass
 class MapSnapshot:
     """What Eq. 4-5 read of the map, as the motivation estimator receives it over the
@@ -138,6 +192,7 @@ class MapSnapshot:
     E: np.ndarray
     terminal: np.ndarray
     version: int
+    log: RowLog | None = None    # the rows changed, when the source keeps a log
 
     @property
     def n(self) -> int:
@@ -182,6 +237,8 @@ class SensorimotorMap:
         self.winner: int = -1
         self.inserted = False      # whether the last update inserted a node
         self.C_t = np.zeros(dim)   # Merge-GNG context of the last input (kernels.match)
+        self.log = RowLog()        # the rows each change touched (the estimator's input)
+        self.rebuild_in_links()    # (none yet: compiles the kernel where maps are made)
 
     # ------------------------------------------------------------------ storage
     def _alloc(self, cap: int, degree: int) -> None:
@@ -194,14 +251,15 @@ class SensorimotorMap:
         self.a = np.zeros((cap, degree, self.action_dim))       # action vectors a_ij
         self.age = np.zeros((cap, degree), dtype=np.int64)
         self.terminal = np.zeros(cap, dtype=bool)   # an episode ended on the node
+        self.inn = np.full((cap, degree), -1, dtype=np.int64)   # sources of links in
 
     def _grow_nodes(self) -> None:
         old = (self.w, self.c, self.h, self.alive, self.out, self.E, self.a, self.age,
-               self.terminal)
+               self.terminal, self.inn)
         cap = 2 * len(self.w)
         self._alloc(cap, self.out.shape[1])
         for new, arr in zip((self.w, self.c, self.h, self.alive, self.out, self.E, self.a,
-                             self.age, self.terminal), old):
+                             self.age, self.terminal, self.inn), old):
             new[: len(arr)] = arr
 
     def _grow_degree(self) -> None:
@@ -211,6 +269,7 @@ class SensorimotorMap:
         self.E = np.concatenate([self.E, np.zeros((cap, pad))], axis=1)
         self.a = np.concatenate([self.a, np.zeros((cap, pad, self.action_dim))], axis=1)
         self.age = np.concatenate([self.age, np.zeros((cap, pad), np.int64)], axis=1)
+        self.inn = np.concatenate([self.inn, np.full((cap, pad), -1, np.int64)], axis=1)
 
     @property
     def size(self) -> int:
@@ -274,8 +333,11 @@ class SensorimotorMap:
         cell became an ordinary one. The motivation estimator treats flagged nodes as
         absorbing (no successor in Eq. 5), except the nodes of the current goal."""
         if 0 <= i < self.n:
-            self.terminal[self.nodes_at(i)] = True
+            at = self.nodes_at(i)
+            self.terminal[at] = True
             self.terminal[i] = True
+            self.log.touch(at)
+            self.log.touch(i)
 
     def nodes_at(self, i: int) -> np.ndarray:
         """The live nodes whose weights lie within the GWR's own radius of node i's,
@@ -311,10 +373,13 @@ class SensorimotorMap:
         C = self.C_t    # written by match: context(), x at an episode start (neutral)
         self.inserted = False
         # winner, GWR test, adaptation of the winner and its neighbours
-        b, insert = kernels.match(self.w, self.c, self.h, self.alive, self.out, self.n,
+        b, insert, moved = kernels.match(self.w, self.c, self.h, self.alive, self.out,
+                                         self.inn, self.n,
                                   self.prev, x, C, self.alpha_c, self.beta_c, self.a_T,
                                   self.h_T, learn, self.eps_b, self.eps_n, self.tau_b,
                                   self.tau_n, self.kappa_h)
+        if len(moved):
+            self.log.touch(moved)
         if not learn or not insert:
             winner = b
         elif b < 0:
@@ -326,8 +391,11 @@ class SensorimotorMap:
             self._habituate(b, self.tau_b)
         if learn and self.prev >= 0 and action is not None:
             if self.terminal[self.prev]:        # walked on from prev: its place is not an
-                self.terminal[self.nodes_at(self.prev)] = False            # episode end
+                at = self.nodes_at(self.prev)                              # episode end
+                self.terminal[at] = False
                 self.terminal[self.prev] = False
+                self.log.touch(at)
+                self.log.touch(self.prev)
             self._update_links(self.prev, winner, np.asarray(action, dtype=float))
         self.prev = self.winner = winner
         return winner
@@ -343,11 +411,15 @@ class SensorimotorMap:
             self.n += 1
         self.w[r], self.c[r], self.h[r], self.alive[r] = w, c, 1.0, True
         self.terminal[r] = False
+        stale = bool((self.out[r] >= 0).any() or (self.inn[r] >= 0).any())
         self.out[r] = -1
         self.E[r] = 0.0
         self.age[r] = 0
         self.version += 1
         self.inserted = True
+        self.log.touch(r)
+        if stale:               # (a freed slot has no links: removed only when unlinked)
+            self.rebuild_in_links()
         return r
 
     def _habituate(self, i: int, tau: float) -> None:
@@ -358,12 +430,15 @@ class SensorimotorMap:
         (:func:`kernels.update_links`); nodes left without links are removed (except the
         previous and current winner; :func:`kernels.link_step`)."""
         for _ in range(2):      # again once the rows are wider, when a new link needs it
-            changes = kernels.link_step(
-                self.out, self.E, self.a, self.age, self.alive, self.terminal, self.n, i, j,
-                a, self.alpha, self.sigma_a, self.eta_a, self.E_init, self.E_min,
+            changes, ends = kernels.link_step(
+                self.out, self.E, self.a, self.age, self.inn, self.alive, self.terminal,
+                self.n, i, j, a, self.alpha, self.sigma_a, self.eta_a, self.E_init, self.E_min,
                 self.max_age, self.link_rule == "credit", self.prev, self.winner)
             if changes >= 0:
                 self.version += changes
+                self.log.touch(i)
+                if len(ends):
+                    self.log.touch(ends)
                 return
             self._grow_degree()
 
@@ -388,6 +463,15 @@ class SensorimotorMap:
             self.terminal[:n] = s["terminal"]
         self.n = n
         self.version, self.prev, self.winner = (int(v) for v in s["meta"])
+        self.log.invalidate()
+        self.rebuild_in_links()
+
+    def rebuild_in_links(self) -> None:
+        """``inn``, the sources of the links into each node (what the step reads instead
+        of scanning every row for links into a node), from ``out``: after a load, or an
+        edit of ``out`` by hand. The link kernels keep it up to date."""
+        while not kernels.in_links(self.out, self.n, self.inn):
+            self._grow_degree()
 
     def save(self, path: str | Path, step_id: int = -1, run_id: int = 0) -> Path:
         """Write the whole map and the last step it learnt (``step_id`` of the graph's run

@@ -688,3 +688,41 @@ def scaling_slopes(rows: list[dict]) -> dict:
             y = np.log([r["step_median_us"] for r in rs])
             out[family] = float(np.polyfit(x, y, 1)[0])
     return out
+
+
+def scaling_main(argv: list[str] | None = None) -> int:
+    """``python -m tmgwr_agent.experiments.bench``: the scaling rows alone (issue 27), for
+    measuring a change of the core step without the rest of ``./tmgwr bench``."""
+    import argparse
+    import json
+    p = argparse.ArgumentParser(prog="python -m tmgwr_agent.experiments.bench",
+                                description=scaling_main.__doc__)
+    p.add_argument("--cells", default=",".join(map(str, SCALING_CELLS)),
+                   help="comma-separated free cells per map (default %(default)s)")
+    p.add_argument("--families", default=",".join(SCALING_FAMILIES),
+                   help="comma-separated families (default %(default)s)")
+    p.add_argument("--steps", type=int, default=SCALING_STEPS,
+                   help="converged steps timed per map (default %(default)s)")
+    p.add_argument("--seed", type=int, default=0, help="maze and agent seed (default 0)")
+    p.add_argument("--json", default=None, metavar="OUT", help="also write the rows here")
+    args = p.parse_args(argv)
+    try:
+        cells = tuple(int(c) for c in args.cells.split(","))
+    except ValueError:
+        p.error(f"--cells: not a comma-separated list of integers: {args.cells!r}")
+    families = tuple(args.families.split(","))
+    bad = [f for f in families if f not in SCALING_FAMILIES]
+    if bad or args.steps < 1 or min(cells) < 1:
+        p.error(f"--families must be among {', '.join(SCALING_FAMILIES)} (got "
+                f"{args.families!r}), --steps and --cells >= 1")
+    warm_up()
+    result = scaling(args.seed, args.steps, cells, families)
+    print(scaling_table(result))
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(result, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(scaling_main())

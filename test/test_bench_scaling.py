@@ -1,0 +1,30 @@
+"""The scaling rows of the bench alone (``python -m tmgwr_agent.experiments.bench``): a
+small map gives a row with every field issue 27 names; bad arguments exit 2."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from tmgwr_agent.experiments.bench import scaling_main
+
+
+def test_scaling_alone_writes_the_rows(tmp_path):
+    out = tmp_path / "scaling.json"
+    assert scaling_main(["--families", "open", "--cells", "80", "--steps", "30",
+                         "--json", str(out)]) == 0
+    rows = json.loads(out.read_text())["scaling"]
+    assert len(rows) == 1 and rows[0]["family"] == "open"
+    for key in ("cells", "nodes", "step_median_us", "step_p99_us", "step_mean_us",
+                "goal_change_first_ms", "block_episode_ms"):
+        assert rows[0][key] > 0, key
+
+
+@pytest.mark.parametrize("args", [["--families", "rooms"], ["--cells", "3x"],
+                                  ["--steps", "0"]])
+def test_bad_arguments_exit_2_naming_them(args):
+    p = subprocess.run([sys.executable, "-m", "tmgwr_agent.experiments.bench", *args],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2
+    assert args[0] in p.stderr
