@@ -80,5 +80,7 @@ def make_agent(spec: str, maze: Maze, rng: np.random.Generator,
         return TMGWRAgent(senses or maze_senses(), rng, {**(overrides or {}), **options})
     from tmgwr_agent.experiments.sensing import SENSED_TABLE_AGENTS
     if name in SENSED_TABLE_AGENTS:
-        return baseline_class(name)(maze, rng, overrides, sensed_states=sensed)
+        n_actions = senses.n_actions if senses is not None else maze_senses().n_actions
+        return baseline_class(name)(maze, rng, overrides, sensed_states=sensed,
+                                    n_actions=n_actions)
     return baseline_class(name)(maze, rng, overrides)   # sensing.check_sensor refuses it

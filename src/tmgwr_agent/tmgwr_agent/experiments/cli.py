@@ -76,6 +76,15 @@ def register(subparsers) -> None:
                         "rotate=DEG (composed in that order), or view=K alone (the "
                         "(2K+1)^2 window of walls around the agent plus a compass to the "
                         "goal); recorded as 'sensor' in the JSON")
+    p.add_argument("--world", default=None, metavar="NAME",
+                   help="the world the maze is built in (default grid): grid, minigrid "
+                        "(MiniGrid's turn left / turn right / forward, sensation row, col, "
+                        "cos h, sin h), pointmaze (MuJoCo's PointMaze), or gym:ID, a "
+                        "registered Gymnasium env (MiniGrid-*, PointMaze_*; "
+                        "sample-complexity only); recorded as 'world' in the JSON")
+    p.add_argument("--world-kwargs", default=None, metavar="JSON",
+                   help="keyword arguments of the world as a JSON object, e.g. "
+                        "'{\"start_dir\": 1}' (minigrid), '{\"layout_seed\": 3}' (gym:ID)")
     p.add_argument("--suite", default=None, metavar="SPEC",
                    help="instead of --maze: generated mazes (env-change, goal-change), "
                         "FAMILY[:N] or all[:N] or a comma list (braided:3,rooms:3); "
@@ -204,7 +213,8 @@ def cmd_experiment(args: argparse.Namespace) -> int:
                               args.trials, args.seed, args.goals, args.episodes, args.event,
                               args.goal, args.jobs, progress=not args.quiet,
                               overrides=overrides, params_files=args.params or (),
-                              sensor=args.sensor)
+                              sensor=args.sensor, world=args.world,
+                              world_kwargs=args.world_kwargs)
     except UsageError as exc:
         return _fail(str(exc))
     write_json(result, args.json)
@@ -244,7 +254,8 @@ def _cmd_suite(args: argparse.Namespace) -> int:
                            args.suite_seed, args.suite_first, args.event, args.goals,
                            args.episodes, args.jobs, progress=not args.quiet,
                            maze_dir=maze_dir, overrides=overrides,
-                           params_files=args.params or (), sensor=args.sensor)
+                           params_files=args.params or (), sensor=args.sensor,
+                           world=args.world, world_kwargs=args.world_kwargs)
     except UsageError as exc:
         return _fail(str(exc))
     write_json(result, args.json)
