@@ -193,6 +193,12 @@ def register(subparsers) -> None:
                         "training mazes)")
     t.add_argument("--eval-trials", type=int, default=5,
                    help="seeds per held-out maze (default 5)")
+    t.add_argument("--world", default=None, metavar="NAME",
+                   help="tune in this world (experiment --world; default grid): the same "
+                        "budget and objective, oracles in the world's primitive steps; "
+                        "the default study name gains -NAME")
+    t.add_argument("--world-kwargs", default=None, metavar="JSON",
+                   help="keyword arguments of the world, a JSON object")
     t.add_argument("--quiet", action="store_true", help="no progress lines")
     t.set_defaults(func=cmd_tune)
 
