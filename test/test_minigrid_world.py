@@ -132,6 +132,15 @@ def test_check_env_passes_on_the_wrapped_env():
     assert senses.dim == 4 and senses.n_actions == 3
 
 
+def test_senses_from_spaces_takes_the_wrapped_env_and_refuses_the_raw_one():
+    from tmgwr_agent.core.senses import Senses, SensesError
+    w = MiniGridWorld(Maze.from_text(TINY), "G")
+    senses = Senses.from_spaces(w.env.observation_space, w.env.action_space)
+    np.testing.assert_array_equal(senses.primitives, np.eye(3))   # not told any geometry
+    with pytest.raises(SensesError, match="1-D Box"):
+        Senses.from_spaces(w.base.observation_space, w.base.action_space)  # MiniGrid's dict
+
+
 def test_world_names_and_kwargs_are_checked():
     assert parse_world(None).name == "grid"
     assert parse_world("minigrid", '{"start_dir": 1}').kwargs == {"start_dir": 1}
@@ -214,3 +223,11 @@ def test_world_cli_errors_exit_2_naming_it(args, message):
     assert proc.returncode == 2, proc.stderr
     assert message in proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+def test_tabular_goal_key_with_an_open_heading():
+    from tmgwr_agent.baselines.q_learning import key_matches
+    assert key_matches((5, 7, 2), (5, 7, None))
+    assert not key_matches((5, 6, 2), (5, 7, None))
+    assert key_matches((5, 7), (5, 7)) and not key_matches((0, 1, -1), (0, 1, 3))
+    assert not key_matches((0, 1, 3), (0, 1, -1))   # -1 (a view's "at goal") is a value
