@@ -37,6 +37,10 @@ def world_senses(world) -> Senses:
                               getattr(world, "primitive_vectors", None))
 
 
+#: The worlds the ROS graph hosts (the agent nodes know their senses by name).
+GRAPH_WORLDS = ("grid", "pointmaze")
+
+
 def named_world_senses(name: str, **kwargs) -> Senses:
     """The senses of world ``name`` without building it (what the agent nodes are given:
     they host no world): the grid's, or PointMaze's (``velocity``: 4 values)."""
@@ -45,7 +49,8 @@ def named_world_senses(name: str, **kwargs) -> Senses:
     if name == "pointmaze":
         from maze_sim.pointmaze_world import PRIMITIVES
         return Senses(4 if kwargs.get("velocity") else 2, PRIMITIVES)
-    raise ValueError(f"unknown world {name!r}; worlds: grid, pointmaze")
+    raise ValueError(f"unknown world {name!r}; worlds the graph hosts: "
+                     f"{', '.join(GRAPH_WORLDS)}")
 
 
 def drawn_at(name: str, sensation) -> tuple[float, float]:

@@ -31,6 +31,9 @@ PYTHON_KEYS = {
     "rosbags": {"python3-rosbags-pip"},
     "gymnasium": {"python3-gymnasium-pip", "python3-gymnasium"},
     "optuna": {"python3-optuna-pip", "python3-optuna"},
+    "minigrid": {"python3-minigrid-pip"},
+    "gymnasium_robotics": {"python3-gymnasium-robotics-pip"},
+    "mujoco": {"python3-mujoco-pip"},
 }
 
 #: Top-level directories of a package that are not installed data.

@@ -64,7 +64,12 @@ from typing import Any, Mapping
 import numpy as np
 
 from maze_sim.maze import Cell, Maze
-from tmgwr_agent.baselines.q_learning import N_ACTIONS, QLearningAgent, QLearningConfig
+from tmgwr_agent.baselines.q_learning import (
+    N_ACTIONS,
+    QLearningAgent,
+    QLearningConfig,
+    key_matches,
+)
 from tmgwr_common.params import param
 
 
@@ -86,12 +91,12 @@ class DynaQPlusAgent(QLearningAgent):
 
     def __init__(self, maze: Maze, rng: np.random.Generator,
                  config: DynaQPlusConfig | Mapping[str, Any] | None = None,
-                 sensed_states: bool = False):
-        super().__init__(maze, rng, config, sensed_states)
+                 sensed_states: bool = False, n_actions: int = N_ACTIONS):
+        super().__init__(maze, rng, config, sensed_states, n_actions)
         self.n_planning = self.config.n_planning
         self.kappa = self.config.kappa
-        n = self.rows * self.cols * N_ACTIONS
-        # Model(s, a), indexed by s * 4 + a; next -1 = never tried.
+        n = self.rows * self.cols * self.n_actions
+        # Model(s, a), indexed by s * n_actions + a; next -1 = never tried.
         self.m_next = [-1] * n
         self.m_reward = [0.0] * n
         self.m_terminal = [False] * n
@@ -101,29 +106,38 @@ class DynaQPlusAgent(QLearningAgent):
         self.is_visited = [False] * (self.rows * self.cols)
         self.t = 0                     # global clock: real learning steps
         # bonus-free twin of Q (Dyna-Q), read by act(explore=False)
-        self.Q0: list[list[float]] = [[0.0] * N_ACTIONS for _ in range(self.rows * self.cols)]
+        self.Q0: list[list[float]] = [[0.0] * self.n_actions
+                                         for _ in range(self.rows * self.cols)]
 
     def grow(self) -> None:
         super().grow()
-        self.m_next.extend([-1] * N_ACTIONS)
-        self.m_reward.extend([0.0] * N_ACTIONS)
-        self.m_terminal.extend([False] * N_ACTIONS)
-        self.m_bumped.extend([False] * N_ACTIONS)
-        self.m_time.extend([0] * N_ACTIONS)
+        self.m_next.extend([-1] * self.n_actions)
+        self.m_reward.extend([0.0] * self.n_actions)
+        self.m_terminal.extend([False] * self.n_actions)
+        self.m_bumped.extend([False] * self.n_actions)
+        self.m_time.extend([0] * self.n_actions)
         self.is_visited.append(False)
-        self.Q0.append([0.0] * N_ACTIONS)
+        self.Q0.append([0.0] * self.n_actions)
 
     def set_goal(self, goal_cell: Cell, goal_obs: np.ndarray | None = None) -> None:
         """The new goal, and the model's rewards and terminals relabelled for it."""
         super().set_goal(goal_cell, goal_obs)
-        g = self.index(self.goal)
+        at_goal = self.goal_states()
         for sa, s2 in enumerate(self.m_next):
             if s2 < 0:
                 continue
             bumped = self.m_bumped[sa]          # a bump stays put, it reaches nothing
-            self.m_terminal[sa] = s2 == g and not bumped
+            self.m_terminal[sa] = s2 in at_goal and not bumped
             self.m_reward[sa] = (self.r_wall if bumped else
-                                 self.r_goal if s2 == g else self.r_empty)
+                                 self.r_goal if s2 in at_goal else self.r_empty)
+
+    def goal_states(self) -> set[int]:
+        """The indices of the states at the goal: the goal's own, and with sensed states
+        every key seen so far that falls on the goal's (:func:`key_matches`)."""
+        g = {self.index(self.goal)}
+        if self.sensed is not None:
+            g.update(s for key, s in self.sensed.items() if key_matches(key, self.goal))
+        return g
 
     def act(self, explore: bool = True) -> int:
         Q = self.Q if explore else self.Q0      # the probe reads the bonus-free twin
@@ -136,8 +150,8 @@ class DynaQPlusAgent(QLearningAgent):
         if not self.is_visited[s]:
             self.is_visited[s] = True
             self.visited.append(s)
-            base = s * N_ACTIONS
-            for b in range(N_ACTIONS):       # untried actions: tau counts from here
+            base = s * self.n_actions
+            for b in range(self.n_actions):       # untried actions: tau counts from here
                 self.m_time[base + b] = t
         # (d) direct RL, on Q and on its bonus-free twin Q0
         self.q_update(s, a, r, s2, terminal)
@@ -145,7 +159,7 @@ class DynaQPlusAgent(QLearningAgent):
         target0 = r if terminal else r + self.gamma * max(self.Q0[s2])
         q0[a] += self.beta * (target0 - q0[a])
         # (e) model learning
-        sa = s * N_ACTIONS + a
+        sa = s * self.n_actions + a
         self.m_next[sa] = s2
         self.m_reward[sa] = r
         self.m_terminal[sa] = terminal
@@ -160,13 +174,14 @@ class DynaQPlusAgent(QLearningAgent):
         m_next, m_reward, m_terminal, m_time = (self.m_next, self.m_reward,
                                                 self.m_terminal, self.m_time)
         gamma, beta, kappa, t = self.gamma, self.beta, self.kappa, self.t
-        scale = len(visited) * N_ACTIONS
+        n_a = self.n_actions
+        scale = len(visited) * n_a
         sqrt = math.sqrt
         for u in self.rng.random(n).tolist():
             k = int(u * scale)
-            s = visited[k >> 2]
-            a = k & 3
-            sa = s * N_ACTIONS + a
+            s, a = divmod(k, n_a)
+            s = visited[s]
+            sa = s * n_a + a
             s2 = m_next[sa]
             if s2 < 0:                        # never tried: back to s with reward 0
                 s2, r, terminal = s, 0.0, False

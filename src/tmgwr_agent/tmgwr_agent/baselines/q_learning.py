@@ -25,7 +25,11 @@ O(1): Q is a list of 4-float lists indexed by ``row * cols + col``.
 Under ``--sensor`` (``sensed_states=True``) the state handed to the agent is not a cell but
 the discretised sensation (:func:`tmgwr_agent.experiments.sensing.discretise`, any hashable
 key): states are then numbered in the order first seen and the tables grow as new ones
-appear (:meth:`QLearningAgent.index`).
+appear (:meth:`QLearningAgent.index`). In a world with other motor primitives
+(``--world minigrid``: turn left, turn right, forward) ``n_actions`` says how many; the
+state is that world's declared discretisation of its sensation (for MiniGrid the cell and
+the heading's quarter), and the goal's key may leave a component open (``None``: the goal
+cell is reached facing any way), which :func:`key_matches` honours.
 """
 
 from __future__ import annotations
@@ -41,6 +45,17 @@ from tmgwr_agent.core.exploration import EpsilonGreedy, ExplorationConfig
 from tmgwr_common.params import make_config, param
 
 N_ACTIONS = 4
+
+
+def key_matches(key, goal) -> bool:
+    """Is the sensed state ``key`` the goal's key? Equal, or equal on every component of
+    a tuple key that the goal fixes (``None`` in the goal's key: any value)."""
+    if key == goal:
+        return True
+    if not (isinstance(key, tuple) and isinstance(goal, tuple)) or len(key) != len(goal) \
+            or None not in goal:
+        return False
+    return all(g is None or k == g for k, g in zip(key, goal))
 
 @dataclass(frozen=True)
 class QLearningConfig(ExplorationConfig):
@@ -77,19 +92,21 @@ class QLearningAgent:
 
     def __init__(self, maze: Maze, rng: np.random.Generator,
                  config: QLearningConfig | Mapping[str, Any] | None = None,
-                 sensed_states: bool = False):
+                 sensed_states: bool = False, n_actions: int = N_ACTIONS):
         """``config``: the agent's config, or a dict of parameter overrides;
-        ``sensed_states``: states are sensed keys, not cells (module docstring)."""
+        ``sensed_states``: states are sensed keys, not cells (module docstring);
+        ``n_actions``: the world's motor primitives (4: the grid's moves)."""
         if not isinstance(config, self.Config):
             config = make_config(self.Config, config, where=self.name)
         self.config = c = config
         self.gamma, self.beta = c.gamma, c.beta
         self.r_goal, self.r_wall, self.r_empty = c.r_goal, c.r_wall, c.r_empty
         self.rng = rng
-        self.policy = EpsilonGreedy(rng, c)
+        self.n_actions = int(n_actions)
+        self.policy = EpsilonGreedy(rng, c, self.n_actions)
         self.rows, self.cols = maze.shape
         n = self.rows * self.cols
-        self.Q: list[list[float]] = [[0.0] * N_ACTIONS for _ in range(n)]
+        self.Q: list[list[float]] = [[0.0] * self.n_actions for _ in range(n)]
         self.tried = [False] * n       # some action has been tried from the state
         self.sensed: dict | None = {} if sensed_states else None   # key -> state index
         self.goal: Cell | None = None
@@ -111,7 +128,7 @@ class QLearningAgent:
 
     def grow(self) -> None:
         """One more state in every per-state table."""
-        self.Q.append([0.0] * N_ACTIONS)
+        self.Q.append([0.0] * self.n_actions)
         self.tried.append(False)
 
     def states_seen(self) -> int:
@@ -120,7 +137,8 @@ class QLearningAgent:
 
     def reward(self, info: StepInfo) -> float:
         """Eq. 8 for the step just taken (the previous goal is an empty cell)."""
-        reached = info.reached_goal if self.goal is None else info.cell == self.goal
+        reached = info.reached_goal if self.goal is None else \
+            key_matches(info.cell, self.goal)
         if reached:
             return self.r_goal
         if info.bumped:

@@ -4,7 +4,10 @@
 joined by ``+``. TMGWR options: ``literal`` / ``credit`` choose the sensorimotor-link rule
 (plain ``tmgwr`` uses the default of ``MapConfig.link_rule``); ``grid`` measures the value
 of the unknown on the sensor's axes (``unknown`` grid: it is told the sensation is a grid
-cell's coordinates; plain ``tmgwr`` learns its frame, core/frame.py); ``paper`` turns our
+cell's coordinates; plain ``tmgwr`` learns its frame, core/frame.py); ``none`` gives what
+the map does not know no value (Eq. 5 as printed, our other additions kept: the learnt
+frame assumes primitives that displace the sensation alike everywhere, which MiniGrid's
+turn / forward do not); ``paper`` turns our
 additions off (``absorbing_terminals``; ``unknown`` none and ``try_untried``, the options
 of Eq. 5' and Eq. 6; ``goal_search``; ``walk_while_novel``: the agent of Eq. 1-7 as
 printed), e.g.
@@ -40,6 +43,7 @@ TMGWR_OPTIONS = {
     "literal": {"link_rule": "literal"},
     "credit": {"link_rule": "credit"},
     "grid": {"unknown": "grid"},
+    "none": {"unknown": "none"},
     "paper": {"absorbing_terminals": False, "unknown": "none", "goal_search": False,
               "try_untried": False, "walk_while_novel": False, "eps_min": 0.1},
 }
@@ -80,5 +84,7 @@ def make_agent(spec: str, maze: Maze, rng: np.random.Generator,
         return TMGWRAgent(senses or maze_senses(), rng, {**(overrides or {}), **options})
     from tmgwr_agent.experiments.sensing import SENSED_TABLE_AGENTS
     if name in SENSED_TABLE_AGENTS:
-        return baseline_class(name)(maze, rng, overrides, sensed_states=sensed)
+        n_actions = senses.n_actions if senses is not None else maze_senses().n_actions
+        return baseline_class(name)(maze, rng, overrides, sensed_states=sensed,
+                                    n_actions=n_actions)
     return baseline_class(name)(maze, rng, overrides)   # sensing.check_sensor refuses it

@@ -76,6 +76,15 @@ def register(subparsers) -> None:
                         "rotate=DEG (composed in that order), or view=K alone (the "
                         "(2K+1)^2 window of walls around the agent plus a compass to the "
                         "goal); recorded as 'sensor' in the JSON")
+    p.add_argument("--world", default=None, metavar="NAME",
+                   help="the world the maze is built in (default grid): grid, minigrid "
+                        "(MiniGrid's turn left / turn right / forward, sensation row, col, "
+                        "cos h, sin h), pointmaze (MuJoCo's PointMaze), or gym:ID, a "
+                        "registered Gymnasium env (MiniGrid-*, PointMaze_*; "
+                        "sample-complexity only); recorded as 'world' in the JSON")
+    p.add_argument("--world-kwargs", default=None, metavar="JSON",
+                   help="keyword arguments of the world as a JSON object, e.g. "
+                        "'{\"start_dir\": 1}' (minigrid), '{\"layout_seed\": 3}' (gym:ID)")
     p.add_argument("--suite", default=None, metavar="SPEC",
                    help="instead of --maze: generated mazes (env-change, goal-change), "
                         "FAMILY[:N] or all[:N] or a comma list (braided:3,rooms:3); "
@@ -184,6 +193,12 @@ def register(subparsers) -> None:
                         "training mazes)")
     t.add_argument("--eval-trials", type=int, default=5,
                    help="seeds per held-out maze (default 5)")
+    t.add_argument("--world", default=None, metavar="NAME",
+                   help="tune in this world (experiment --world; default grid): the same "
+                        "budget and objective, oracles in the world's primitive steps; "
+                        "the default study name gains -NAME")
+    t.add_argument("--world-kwargs", default=None, metavar="JSON",
+                   help="keyword arguments of the world, a JSON object")
     t.add_argument("--quiet", action="store_true", help="no progress lines")
     t.set_defaults(func=cmd_tune)
 
@@ -204,7 +219,8 @@ def cmd_experiment(args: argparse.Namespace) -> int:
                               args.trials, args.seed, args.goals, args.episodes, args.event,
                               args.goal, args.jobs, progress=not args.quiet,
                               overrides=overrides, params_files=args.params or (),
-                              sensor=args.sensor)
+                              sensor=args.sensor, world=args.world,
+                              world_kwargs=args.world_kwargs)
     except UsageError as exc:
         return _fail(str(exc))
     write_json(result, args.json)
@@ -244,7 +260,8 @@ def _cmd_suite(args: argparse.Namespace) -> int:
                            args.suite_seed, args.suite_first, args.event, args.goals,
                            args.episodes, args.jobs, progress=not args.quiet,
                            maze_dir=maze_dir, overrides=overrides,
-                           params_files=args.params or (), sensor=args.sensor)
+                           params_files=args.params or (), sensor=args.sensor,
+                           world=args.world, world_kwargs=args.world_kwargs)
     except UsageError as exc:
         return _fail(str(exc))
     write_json(result, args.json)

@@ -40,13 +40,14 @@ Parameters: ``overrides`` (``experiment --params``) change an agent's declared d
 
 from __future__ import annotations
 
-from functools import partial
 from typing import Any, Mapping
 
 import numpy as np
 
 from maze_sim.maze import Maze, bfs_distances
 from maze_sim.sensors import IDENTITY
+from maze_sim.worlds import WorldSpec
+from maze_sim.worlds import make_world as make_hosted_world
 from tmgwr_agent.experiments.agent_factory import make_agent
 from tmgwr_agent.experiments.parallel import agent_trials
 from tmgwr_agent.experiments.runner import (
@@ -55,6 +56,7 @@ from tmgwr_agent.experiments.runner import (
     learning_steps,
     make_world,
     run_episode,
+    scenario_trial,
     set_goal,
     train_until_converged,
     with_overrides,
@@ -108,17 +110,33 @@ def oracle_steps(maze: Maze, event: str, goal: str = "G") -> int:
     return best
 
 
+def event_oracle(world: WorldSpec | None, maze: Maze, event: str, goal: str) -> dict:
+    """``oracle_steps``, ``shortest_before``, ``shortest_after`` of an event in the
+    primitive steps of ``world`` (the grid's: BFS cells; another: its own oracle,
+    ``event_oracle_steps`` and ``shortest_steps`` of the world)."""
+    if world is None or world.name == "grid":
+        start, target = maze.start, maze.goal_cell(goal)
+        return {"oracle_steps": oracle_steps(maze, event, goal),
+                "shortest_before": maze.shortest_path_length(start, target),
+                "shortest_after": maze.shortest_path_length(
+                    start, target, walls=maze.walls_after([event]))}
+    w = make_hosted_world(world, maze, goal)
+    return {"oracle_steps": w.event_oracle_steps(event, goal),
+            "shortest_before": w.shortest_steps(maze.walls, goal),
+            "shortest_after": w.shortest_steps(maze.walls_after([event]), goal)}
+
+
 def trial(spec: str, t: int, seed: np.random.SeedSequence, maze: str | Maze, event: str,
           goal: str, overrides: Mapping[str, Any] | None = None, *,
           to_optimal: bool = True, within: int | None = None,
-          sensor: str = IDENTITY) -> dict:
+          sensor: str = IDENTITY, world_spec: WorldSpec | None = None) -> dict:
     """Steps 1-4 for one agent and trial (``maze``: a file or a Maze); ``to_optimal``
     False stops after step 3 (``episodes_to_optimal`` is then ``None``); ``within`` caps
     step 4 at that many episodes (``None`` beyond them; default the caps of
     :class:`.runner.Caps`); ``sensor``: the ``--sensor`` spec (:mod:`.sensing`)."""
     maze = maze if isinstance(maze, Maze) else Maze.from_file(maze)
     caps = Caps.for_maze(maze)
-    world = make_world(maze, goal, caps, sensor, seed)
+    world = make_world(maze, goal, caps, sensor, seed, world_spec)
     agent = make_agent(spec, maze, np.random.default_rng(seed), overrides,
                        sensed=not world.identity, senses=world.senses)
     set_goal(world, agent, goal)
@@ -147,17 +165,14 @@ def trial(spec: str, t: int, seed: np.random.SeedSequence, maze: str | Maze, eve
 def run(maze_path: str, agents: list[str], trials: int, seed: int, event: str = "a",
         goal: str = "G", jobs: int | None = None, progress: bool = True,
         overrides: Mapping[str, Mapping[str, Any]] | None = None,
-        sensor: str = IDENTITY) -> dict:
+        sensor: str = IDENTITY, world: WorldSpec | None = None) -> dict:
     """``overrides``: parameter overrides per agent spec (absent: the defaults);
     ``sensor``: the normalised ``--sensor`` spec."""
     maze = Maze.from_file(maze_path)
-    fn = partial(trial, sensor=sensor) if sensor != IDENTITY else trial
+    fn = scenario_trial(trial, sensor, world)
     res = agent_trials(with_overrides(fn, overrides), agents, seed, trials,
                        (maze_path, event, goal), jobs, f"env-change {event}", progress)
     out = {a: {k: stat(r[k] for r in rs) for k in RESULTS}
            for a, rs in res.items()}
-    return {"event": event, "goal": goal, "oracle_steps": oracle_steps(maze, event, goal),
-            "shortest_before": maze.shortest_path_length(maze.start, maze.goal_cell(goal)),
-            "shortest_after": maze.shortest_path_length(
-                maze.start, maze.goal_cell(goal), walls=maze.walls_after([event])),
+    return {"event": event, "goal": goal, **event_oracle(world, maze, event, goal),
             "agents": out}

@@ -28,13 +28,13 @@ level.
 
 from __future__ import annotations
 
-from functools import partial
 from typing import Any, Mapping
 
 import numpy as np
 
 from maze_sim.maze import Maze
 from maze_sim.sensors import IDENTITY
+from maze_sim.worlds import WorldSpec
 from tmgwr_agent.experiments.agent_factory import make_agent
 from tmgwr_agent.experiments.parallel import agent_trials
 from tmgwr_agent.experiments.runner import (
@@ -42,6 +42,7 @@ from tmgwr_agent.experiments.runner import (
     learning_steps,
     make_world,
     run_episode,
+    scenario_trial,
     set_goal,
     with_overrides,
 )
@@ -53,10 +54,11 @@ DEFAULT_EPISODES = 1000
 
 def trial(spec: str, t: int, seed: np.random.SeedSequence, maze_path: str,
           goals: tuple[str, ...], episodes: int,
-          overrides: Mapping[str, Any] | None = None, *, sensor: str = IDENTITY) -> list[dict]:
+          overrides: Mapping[str, Any] | None = None, *, sensor: str = IDENTITY,
+          world_spec: WorldSpec | None = None) -> list[dict]:
     maze = Maze.from_file(maze_path)
     caps = Caps.for_maze(maze)
-    world = make_world(maze, goals[0], caps, sensor, seed)
+    world = make_world(maze, goals[0], caps, sensor, seed, world_spec)
     agent = make_agent(spec, maze, np.random.default_rng(seed), overrides,
                        sensed=not world.identity, senses=world.senses)
     set_goal(world, agent, goals[0])
@@ -85,10 +87,10 @@ def run(maze_path: str, agents: list[str], trials: int, seed: int,
         goals: tuple[str, ...] = DEFAULT_GOALS, episodes: int = DEFAULT_EPISODES,
         jobs: int | None = None, progress: bool = True,
         overrides: Mapping[str, Mapping[str, Any]] | None = None,
-        sensor: str = IDENTITY) -> dict:
+        sensor: str = IDENTITY, world: WorldSpec | None = None) -> dict:
     """``overrides``: parameter overrides per agent spec (absent: the defaults);
     ``sensor``: the normalised ``--sensor`` spec."""
-    fn = partial(trial, sensor=sensor) if sensor != IDENTITY else trial
+    fn = scenario_trial(trial, sensor, world)
     res = agent_trials(with_overrides(fn, overrides), agents, seed, trials,
                        (maze_path, tuple(goals), episodes), jobs, "goal-change", progress)
     out = {}

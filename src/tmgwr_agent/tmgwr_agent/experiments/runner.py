@@ -51,8 +51,10 @@ import numpy as np
 from maze_sim.maze import Maze
 from maze_sim.sensors import SensorSpec
 from maze_sim.world import GridWorld
+from maze_sim.worlds import WorldSpec
+from maze_sim.worlds import make_world as make_hosted_world
 from tmgwr_agent.core.protocol import Agent
-from tmgwr_agent.experiments.sensing import SensedWorld, noise_rng
+from tmgwr_agent.experiments.sensing import HostedWorld, SensedWorld, noise_rng
 
 #: Consecutive optimal greedy rollouts that count as convergence (section 5.2.5).
 STREAK = 10
@@ -92,22 +94,39 @@ def with_overrides(fn: Callable,
     return partial(_call_with, fn, {a: dict(v) for a, v in overrides.items() if v})
 
 
+def scenario_trial(fn: Callable, sensor: str, world: WorldSpec | None) -> Callable:
+    """A scenario's trial function with its ``--sensor`` and ``--world`` bound (only those
+    that differ from the defaults, so a plain run calls ``fn`` itself). Picklable."""
+    kwargs: dict[str, Any] = {}
+    if sensor != "identity":
+        kwargs["sensor"] = sensor
+    if world is not None and world.name != "grid":
+        kwargs["world_spec"] = world
+    return partial(fn, **kwargs) if kwargs else fn
+
+
 def _call_with(fn: Callable, overrides: dict[str, dict[str, Any]], spec: str, *args) -> Any:
     return fn(spec, *args, overrides=overrides.get(spec))
 
 
 def make_world(maze: Maze, goal: str, caps: Caps, sensor: SensorSpec | str | None = None,
-               seed: np.random.SeedSequence | None = None) -> SensedWorld:
+               seed: np.random.SeedSequence | None = None,
+               world: WorldSpec | None = None) -> SensedWorld | HostedWorld:
     """The world under ``sensor`` (default identity); ``seed``: the trial's seed, whose
-    sensor-noise stream (:func:`.sensing.noise_rng`) drives any noise."""
-    world = GridWorld(maze, goal=goal, max_episode_steps=caps.episode_steps)
-    return SensedWorld(world, sensor, noise_rng(seed))
+    sensor-noise stream (:func:`.sensing.noise_rng`) drives any noise; ``world``: the
+    ``--world`` (None or ``grid``: our grid world; another: :func:`maze_sim.worlds.
+    make_world` of it, sensed as it senses, :class:`.sensing.HostedWorld`)."""
+    if world is None or world.name == "grid":
+        grid = GridWorld(maze, goal=goal, max_episode_steps=caps.episode_steps)
+        return SensedWorld(grid, sensor, noise_rng(seed))
+    return HostedWorld(make_hosted_world(world, maze, goal, caps.episode_steps))
 
 
-def agent_state(world: GridWorld | SensedWorld):
+def agent_state(world: GridWorld | SensedWorld | HostedWorld):
     """What a tabular agent may know of where it is: the discretised sensation of a
-    :class:`.sensing.SensedWorld`, the cell of a bare world (identity sensing)."""
-    return world.state if isinstance(world, SensedWorld) else world.cell
+    :class:`.sensing.SensedWorld` or a hosted world, the cell of a bare world (identity
+    sensing)."""
+    return world.state if isinstance(world, (SensedWorld, HostedWorld)) else world.cell
 
 
 def set_goal(world: GridWorld | SensedWorld, agent: Agent, goal: str,
@@ -115,7 +134,7 @@ def set_goal(world: GridWorld | SensedWorld, agent: Agent, goal: str,
     """Move the goal in the world and tell the agent (its tabular state for the tabular
     agents, the goal *sensation* for TMGWR, which never sees cells)."""
     world.set_goal(goal, keep_previous=keep_previous)
-    state = world.goal_state if isinstance(world, SensedWorld) else world.goal
+    state = world.goal_state if isinstance(world, (SensedWorld, HostedWorld)) else world.goal
     agent.set_goal(state, world.goal_observation())
 
 

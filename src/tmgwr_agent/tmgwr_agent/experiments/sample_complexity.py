@@ -14,18 +14,19 @@ on until convergence or the caps.
 
 from __future__ import annotations
 
-from functools import partial
 from typing import Any, Mapping
 
 import numpy as np
 
 from maze_sim.maze import Maze
 from maze_sim.sensors import IDENTITY
+from maze_sim.worlds import WorldSpec
 from tmgwr_agent.experiments.agent_factory import make_agent
 from tmgwr_agent.experiments.parallel import agent_trials
 from tmgwr_agent.experiments.runner import (
     Caps,
     make_world,
+    scenario_trial,
     set_goal,
     train_until_converged,
     with_overrides,
@@ -39,12 +40,13 @@ EVERY = 5
 
 def trial(spec: str, t: int, seed: np.random.SeedSequence, maze_path: str,
           goals: tuple[str, ...], episodes: int,
-          overrides: Mapping[str, Any] | None = None, *, sensor: str = IDENTITY) -> dict:
+          overrides: Mapping[str, Any] | None = None, *, sensor: str = IDENTITY,
+          world_spec: WorldSpec | None = None) -> dict:
     maze = Maze.from_file(maze_path)
     caps = Caps.for_maze(maze)
     out = {}
     for g, child in zip(goals, seed.spawn(len(goals))):
-        world = make_world(maze, g, caps, sensor, child)
+        world = make_world(maze, g, caps, sensor, child, world_spec)
         agent = make_agent(spec, maze, np.random.default_rng(child), overrides,
                            sensed=not world.identity, senses=world.senses)
         set_goal(world, agent, g)
@@ -58,10 +60,10 @@ def run(maze_path: str, agents: list[str], trials: int, seed: int,
         goals: tuple[str, ...] = DEFAULT_GOALS, episodes: int = DEFAULT_EPISODES,
         jobs: int | None = None, progress: bool = True,
         overrides: Mapping[str, Mapping[str, Any]] | None = None,
-        sensor: str = IDENTITY) -> dict:
+        sensor: str = IDENTITY, world: WorldSpec | None = None) -> dict:
     """``overrides``: parameter overrides per agent spec (absent: the defaults);
     ``sensor``: the normalised ``--sensor`` spec."""
-    fn = partial(trial, sensor=sensor) if sensor != IDENTITY else trial
+    fn = scenario_trial(trial, sensor, world)
     res = agent_trials(with_overrides(fn, overrides), agents, seed, trials,
                        (maze_path, tuple(goals), episodes), jobs, "sample-complexity",
                        progress)

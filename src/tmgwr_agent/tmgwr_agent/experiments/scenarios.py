@@ -19,11 +19,12 @@ import numpy as np
 
 from maze_sim.maze import Maze, MazeError, maze_file
 from maze_sim.sensors import SensorSpec, SensorSpecError, parse_sensor
+from maze_sim.worlds import WorldError, WorldSpec, parse_world
 from tmgwr_agent.experiments import env_change, goal_change, sample_complexity, timing
 from tmgwr_agent.experiments.agent_factory import AGENT_NAMES, make_agent, parse_spec
 from tmgwr_agent.experiments.names import SCENARIOS
 from tmgwr_agent.experiments.runner import Caps
-from tmgwr_agent.experiments.sensing import check_sensor
+from tmgwr_agent.experiments.sensing import check_sensor, check_world
 
 DEFAULT_MAZE = maze_file()
 DEFAULT_AGENTS = AGENT_NAMES
@@ -97,6 +98,15 @@ def params_record(overrides: Mapping[str, Mapping[str, Any]],
             "agents": {a: dict(v) for a, v in overrides.items()}}
 
 
+def parse_sensor_spec(sensor: str | None) -> SensorSpec:
+    """``--sensor`` parsed (its agents not checked yet), a :class:`UsageError` naming the
+    part that does not parse."""
+    try:
+        return parse_sensor(sensor)
+    except SensorSpecError as exc:
+        raise UsageError(f"--sensor: {exc}") from None
+
+
 def check_sensor_spec(sensor: str | None, agents: Sequence[str]) -> SensorSpec:
     """``--sensor``: the checked spec, refused (naming the part, or the agent that cannot
     run under it) as a :class:`UsageError`."""
@@ -108,6 +118,56 @@ def check_sensor_spec(sensor: str | None, agents: Sequence[str]) -> SensorSpec:
     if why:
         raise UsageError(f"--sensor: {why}")
     return spec
+
+
+#: The scenarios a registered env (``--world gym:ID``: no events, no named goals) runs.
+GYM_SCENARIOS = ("sample-complexity",)
+
+
+def check_world_spec(world: str | None, world_kwargs: str | None,
+                     agents: Sequence[str] | None, default_agents: Sequence[str],
+                     scenario: str, sensor: SensorSpec) -> tuple[WorldSpec, list[str]]:
+    """``--world`` / ``--world-kwargs``: the checked spec and the agents to run (without
+    ``--agents``, those of ``default_agents`` that can run there), refused (naming the
+    world, the env id, the kwargs, or the scenario or agent that cannot run there) as a
+    :class:`UsageError`."""
+    try:
+        spec = parse_world(world, world_kwargs)
+    except WorldError as exc:
+        raise UsageError(f"--world: {exc}") from None
+    if not spec.from_maze and scenario not in GYM_SCENARIOS:
+        raise UsageError(f"--world {spec.text}: a registered env has no events or named "
+                         f"goals; it runs {', '.join(GYM_SCENARIOS)} only (not {scenario})")
+    if spec.name != "grid" and not sensor.identity:
+        raise UsageError(f"--sensor {sensor.text} applies to the grid world only; "
+                         f"--world {spec.text} senses through its own wrapper")
+    if not agents:
+        agents = [a for a in default_agents if check_world([a], spec) is None]
+    agents = check_agents(agents)
+    why = check_world(agents, spec)
+    if why:
+        raise UsageError(f"--world: {why}")
+    return spec, agents
+
+
+def gym_maze(spec: WorldSpec, directory: str | Path) -> Path:
+    """The layout of a ``gym:ID`` world as a maze file (``#`` wall, ``S`` start, ``G``
+    goal) in ``directory``: the caps and goal checks of the scenarios read it."""
+    from maze_sim.worlds import make_world
+    try:
+        w = make_world(spec, None)
+    except WorldError as exc:
+        raise UsageError(f"--world: {exc}") from None
+    except (TypeError, ValueError) as exc:
+        raise UsageError(f"--world {spec.text} --world-kwargs: {exc}") from None
+    rows = []
+    for r in range(w.walls.shape[0]):
+        rows.append("".join("S" if (r, c) == w.start_pose[:2] else
+                            "G" if (r, c) == w.goal else
+                            "#" if w.walls[r, c] else "." for c in range(w.walls.shape[1])))
+    path = Path(directory) / (spec.env_id.replace("/", "_") + ".txt")
+    path.write_text("\n".join(rows) + "\n", encoding="utf-8")
+    return path
 
 
 def check_goals(maze: Maze, goals: Sequence[str]) -> tuple[str, ...]:
@@ -134,13 +194,34 @@ def run_scenario(scenario: str, maze_path: str | Path = DEFAULT_MAZE,
                  event: str = "a", goal: str = "G", jobs: int | None = None,
                  progress: bool = True,
                  overrides: Mapping[str, Mapping[str, Any]] | None = None,
-                 params_files: Sequence[str] = (), sensor: str | None = None) -> dict:
+                 params_files: Sequence[str] = (), sensor: str | None = None,
+                 world: str | None = None, world_kwargs: str | None = None) -> dict:
     """``overrides``: parameter overrides per agent spec (``--params``; None: every agent
     with its declared defaults, and no ``params`` in the JSON); ``params_files``: where
     they came from, recorded beside them; ``sensor``: the ``--sensor`` spec (None:
-    identity), recorded normalised as ``sensor``."""
+    identity), recorded normalised as ``sensor``; ``world``, ``world_kwargs``: the
+    ``--world`` and its ``--world-kwargs`` JSON (None: the grid), recorded as ``world``
+    (and ``world_kwargs`` when given). A ``gym:ID`` world runs on its own layout (written
+    as a maze file to a temporary folder: ``maze_path`` is not read)."""
     if scenario not in SCENARIOS:
         raise UsageError(f"unknown scenario {scenario!r}; scenarios: {', '.join(SCENARIOS)}")
+    d = DEFAULTS[scenario]
+    wspec, agents = check_world_spec(world, world_kwargs, agents, d["agents"], scenario,
+                                     parse_sensor_spec(sensor))
+    if not wspec.from_maze:
+        import tempfile
+        with tempfile.TemporaryDirectory(prefix="tmgwr_gym_") as tmp:
+            out = _run_scenario(scenario, gym_maze(wspec, tmp), agents, trials, seed,
+                                goals or ("G",), episodes, event, goal, jobs, progress,
+                                overrides, params_files, sensor, wspec)
+        out["maze"] = f"{wspec.text} (layout seed {wspec.kwargs.get('layout_seed', 0)})"
+        return out
+    return _run_scenario(scenario, maze_path, agents, trials, seed, goals, episodes, event,
+                         goal, jobs, progress, overrides, params_files, sensor, wspec)
+
+
+def _run_scenario(scenario, maze_path, agents, trials, seed, goals, episodes, event, goal,
+                  jobs, progress, overrides, params_files, sensor, wspec: WorldSpec) -> dict:
     d = DEFAULTS[scenario]
     maze = load_maze(maze_path)
     maze_path = maze.source          # the file found (a name resolves to the installed maze)
@@ -156,7 +237,8 @@ def run_scenario(scenario: str, maze_path: str | Path = DEFAULT_MAZE,
         overrides = check_overrides(agents, overrides, maze)
     spec = check_sensor_spec(sensor, agents)
     maze_s = str(maze_path)
-    common = dict(jobs=jobs, progress=progress, overrides=overrides, sensor=spec.text)
+    common = dict(jobs=jobs, progress=progress, overrides=overrides, sensor=spec.text,
+                  world=wspec)
     if scenario == "goal-change":
         if len(goals) < 2:
             raise UsageError("goal-change needs at least two goals (--goals 1,2,...)")
@@ -172,7 +254,9 @@ def run_scenario(scenario: str, maze_path: str | Path = DEFAULT_MAZE,
         body = timing.run(maze_s, agents, trials, seed, goals, check_event(maze, event, goal),
                           goal, **common)
     out = {"scenario": scenario, "maze": maze_s, "trials": trials, "seed": seed,
-           "sensor": spec.text}
+           "sensor": spec.text, "world": wspec.text}
+    if wspec.kwargs:
+        out["world_kwargs"] = dict(wspec.kwargs)
     out.update({k: v for k, v in body.items() if k != "agents"})
     out["caps"] = asdict(Caps.for_maze(maze))
     if overrides is not None:

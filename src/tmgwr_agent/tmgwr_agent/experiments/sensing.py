@@ -34,7 +34,7 @@ from maze_sim.maze import Cell
 from maze_sim.sensors import SensorSpec, goal_sensation, parse_sensor, sense, wrap
 from maze_sim.world import GridWorld
 from tmgwr_agent.core.senses import Senses
-from tmgwr_agent.world_senses import maze_senses
+from tmgwr_agent.world_senses import env_senses, maze_senses
 
 #: Agents whose table can key on :func:`discretise` of a sensation.
 SENSED_TABLE_AGENTS = ("q_learning", "dyna_q_plus")
@@ -151,6 +151,50 @@ class SensedWorld:
         if self.identity:
             return self.world.goal
         return discretise(self.goal_observation(), self.spec)
+
+
+class HostedWorld:
+    """A world of :mod:`maze_sim.worlds` other than the grid (``--world minigrid``,
+    ``gym:ID``, ...), sensed as it senses: its own sensation wrapper, its own motor
+    primitives, its own declared discretisation for the tables (``state``,
+    ``goal_state``, ``info.cell``). Attributes it does not define are the world's."""
+
+    identity = False
+
+    def __init__(self, world):
+        self.world = world
+
+    def __getattr__(self, name: str):
+        if name == "world":
+            raise AttributeError(name)
+        return getattr(self.world, name)
+
+    def reset(self, seed: int | None = None, start: Cell | None = None):
+        return self.world.reset(seed, start)
+
+    def step(self, action: int):
+        return self.world.step(action)
+
+    @property
+    def senses(self) -> Senses:
+        """The world's Gymnasium spaces: the sensation's dimension and one motor vector
+        per action (one-hot unless the world declares ``primitive_vectors``)."""
+        return env_senses(self.world.env)
+
+
+def check_world(agents, world) -> str | None:
+    """Why ``agents`` cannot run in ``world`` (a :class:`maze_sim.worlds.WorldSpec`), or
+    None: in a world other than the grid only the agents that learn from what they sense
+    run (model_based, rmax and freespace are given the grid's cells and moves)."""
+    if world is None or world.name == "grid":
+        return None
+    for a in agents:
+        name = a.partition(":")[0]
+        if name not in SENSATION_AGENTS and name not in SENSED_TABLE_AGENTS:
+            return (f"agent {a!r} cannot run in --world {world.text}: it is given the grid "
+                    f"world's cells and four moves (agents that learn from what they "
+                    f"sense: tmgwr, {', '.join(SENSED_TABLE_AGENTS)})")
+    return None
 
 
 def check_sensor(agents, spec: SensorSpec) -> str | None:

@@ -79,22 +79,22 @@ import math
 import statistics
 import tempfile
 from dataclasses import asdict
-from functools import partial
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from maze_sim.sensors import IDENTITY
 from maze_sim.suite import SuiteError, SuiteMaze, suite
+from maze_sim.worlds import WorldSpec
 from tmgwr_agent.experiments import env_change, goal_change
 from tmgwr_agent.experiments.parallel import run_items, trial_seeds
-from tmgwr_agent.experiments.runner import Caps, with_overrides
+from tmgwr_agent.experiments.runner import Caps, scenario_trial, with_overrides
 from tmgwr_agent.experiments.scenarios import (
     DEFAULTS,
     UsageError,
-    check_agents,
     check_overrides,
     check_sensor_spec,
+    check_world_spec,
     params_record,
+    parse_sensor_spec,
 )
 from tmgwr_agent.experiments.stats import stat
 
@@ -180,13 +180,10 @@ def _env_summary(mazes: list[dict], agents: list[str], trials: int, skipped: int
     return out
 
 
-def _env_maze(sm: SuiteMaze, event: str, res: dict[str, list[dict]]) -> dict:
+def _env_maze(sm: SuiteMaze, event: str, res: dict[str, list[dict]],
+              world: WorldSpec | None = None) -> dict:
     maze = sm.maze()
-    return {"event": event,
-            "oracle_steps": env_change.oracle_steps(maze, event, GOAL),
-            "shortest_before": maze.shortest_path_length(maze.start, maze.goal_cell(GOAL)),
-            "shortest_after": maze.shortest_path_length(
-                maze.start, maze.goal_cell(GOAL), walls=maze.walls_after([event])),
+    return {"event": event, **env_change.event_oracle(world, maze, event, GOAL),
             "caps": asdict(Caps.for_maze(maze)),
             "agents": {a: {k: stat(r[k] for r in rs) for k in env_change.RESULTS}
                        for a, rs in res.items()}}
@@ -262,10 +259,12 @@ def run_suite(scenario: str, spec: str, agents: Sequence[str] | None = None,
               episodes: int | None = None, jobs: int | None = None, progress: bool = True,
               maze_dir: str | Path | None = None,
               overrides: Mapping[str, Mapping[str, Any]] | None = None,
-              params_files: Sequence[str] = (), sensor: str | None = None) -> dict:
+              params_files: Sequence[str] = (), sensor: str | None = None,
+              world: str | None = None, world_kwargs: str | None = None) -> dict:
     """Run ``scenario`` on every maze of ``spec``; returns the suite JSON (see above).
     ``maze_dir``: where the maze files go (None: a temporary folder, removed after);
-    ``overrides``, ``params_files``, ``sensor``: as for :func:`.scenarios.run_scenario`."""
+    ``overrides``, ``params_files``, ``sensor``, ``world``, ``world_kwargs``: as for
+    :func:`.scenarios.run_scenario` (a ``gym:ID`` world has no suite)."""
     if scenario not in SUITE_SCENARIOS:
         raise UsageError(f"--suite runs {' and '.join(SUITE_SCENARIOS)}, not {scenario}")
     if trials < 1:
@@ -278,8 +277,13 @@ def run_suite(scenario: str, spec: str, agents: Sequence[str] | None = None,
             raise UsageError(f"with --suite, --event is block or open (or a / b), "
                              f"got {event!r}")
         kind = EVENT_KINDS[event]
-    agents = check_agents(agents if agents else DEFAULTS[scenario]["agents"])
+    wspec, agents = check_world_spec(world, world_kwargs, agents,
+                                     DEFAULTS[scenario]["agents"], scenario,
+                                     parse_sensor_spec(sensor))
     sensor = check_sensor_spec(sensor, agents).text
+    if not wspec.from_maze:
+        raise UsageError(f"--world {wspec.text}: a registered env is one layout, not a "
+                         f"suite of mazes")
     if scenario == "goal-change":
         episodes = episodes if episodes is not None else goal_change.DEFAULT_EPISODES
         if episodes < 1:
@@ -298,13 +302,14 @@ def run_suite(scenario: str, spec: str, agents: Sequence[str] | None = None,
         with tempfile.TemporaryDirectory(prefix="tmgwr_suite_") as tmp:
             return _run(scenario, spec, agents, trials, seed, suite_seed, first, kind,
                         episodes, jobs, progress, Path(tmp), mazes, todo, skipped, params,
-                        sensor)
+                        sensor, wspec)
     return _run(scenario, spec, agents, trials, seed, suite_seed, first, kind, episodes,
-                jobs, progress, Path(maze_dir), mazes, todo, skipped, params, sensor)
+                jobs, progress, Path(maze_dir), mazes, todo, skipped, params, sensor, wspec)
 
 
 def _run(scenario, spec, agents, trials, seed, suite_seed, first, kind, episodes, jobs,
-         progress, maze_dir: Path, mazes, todo, skipped, params, sensor: str) -> dict:
+         progress, maze_dir: Path, mazes, todo, skipped, params, sensor: str,
+         wspec: WorldSpec) -> dict:
     for sm in mazes:                      # every maze, skipped ones too: all inspectable
         sm.write(maze_dir)
     seeds = trial_seeds(seed, trials)
@@ -317,8 +322,7 @@ def _run(scenario, spec, agents, trials, seed, suite_seed, first, kind, episodes
                 items.append((a, t, seeds[t]) + extra)
                 owner.append((m, a))
     fn = env_change.trial if scenario == "env-change" else goal_change.trial
-    if sensor != IDENTITY:
-        fn = partial(fn, sensor=sensor)
+    fn = scenario_trial(fn, sensor, wspec)
     fn = with_overrides(fn, params[0] if params else None)
     # Biggest mazes first (the pool's tail is shorter); results go back in item order.
     order = sorted(range(len(items)), key=lambda i: -todo[owner[i][0]][0].free_cells)
@@ -336,7 +340,7 @@ def _run(scenario, spec, agents, trials, seed, suite_seed, first, kind, episodes
         entry = {"name": sm.name, "family": sm.family, "index": sm.index,
                  "file": f"{sm.name}.txt", "free_cells": sm.free_cells}
         if scenario == "env-change":
-            entry.update(_env_maze(sm, arg, r))
+            entry.update(_env_maze(sm, arg, r, wspec))
         else:
             entry.update({"goals": list(arg), "caps": asdict(Caps.for_maze(sm.maze())),
                           "agents": {a: {"transitions": _goal_rows(rs)}
@@ -357,7 +361,9 @@ def _run(scenario, spec, agents, trials, seed, suite_seed, first, kind, episodes
     fam_summary = {f: summary([e for e in entries if e["family"] == f],
                               sum(s["family"] == f for s in skipped)) for f in families}
     out: dict = {"scenario": scenario, "maze": None, "trials": trials, "seed": seed,
-                 "sensor": sensor}
+                 "sensor": sensor, "world": wspec.text}
+    if wspec.kwargs:
+        out["world_kwargs"] = dict(wspec.kwargs)
     if scenario == "env-change":
         out.update({"event": kind, "goal": GOAL})
     else:

@@ -24,19 +24,20 @@ run (same seeds, same load), not across runs.
 from __future__ import annotations
 
 import time
-from functools import partial
 from typing import Any, Mapping
 
 import numpy as np
 
 from maze_sim.maze import Maze
 from maze_sim.sensors import IDENTITY
+from maze_sim.worlds import WorldSpec
 from tmgwr_agent.experiments.agent_factory import make_agent
 from tmgwr_agent.experiments.parallel import agent_trials
 from tmgwr_agent.experiments.runner import (
     Caps,
     make_world,
     run_episode,
+    scenario_trial,
     set_goal,
     train_until_converged,
     with_overrides,
@@ -48,12 +49,13 @@ DEFAULT_GOALS = ("4", "3")
 
 def trial(spec: str, t: int, seed: np.random.SeedSequence, maze_path: str,
           goals: tuple[str, str], event: str, goal: str = "G",
-          overrides: Mapping[str, Any] | None = None, *, sensor: str = IDENTITY) -> dict:
+          overrides: Mapping[str, Any] | None = None, *, sensor: str = IDENTITY,
+          world_spec: WorldSpec | None = None) -> dict:
     maze = Maze.from_file(maze_path)
     caps = Caps.for_maze(maze)
     s_train, s_adapt = seed.spawn(2)
     # training on G, then the event
-    world = make_world(maze, goal, caps, sensor, s_train)
+    world = make_world(maze, goal, caps, sensor, s_train, world_spec)
     agent = make_agent(spec, maze, np.random.default_rng(s_train), overrides,
                        sensed=not world.identity, senses=world.senses)
     set_goal(world, agent, goal)
@@ -64,7 +66,7 @@ def trial(spec: str, t: int, seed: np.random.SeedSequence, maze_path: str,
     ep = run_episode(world, agent)
     event_s = time.process_time() - t0 if ep.reached_goal else None
     # training on goals[0], then the goal moves to goals[1]
-    world = make_world(maze, goals[0], caps, sensor, s_adapt)
+    world = make_world(maze, goals[0], caps, sensor, s_adapt, world_spec)
     agent = make_agent(spec, maze, np.random.default_rng(s_adapt), overrides,
                        sensed=not world.identity, senses=world.senses)
     set_goal(world, agent, goals[0])
@@ -81,12 +83,12 @@ def run(maze_path: str, agents: list[str], trials: int, seed: int,
         goals: tuple[str, ...] = DEFAULT_GOALS, event: str = "a", goal: str = "G",
         jobs: int | None = None, progress: bool = True,
         overrides: Mapping[str, Mapping[str, Any]] | None = None,
-        sensor: str = IDENTITY) -> dict:
+        sensor: str = IDENTITY, world: WorldSpec | None = None) -> dict:
     """``overrides``: parameter overrides per agent spec (absent: the defaults);
     ``sensor``: the normalised ``--sensor`` spec."""
     if len(goals) != 2:
         raise ValueError(f"timing takes two goals FROM,TO (got {','.join(goals)})")
-    fn = partial(trial, sensor=sensor) if sensor != IDENTITY else trial
+    fn = scenario_trial(trial, sensor, world)
     res = agent_trials(with_overrides(fn, overrides), agents, seed, trials,
                        (maze_path, tuple(goals), event, goal), jobs, "timing", progress)
     out = {a: {k: stat(r[k] for r in rs)

@@ -97,13 +97,14 @@ import yaml
 from maze_sim.maze import Maze
 from maze_sim.suite import SuiteError, suite
 from maze_sim.suite import parse_spec as suite_counts
+from maze_sim.worlds import WorldError, WorldSpec, parse_world
 from tmgwr_agent.experiments import env_change
 from tmgwr_agent.experiments.agent_factory import AGENT_NAMES, baseline_class, make_agent
 from tmgwr_agent.experiments.agent_factory import parse_spec as parse_agent
-from tmgwr_agent.experiments.env_change import oracle_steps
 from tmgwr_agent.experiments.parallel import run_items, trial_seeds, warm_up
 from tmgwr_agent.experiments.runner import Caps
 from tmgwr_agent.experiments.scenarios import UsageError
+from tmgwr_agent.experiments.sensing import check_world
 from tmgwr_common.params import (
     Param,
     ParamError,
@@ -333,30 +334,30 @@ class Task:
     oracle: int
     cap_ratio: float           # a failed episode's ratio: episode_steps / oracle
     kind: str = "block"
+    world: WorldSpec | None = None   # --world (None: the grid), oracles in its steps
 
     @classmethod
-    def of(cls, sm, kind: str = "block") -> "Task":
+    def of(cls, sm, kind: str = "block", world: WorldSpec | None = None) -> "Task":
         maze = sm.maze()
         if kind == "open":
-            d = maze.shortest_path_length(maze.start, maze.goal_cell(GOAL),
-                                          walls=maze.walls_after([sm.open_event]))
+            d = env_change.event_oracle(world, maze, sm.open_event, GOAL)["shortest_after"]
             return cls(sm.name, sm.family, sm.text, sm.open_event, d,
-                       Caps.for_maze(maze).episode_steps / d, kind)
-        oracle = oracle_steps(maze, sm.block_event, GOAL)
+                       Caps.for_maze(maze).episode_steps / d, kind, world)
+        oracle = env_change.event_oracle(world, maze, sm.block_event, GOAL)["oracle_steps"]
         return cls(sm.name, sm.family, sm.text, sm.block_event, oracle,
-                   Caps.for_maze(maze).episode_steps / oracle)
+                   Caps.for_maze(maze).episode_steps / oracle, "block", world)
 
 
-def tasks(spec: str, suite_seed: int, first: int, kind: str = "block"
-          ) -> tuple[list[Task], list[str]]:
+def tasks(spec: str, suite_seed: int, first: int, kind: str = "block",
+          world: WorldSpec | None = None) -> tuple[list[Task], list[str]]:
     """The mazes of a split with a block event (``kind`` "open": an opening), and the
-    names of those without one."""
+    names of those without one; ``world``: the ``--world`` they run in."""
     try:
         mazes = suite(spec, suite_seed, first)
     except SuiteError as exc:
         raise UsageError(str(exc)) from exc
     event = (lambda sm: sm.open_event) if kind == "open" else (lambda sm: sm.block_event)
-    todo = [Task.of(sm, kind) for sm in mazes if event(sm)]
+    todo = [Task.of(sm, kind, world) for sm in mazes if event(sm)]
     skipped = [sm.name for sm in mazes if not event(sm)]
     if not todo:
         raise UsageError(f"suite {spec!r} has no maze with an opening (blocking mazes "
@@ -372,7 +373,7 @@ def block_run(agent: str, overrides: Mapping[str, Any], task: Task,
     overrides: train on G to convergence, fire the block, the first episode's steps."""
     maze = Maze.from_text(task.text, source=task.name)
     r = env_change.trial(agent, 0, seed, maze, task.event, GOAL, overrides,
-                         to_optimal=False)
+                         to_optimal=False, world_spec=task.world)
     return {"steps": r["steps"], "train_episodes": r["train_episodes"]}
 
 
@@ -383,7 +384,7 @@ def open_run(agent: str, overrides: Mapping[str, Any], task: Task,
     (``None``: not within the cap)."""
     maze = Maze.from_text(task.text, source=task.name)
     r = env_change.trial(agent, 0, seed, maze, task.event, GOAL, overrides,
-                         within=OPEN_WITHIN)
+                         within=OPEN_WITHIN, world_spec=task.world)
     return {"episodes": r["episodes_to_optimal"], "train_episodes": r["train_episodes"]}
 
 
@@ -482,12 +483,19 @@ class Setup:
     space: tuple[tuple, ...]      # (name, low, high, log, integer) per searched parameter
     open_suite: str = ""          # the openings' split ("": none)
     open_weight: float = 0.0
+    world: str = "grid"           # --world (and --world-kwargs JSON, "" none)
+    world_kwargs: str = ""
+
+    @property
+    def world_spec(self) -> WorldSpec:
+        return parse_world(self.world, self.world_kwargs)
 
     def task_list(self) -> list[Task]:
         """The block tasks, then the opening tasks, of the training split."""
-        todo, _ = tasks(self.suite, self.suite_seed, self.suite_first)
+        w = self.world_spec
+        todo, _ = tasks(self.suite, self.suite_seed, self.suite_first, world=w)
         if self.open_suite:
-            todo += tasks(self.open_suite, self.suite_seed, self.suite_first, "open")[0]
+            todo += tasks(self.open_suite, self.suite_seed, self.suite_first, "open", w)[0]
         return todo
 
     def dims(self) -> list[Dim]:
@@ -587,6 +595,8 @@ def _create(storage: str, study_name: str, setup: Setup):
     study = optuna.create_study(study_name=study_name, storage=open_storage(storage),
                                 direction="minimize", load_if_exists=True)
     mine = json.loads(json.dumps(asdict(setup)))
+    if mine["world"] == "grid" and not mine["world_kwargs"]:
+        del mine["world"], mine["world_kwargs"]   # as studies made before --world store it
     mine["space"] = sorted(mine["space"])       # the same space named in any order
     theirs = study.user_attrs.get("setup")
     if theirs is not None and "space" in theirs:
@@ -771,13 +781,14 @@ def _table(held: dict) -> str:
 
 def held_out(agent: str, params: Mapping[str, Any], spec: str, suite_seed: int,
              first: int, trials: int, seed: int, jobs: int, progress: bool,
-             open_spec: str = "", open_weight: float = 0.0) -> dict:
+             open_spec: str = "", open_weight: float = 0.0,
+             world: WorldSpec | None = None) -> dict:
     """The tuned parameters and the defaults on a held-out split (same runs as tuning;
-    ``open_spec``: its openings)."""
-    task_list, skipped = tasks(spec, suite_seed, first)
+    ``open_spec``: its openings; ``world``: the ``--world``)."""
+    task_list, skipped = tasks(spec, suite_seed, first, world=world)
     names = [t.name for t in task_list]
     if open_spec:
-        task_list += tasks(open_spec, suite_seed, first, "open")[0]
+        task_list += tasks(open_spec, suite_seed, first, "open", world)[0]
     seeds = trial_seeds(seed, trials)
     res = {label: evaluate(agent, p, task_list, seeds, jobs, progress, f"held-out {label}",
                            open_weight)
@@ -811,7 +822,19 @@ def run(args) -> int:
         raise UsageError("--trials, --workers, --seeds and --eval-trials must be >= 1")
     if args.suite_seed < 0 or args.suite_first < 0:
         raise UsageError("--suite-seed and --suite-first must be >= 0")
+    try:
+        wspec = parse_world(args.world, args.world_kwargs)
+    except WorldError as exc:
+        raise UsageError(f"--world: {exc}") from None
+    if not wspec.from_maze:
+        raise UsageError(f"--world {wspec.text}: tuning runs the env-change protocol on a "
+                         f"maze suite; a registered env has neither")
+    why = check_world([args.agent], wspec)
+    if why:
+        raise UsageError(f"--world: {why}")
     study_name = args.study or args.agent.replace(":", "-").replace("+", "-")
+    if wspec.name != "grid" and not args.study:
+        study_name += f"-{wspec.name}"
     storage = args.storage or str(RESULTS / "optuna.journal")
     if args.open_weight < 0:
         raise UsageError("--open-weight must be >= 0")
@@ -819,8 +842,9 @@ def run(args) -> int:
     setup = Setup(args.agent, args.suite, args.suite_seed, args.suite_first, args.seeds,
                   args.seed, PENALTY,
                   tuple((d.name, d.low, d.high, d.log, d.integer) for d in dims),
-                  open_suite, args.open_weight if open_suite else 0.0)
-    _, skipped = tasks(args.suite, args.suite_seed, args.suite_first)
+                  open_suite, args.open_weight if open_suite else 0.0, wspec.name,
+                  args.world_kwargs or "")
+    _, skipped = tasks(args.suite, args.suite_seed, args.suite_first, world=wspec)
     task_list = setup.task_list()
     study = _create(storage, study_name, setup)
     if not args.quiet:
@@ -866,7 +890,8 @@ def run(args) -> int:
                       "suite": args.suite, "open_suite": open_suite,
                       "open_weight": setup.open_weight, "suite_seed": args.suite_seed,
                       "suite_first": args.suite_first, "mazes": [t.name for t in task_list],
-                      "skipped": skipped, "seeds": args.seeds, "seed": args.seed},
+                      "skipped": skipped, "seeds": args.seeds, "seed": args.seed,
+                      "world": wspec.text},
         "space": [{"name": d.name, "low": d.low, "high": d.high, "log": d.log,
                    "integer": d.integer, "default": d.default} for d in dims],
         "budget": args.trials,
@@ -888,7 +913,8 @@ def run(args) -> int:
         open_spec = (args.eval_open_suite or open_suite) if open_suite else ""
         summary["held_out"] = held_out(args.agent, params, spec, args.suite_seed, first,
                                        args.eval_trials, args.seed, args.workers,
-                                       not args.quiet, open_spec, setup.open_weight)
+                                       not args.quiet, open_spec, setup.open_weight,
+                                       wspec)
     out_json = Path(args.json or RESULTS / f"{study_name}.json")
     out_json.parent.mkdir(parents=True, exist_ok=True)
     out_json.write_text(json.dumps(summary, indent=1, default=_json_default) + "\n")

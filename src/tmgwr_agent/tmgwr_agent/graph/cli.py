@@ -190,10 +190,10 @@ def _run_settings(args) -> tuple[dict, Path | None, Path | None]:
              "params_files": [str(Path(f).expanduser().resolve()) for f in args.params_file],
              "composed": args.composed, "world": args.world}
     if args.world is not None:
-        from maze_sim.worlds import WORLDS
-        if args.world not in WORLDS:
-            raise resume.ResumeError(f"--world: unknown world {args.world!r}; worlds: "
-                                     f"{', '.join(WORLDS)}")
+        from tmgwr_agent.world_senses import GRAPH_WORLDS
+        if args.world not in GRAPH_WORLDS:
+            raise resume.ResumeError(f"--world: unknown world {args.world!r}; worlds the "
+                                     f"graph hosts: {', '.join(GRAPH_WORLDS)}")
     if not args.resume:
         run_dir = None if args.no_record else Path(args.record_dir or default_run_dir())
         return given, run_dir, run_dir
