@@ -175,7 +175,7 @@ def test_resume_finds_the_run_and_keeps_its_settings(tmp_path, monkeypatch):
         resume.find_run(str(tmp_path / "empty"))
     s = resume.merged_settings(run, {"seed": None, "goal": "2", "params_files": []})
     assert s == {"maze": "/m.txt", "seed": 1, "goal": "2", "params_files": ["/p.yaml"],
-                 "composed": False}
+                 "composed": False, "world": None}
     with pytest.raises(resume.ResumeError, match="--seed 2 differs from the run's seed 1"):
         resume.merged_settings(run, {"seed": 2})
     assert resume.resumed_bag_dir(run) == run / "resumed_1"

@@ -24,15 +24,19 @@ is ``K = K_push + K_brake`` physics steps of the env's own dynamics
 (:func:`physics_step`, what ``PointEnv.step`` does): full force along the direction for
 ``K_push`` steps, then a brake, the force opposing the velocity (``-v`` scaled so that one
 physics step would stop the point, clipped to full force) for up to ``K_brake`` steps or
-until the point is at rest. So a primitive is a move of about one cell that ends at rest:
+until the point is at rest. So a primitive is a move of :func:`step_length` that ends at rest:
 the next primitive starts from rest and the position alone tells where the point is
 (without the brake the point, damped by 1 N s/m for its 4.2 kg, would glide on for seconds
 and a position would not tell what a force does next).
 
+The move's length is the largest ``S / n`` not longer than ``sqrt 2`` times the success
+radius (half a cell here): a bump leaves the point off a cell's centre on that axis, and
+with moves of a whole cell that offset would stay for ever; with this length some point of
+the move lattice always lies within the success radius of the goal's centre.
 ``K_push`` and ``K_brake`` are derived from the world by :func:`primitive_steps`, measured
 once per process on the env's point model in free space (no walls, the same XML): the
 point at rest pushed for ``n`` steps and braked to rest travels ``d(n)``; ``K_push`` is
-the ``n`` whose ``d(n)`` is nearest one cell ``S``, ``K_brake`` the number of steps the
+the ``n`` whose ``d(n)`` is nearest that length, ``K_brake`` the number of steps the
 brake took to bring that move to rest, plus :data:`BRAKE_MARGIN` (a move that ran into a
 wall may need a few more).
 

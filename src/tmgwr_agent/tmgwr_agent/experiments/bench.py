@@ -659,9 +659,8 @@ SCALING_HEADER = ("family", "cells", "nodes", "median us", "p99 us", "mean us",
                   "incremental solves")
 
 
-def scaling_table(result: dict) -> str:
-    """The scaling rows (issue 27) as a table, with the slopes."""
-    from tmgwr_agent.experiments.report import _table
+def scaling_rows(result: dict) -> list[list[str]]:
+    """The scaling rows as text cells under :data:`SCALING_HEADER`."""
     rows = []
     for r in result.get("scaling") or []:
         sv = r.get("solves") or {}
@@ -672,6 +671,13 @@ def scaling_table(result: dict) -> str:
                      f"{r['goal_change_first_ms']:.1f}",
                      f"{r['block_episode_ms']:.1f} ({r['block_episode_steps']})",
                      f"{sv.get('incremental', 0)} / {total}" if total else "-"])
+    return rows
+
+
+def scaling_table(result: dict) -> str:
+    """The scaling rows (issue 27) as a table, with the slopes."""
+    from tmgwr_agent.experiments.report import _table
+    rows = scaling_rows(result)
     slopes = ", ".join(f"{f} {v:.2f}" for f, v in (result.get("scaling_slopes") or {}).items())
     return ("scaling (issue 27): converged core step against map size; log-log slope of the "
             f"median from ~1,400 cells: {slopes or '-'}\n" + _table(list(SCALING_HEADER), rows))

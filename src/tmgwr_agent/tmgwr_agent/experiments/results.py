@@ -290,10 +290,26 @@ def table_bench(root: Path) -> str:
     return _md(list(RATIO_HEADER), rows) + "\n\n" + _source(d)
 
 
+def table_bench_scaling(root: Path) -> str:
+    """`make bench`'s scaling rows: the converged core step against the map's size."""
+    from tmgwr_agent.experiments.bench import SCALING_HEADER, scaling_rows
+    d = load("bench", root)
+    r = d["result"]
+    if not r.get("scaling"):
+        raise ResultsError("results/bench.json has no scaling rows (record it again with "
+                           "`./tmgwr results record bench -- bench`)")
+    slopes = ", ".join(f"{f} {v:.2f}" for f, v in sorted(r["scaling_slopes"].items()))
+    return (_md(list(SCALING_HEADER), scaling_rows(r))
+            + "\n\nMedian, p99 and mean of the converged core step over 2,000 learning steps, "
+            "the median over a pure lookup of the winner's best link on the same map, the "
+            "first step after a goal change, and the episode after a block. Log-log slope "
+            f"of the median against nodes from about 1,400 cells: {slopes}. " + _source(d))
+
+
 #: The sensors of the sensing table, and the results file of each.
 SENSORS = (("identity", "sensing_identity"), ("scale=1:2", "sensing_scale-1_2"),
            ("scale=1:5", "sensing_scale-1_5"), ("rotate=30", "sensing_rotate-30"),
-           ("noise=0.1", "sensing_noise-0p1"), ("noise=0.2", "sensing_noise-0p2"))
+           ("noise=0.1", "sensing_noise-0p1"))
 
 
 def table_sensing(root: Path) -> str:
@@ -354,6 +370,35 @@ def table_view(root: Path) -> str:
             + _source(d))
 
 
+#: The worlds table: the world and its results file (env-change on the default maze).
+WORLD_RESULTS = (("minigrid", "world_minigrid"), ("pointmaze", "world_pointmaze"))
+
+
+def table_worlds(root: Path) -> str:
+    """The default maze in the worlds of ``--world``, per agent: the trials that converged
+    before the event, the steps of the first episode after the block over the world's
+    oracle (each trial; ``-``: the goal was not reached within the caps), and the episodes
+    until a greedy rollout is optimal again."""
+    docs = [(w, load(name, root)) for w, name in WORLD_RESULTS]
+    rows = []
+    for w, d in docs:
+        r = d["result"]
+        for a, v in r["agents"].items():
+            n = len(v["steps"]["values"])
+            conv = sum(e is not None for e in v["train_episodes"]["values"])
+            steps = " / ".join("-" if x is None else f"{x / r['oracle_steps']:.1f}"
+                               for x in v["steps"]["values"])
+            eps = " / ".join("-" if x is None else str(x)
+                             for x in v["episodes_to_optimal"]["values"])
+            rows.append([w, f"`{a}`", f"{conv} of {n}", steps, eps])
+    header = ["world", "agent", "converged", "steps after the block / oracle (each trial)",
+              "episodes to optimal"]
+    oracles = ", ".join(f"{w} {d['result']['oracle_steps']}" for w, d in docs)
+    return (_md(header, rows)
+            + f"\n\nDefault maze, event `a`, oracle steps in each world's own primitives "
+            f"({oracles}). " + _source(*(d for _, d in docs)))
+
+
 #: Marked table name -> the function that generates it from results/.
 TABLES: dict[str, Callable[[Path], str]] = {
     "headline": table_headline,
@@ -364,8 +409,10 @@ TABLES: dict[str, Callable[[Path], str]] = {
     "suite": table_suite,
     "suite-openings": table_suite_openings,
     "bench": table_bench,
+    "bench-scaling": table_bench_scaling,
     "sensing": table_sensing,
     "sensing-view": table_view,
+    "worlds": table_worlds,
     "rivals-blocks": lambda root: table_suite(root, "rivals_blocks"),
     "rivals-openings": lambda root: table_suite_openings(root, "rivals_openings"),
 }
