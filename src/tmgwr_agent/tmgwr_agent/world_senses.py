@@ -28,13 +28,16 @@ def env_senses(env) -> Senses:
 
 
 def world_senses(world) -> Senses:
-    """The senses of a world hosted by name (``maze_sim.worlds``): the grid world's
-    (:func:`maze_senses`), or those a world declares (``observation_space``,
-    ``action_space``, ``primitive_vectors``)."""
-    if not hasattr(world, "observation_space"):
-        return maze_senses()
-    return Senses.from_spaces(world.observation_space, world.action_space,
-                              getattr(world, "primitive_vectors", None))
+    """The senses of a world hosted by name (``maze_sim.worlds``): those a world declares
+    itself (``observation_space``, ``action_space``, ``primitive_vectors``: PointMaze),
+    else those of the Gymnasium env it drives (``env``, seen through its sensation
+    wrapper: MiniGrid, ``gym:ID``), else the grid world's (:func:`maze_senses`)."""
+    if hasattr(world, "observation_space"):
+        return Senses.from_spaces(world.observation_space, world.action_space,
+                                  getattr(world, "primitive_vectors", None))
+    if getattr(world, "env", None) is not None:
+        return env_senses(world.env)
+    return maze_senses()
 
 
 #: The worlds the ROS graph hosts (the agent nodes know their senses by name).

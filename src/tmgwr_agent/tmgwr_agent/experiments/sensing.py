@@ -34,7 +34,7 @@ from maze_sim.maze import Cell
 from maze_sim.sensors import SensorSpec, goal_sensation, parse_sensor, sense, wrap
 from maze_sim.world import GridWorld
 from tmgwr_agent.core.senses import Senses
-from tmgwr_agent.world_senses import env_senses, maze_senses
+from tmgwr_agent.world_senses import maze_senses, world_senses
 
 #: Agents whose table can key on :func:`discretise` of a sensation.
 SENSED_TABLE_AGENTS = ("q_learning", "dyna_q_plus")
@@ -177,9 +177,10 @@ class HostedWorld:
 
     @property
     def senses(self) -> Senses:
-        """The world's Gymnasium spaces: the sensation's dimension and one motor vector
-        per action (one-hot unless the world declares ``primitive_vectors``)."""
-        return env_senses(self.world.env)
+        """The world's senses (:func:`~tmgwr_agent.world_senses.world_senses`): the
+        sensation's dimension and one motor vector per action (one-hot unless the world
+        declares ``primitive_vectors``)."""
+        return world_senses(self.world)
 
 
 def check_world(agents, world) -> str | None:
