@@ -54,15 +54,20 @@ from tmgwr_agent.experiments.scenarios import DEFAULT_MAZE
 from tmgwr_agent.experiments.stats import stat
 
 
-def time_steps(world, agent, n: int) -> np.ndarray:
-    """Nanoseconds of ``act`` + ``observe`` for ``n`` steps of training episodes."""
-    out = np.empty(n, dtype=np.int64)
+def timed_steps(world, agent, n: int, clock=time.perf_counter_ns
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``n`` steps of training episodes, timed by ``clock`` (nanoseconds): the agent's
+    (``act`` + ``observe``) and the world's (``step``) apart, and the winner each step
+    acted from."""
+    agent_ns = np.empty(n, dtype=np.int64)
+    world_ns = np.empty(n, dtype=np.int64)
+    win = np.empty(n, dtype=np.int64)
     i = 0
-    clock = time.perf_counter_ns
     while i < n:
         obs, _ = world.reset()
         agent.begin_episode(obs, world.cell)
         while i < n:
+            win[i] = agent.winner
             t0 = clock()
             a = agent.act()
             t1 = clock()
@@ -70,11 +75,16 @@ def time_steps(world, agent, n: int) -> np.ndarray:
             t2 = clock()
             agent.observe(obs, info)
             t3 = clock()
-            out[i] = (t1 - t0) + (t3 - t2)
+            agent_ns[i], world_ns[i] = (t1 - t0) + (t3 - t2), t2 - t1
             i += 1
             if term or trunc:
                 break
-    return out
+    return agent_ns, world_ns, win
+
+
+def time_steps(world, agent, n: int) -> np.ndarray:
+    """Nanoseconds of ``act`` + ``observe`` for ``n`` steps of training episodes."""
+    return timed_steps(world, agent, n)[0]
 
 
 def step_stats(ns: np.ndarray, agent, maze: Maze, trained_episodes: int | None) -> dict:
@@ -120,26 +130,7 @@ def bench_large(seed: int, steps: int, max_episodes: int = 20) -> dict:
 def time_split(world, agent, n: int) -> tuple[np.ndarray, np.ndarray]:
     """CPU nanoseconds (``time.thread_time_ns``) of the agent (``act`` + ``observe``) and
     of the world (``step``), apart, over ``n`` steps of training episodes."""
-    agent_ns = np.empty(n, dtype=np.int64)
-    world_ns = np.empty(n, dtype=np.int64)
-    clock = time.thread_time_ns
-    i = 0
-    while i < n:
-        obs, _ = world.reset()
-        agent.begin_episode(obs, world.cell)
-        while i < n:
-            t0 = clock()
-            a = agent.act()
-            t1 = clock()
-            obs, _, term, trunc, info = world.step(a)
-            t2 = clock()
-            agent.observe(obs, info)
-            t3 = clock()
-            agent_ns[i], world_ns[i] = (t1 - t0) + (t3 - t2), t2 - t1
-            i += 1
-            if term or trunc:
-                break
-    return agent_ns, world_ns
+    return timed_steps(world, agent, n, time.thread_time_ns)[:2]
 
 
 #: The worlds whose agent and world CPU per step ``bench_worlds`` measures.
@@ -499,27 +490,8 @@ def lookup_floor_ns(agent, winners: np.ndarray) -> np.ndarray:
 
 def time_steps_winners(world, agent, n: int) -> tuple[np.ndarray, np.ndarray]:
     """:func:`time_steps`, with the winner each step acted from."""
-    ns = np.empty(n, dtype=np.int64)
-    win = np.empty(n, dtype=np.int64)
-    i = 0
-    clock = time.perf_counter_ns
-    while i < n:
-        obs, _ = world.reset()
-        agent.begin_episode(obs, world.cell)
-        while i < n:
-            win[i] = agent.winner
-            t0 = clock()
-            a = agent.act()
-            t1 = clock()
-            obs, _, term, trunc, info = world.step(a)
-            t2 = clock()
-            agent.observe(obs, info)
-            t3 = clock()
-            ns[i] = (t1 - t0) + (t3 - t2)
-            i += 1
-            if term or trunc:
-                break
-    return ns, win
+    agent_ns, _, win = timed_steps(world, agent, n)
+    return agent_ns, win
 
 
 def goal_change_first_ms(world, agent, goal_cell) -> float:
