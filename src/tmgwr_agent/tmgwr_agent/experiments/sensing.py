@@ -183,25 +183,40 @@ class HostedWorld:
         return world_senses(self.world)
 
 
+def given_cells(agents) -> str | None:
+    """The first of ``agents`` (specs such as ``tmgwr:paper``) that is given the grid
+    world's true cells rather than learning from what it senses, or None."""
+    for a in agents:
+        name = a.partition(":")[0]
+        if name not in SENSATION_AGENTS and name not in SENSED_TABLE_AGENTS:
+            return a
+    return None
+
+
 def check_world(agents, world) -> str | None:
     """Why ``agents`` cannot run in ``world`` (a :class:`maze_sim.worlds.WorldSpec`), or
     None: in a world other than the grid only the agents that learn from what they sense
     run (model_based, rmax and freespace are given the grid's cells and moves)."""
     if world is None or world.name == "grid":
         return None
-    for a in agents:
-        name = a.partition(":")[0]
-        if name not in SENSATION_AGENTS and name not in SENSED_TABLE_AGENTS:
-            return (f"agent {a!r} cannot run in --world {world.text}: it is given the grid "
-                    f"world's cells and four moves (agents that learn from what they "
-                    f"sense: tmgwr, {', '.join(SENSED_TABLE_AGENTS)})")
-    return None
+    a = given_cells(agents)
+    if a is None:
+        return None
+    return (f"agent {a!r} cannot run in --world {world.text}: it is given the grid "
+            f"world's cells and four moves (agents that learn from what they "
+            f"sense: tmgwr, {', '.join(SENSED_TABLE_AGENTS)})")
 
 
 def check_sensor(agents, spec: SensorSpec) -> str | None:
     """Why ``agents`` (specs such as ``tmgwr:paper``) cannot run under ``spec``, or None."""
     if spec.identity:
         return None
+    a = given_cells(agents)
+    if a is None:
+        return None
+    return (f"agent {a!r} cannot run under --sensor {spec.text}: it keys on the "
+            f"true cell (agents that learn from what they sense: tmgwr, "
+            f"{', '.join(SENSED_TABLE_AGENTS)})")
     for a in agents:
         name = a.partition(":")[0]
         if name not in SENSATION_AGENTS and name not in SENSED_TABLE_AGENTS:
