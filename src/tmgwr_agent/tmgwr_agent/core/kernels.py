@@ -314,7 +314,7 @@ def stale_savings(w, alive, n, delta, L, gamma, grid, origin, tried, bump_e, suc
     before) or its best exit (:func:`wall_exits`, ``k`` cells along its run then one step
     out: ``k + 2``), against ``route`` steps. The pairs with a saving go to ``res_i``,
     ``res_a``, ``res_s``; returns how many. ``onb`` / ``ong``: scratch."""
-    x = np.empty(w.shape[1])
+    x, y, z = np.empty(w.shape[1]), np.empty(w.shape[1]), np.empty(w.shape[1])
     Vd = np.zeros(n + 1)                       # gamma^dg: wall_exits then picks min k + dg
     for q in range(n):
         if dg[q] >= 0:
@@ -337,7 +337,8 @@ def stale_savings(w, alive, n, delta, L, gamma, grid, origin, tried, bump_e, suc
                 for b in range(onb.shape[2]):
                     onb[i, a, b] = -1
                     ong[i, a, b] = 0.0
-                if wall_exits(w, i, a, x, delta, L, grid, origin, Vd, gamma, onb, ong):
+                if wall_exits_into(w, i, a, x, delta, L, grid, origin, Vd, gamma, onb, ong,
+                                   y, z):
                     for b in range(onb.shape[2]):
                         q = onb[i, a, b]
                         if q >= 0 and dg[q] >= 0:
@@ -977,6 +978,13 @@ def untried_chain(out, E, n, alive, absorbing, w, delta, L, grid, origin, tried,
 
 @njit(cache=True)
 def wall_exits(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong):
+    """:func:`wall_exits_into` with its own scratch."""
+    return wall_exits_into(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong,
+                           np.empty(w.shape[1]), np.empty(w.shape[1]))
+
+
+@njit(cache=True)
+def wall_exits_into(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong, y, z):
     """Where the remembered wall cell x (primitive a from node i bumped into it) leads if
     it opened (motivation.py, Eq. 5'): a wall opens along its run, so the cells opened
     with it may be a straight run of unknown cells from x in any direction but back to i
@@ -994,15 +1002,14 @@ def wall_exits(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong):
     the last solve's V go to ``onb[i, a]`` / ``ong[i, a]`` (ties: the nearest); the
     sweep takes the max over them with the V it iterates. Returns whether there is any
     exit. A primitive that never moved the agent (``|delta_a| <= L / 2``) has no cell
-    to open."""
+    to open. ``y``, ``z``: scratch of the sensation's size (this runs for every stale
+    wall at an episode's start)."""
     P = delta.shape[0]
     step2 = 0.0
     for k in range(w.shape[1]):
         step2 += delta[a, k] * delta[a, k]
     if step2 <= 0.25 * L * L:
         return False
-    y = np.empty(w.shape[1])
-    z = np.empty(w.shape[1])
     found = False
     for b in range(-1, P):
         back = False
@@ -1108,6 +1115,14 @@ def option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, c
             j = succ[i, a]
         else:
             r = 0.0
+        if r == 0.0:                    # no option (most pairs): nothing to look up
+            for b in range(U.shape[1]):
+                onb[i, a, b] = -1
+                ong[i, a, b] = 0.0
+            rho[i, a] = 0.0
+            U[i, a] = 0.0
+            osucc[i, a] = -1
+            continue
         d = 0.0
         for k in range(w.shape[1]):
             x[k] = w[i, k] + delta[a, k]
