@@ -14,15 +14,28 @@ def test_scaling_alone_writes_the_rows(tmp_path):
     out = tmp_path / "scaling.json"
     assert scaling_main(["--families", "open", "--cells", "80", "--steps", "30",
                          "--json", str(out)]) == 0
-    rows = json.loads(out.read_text())["scaling"]
+    result = json.loads(out.read_text())
+    assert result["scaling_clock"] == "wall"
+    rows = result["scaling"]
     assert len(rows) == 1 and rows[0]["family"] == "open"
     for key in ("cells", "nodes", "step_median_us", "step_p99_us", "step_mean_us",
                 "goal_change_first_ms", "block_episode_ms"):
         assert rows[0][key] > 0, key
 
 
+def test_scaling_by_cpu_time(tmp_path):
+    """--clock cpu times the rows by the thread's CPU time (a loaded machine)."""
+    out = tmp_path / "scaling.json"
+    assert scaling_main(["--families", "braided", "--cells", "80", "--steps", "20",
+                         "--clock", "cpu", "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert result["scaling_clock"] == "cpu"
+    assert result["scaling"][0]["step_median_us"] > 0
+    assert result["scaling"][0]["goal_change_first_ms"] > 0
+
+
 @pytest.mark.parametrize("args", [["--families", "rooms"], ["--cells", "3x"],
-                                  ["--steps", "0"]])
+                                  ["--steps", "0"], ["--clock", "sundial"]])
 def test_bad_arguments_exit_2_naming_them(args):
     p = subprocess.run([sys.executable, "-m", "tmgwr_agent.experiments.bench", *args],
                        capture_output=True, text=True, timeout=120)

@@ -87,6 +87,115 @@ def test_incremental_equals_a_full_solve_after_random_edits(seed):
     assert updates > 0
 
 
+def removal(rng, out, E, R, absorbing, o, n):
+    """One random edit that may lower values (what kernels.invalidate prepares for): a
+    link removed or its E lowered or zeroed, a reward gone, a node made absorbing, an
+    option gone. Returns the rows it touched."""
+    i = int(rng.integers(n))
+    kind = rng.integers(5)
+    s = np.flatnonzero(out[i] >= 0)
+    if kind == 0 and len(s):
+        out[i, s[0]] = -1
+        E[i, s[0]] = 0.0
+    elif kind == 1 and len(s):
+        E[i, s[0]] = 0.0 if rng.random() < 0.5 else E[i, s[0]] * rng.uniform(0.1, 0.9)
+    elif kind == 2:
+        R[i] = 0.0
+    elif kind == 3:
+        absorbing[i] = True
+    else:
+        o.rho[i] = 0.0
+    return [i]
+
+
+def full_ordered(out, E, R, absorbing, alive, o, n):
+    """kernels.ordered_solve from V = 0 over every node; (V, updates)."""
+    V = np.zeros(n + 1)
+    first, pred = kernels.predecessors(out, n, alive, o.osucc, o.onb)
+    heap, pos, key = np.empty(n, np.int64), np.full(n, -1, np.int64), np.zeros(n)
+    done = kernels.ordered_solve(out, E, R, V, n, GAMMA, TOL * (1 - GAMMA), FLOOR, absorbing,
+                                 alive, o.U, o.rho, o.osucc, o.onb, o.ong, first, pred,
+                                 np.arange(n, dtype=np.int64), n, 100 * n, heap, pos, key)
+    assert (pos == -1).all()
+    return V, done
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_an_ordered_solve_from_zero_equals_a_full_solve(seed):
+    """The goal-change solve (kernels.ordered_solve from V = 0, largest values first):
+    V within vi_tol of the exact fixed point, nodes off every route exactly 0, on random
+    maps with cycles, options and a goal whose neighbours hold rewards too."""
+    rng = np.random.default_rng(100 + seed)
+    n = int(rng.integers(20, 200))
+    out, E, R, absorbing, alive, o = random_map(rng, n)
+    g = int(rng.integers(n))                      # a goal and its 2-cycle neighbour
+    R[g], absorbing[g] = 1.0, False
+    out[g, 0], E[g, 0] = (g + 1) % n, 1.0
+    nb = (g + 1) % n
+    R[nb], absorbing[nb] = 0.01, False
+    out[nb, 0], E[nb, 0] = g, 1.0
+    V, done = full_ordered(out, E, R, absorbing, alive, o, n)
+    assert done > 0
+    ref = exact(out, E, R, absorbing, alive, o)
+    np.testing.assert_allclose(V[:n], ref[:n], rtol=TOL, atol=1e-12)
+    assert (V[:n][ref[:n] == 0.0] == 0.0).all()
+
+
+def test_an_ordered_solve_settles_a_chain_in_one_update_a_node():
+    """On a corridor to a goal that returns to its neighbour (the 2-cycle that makes a
+    synchronous solve from V = 0 converge by gamma^2 a round) every node but the goal's
+    cluster is updated once: the Dijkstra order."""
+    n = 400
+    out = np.full((n, 2), -1, dtype=np.int64)
+    out[1:, 0] = np.arange(n - 1)                 # i -> i - 1, towards the goal 0
+    out[0, 0] = 1
+    E = np.where(out >= 0, 1.0, 0.0)
+    R = np.zeros(n)
+    R[0], R[1] = 1.0, 0.01
+    P = 4
+    o = Options(np.zeros((n, P)), np.zeros((n, P)), np.full((n, P), -1),
+                np.full((n, P, P), -1), np.zeros((n, P, P)))
+    absorbing, alive = np.zeros(n, bool), np.ones(n, bool)
+    V, done = full_ordered(out, E, R, absorbing, alive, o, n)
+    assert done <= n
+    ref = exact(out, E, R, absorbing, alive, o)
+    np.testing.assert_allclose(V[:n], ref[:n], rtol=TOL, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_invalidating_what_a_removal_held_up_then_an_ordered_solve_is_exact(seed):
+    """Edits that lower values (links removed, E, R or options gone, nodes made
+    absorbing): kernels.invalidate sets to 0 the nodes whose value rested on them, an
+    ordered solve of those and the edited rows brings V within vi_tol of the exact fixed
+    point again, every time, including regions cut off their sources (exactly 0)."""
+    rng = np.random.default_rng(200 + seed)
+    n = int(rng.integers(20, 150))
+    out, E, R, absorbing, alive, o = random_map(rng, n)
+    V = exact(out, E, R, absorbing, alive, o)
+    heap, pos, key = np.empty(n, np.int64), np.full(n, -1, np.int64), np.zeros(n)
+    found, mark = np.empty(n, np.int64), np.zeros(n, bool)
+    invalidated = 0
+    for _ in range(30):
+        rows = set()
+        for _ in range(int(rng.integers(1, 4))):
+            rows.update(removal(rng, out, E, R, absorbing, o, n) if rng.random() < 0.6
+                        else edit(rng, out, E, R, o, n))
+        seeds = np.array(sorted(rows), dtype=np.int64)
+        first, pred = kernels.predecessors(out, n, alive, o.osucc, o.onb)
+        args = (out, E, R, V, n, GAMMA, TOL * (1 - GAMMA), FLOOR, absorbing, alive, o.U,
+                o.rho, o.osucc, o.onb, o.ong, first, pred)
+        k = kernels.invalidate(*args, seeds, len(seeds), found, mark)
+        assert not mark.any()
+        invalidated += k
+        both = np.concatenate((seeds, found[:k]))
+        assert kernels.ordered_solve(*args, both, len(both), 100 * n, heap, pos, key) >= 0
+        ref = exact(out, E, R, absorbing, alive, o)
+        np.testing.assert_allclose(V[:n], ref[:n], rtol=TOL, atol=1e-12)
+        assert (V[:n][ref[:n] == 0.0] == 0.0).all()
+        assert (pos == -1).all()
+    assert invalidated > 0
+
+
 def test_a_budget_exceeded_says_so_and_leaves_the_queue_clean():
     rng = np.random.default_rng(3)
     n = 60
@@ -152,7 +261,7 @@ def test_the_agent_solving_incrementally_meets_the_full_solves_stopping_rule(mon
     from tmgwr_agent.experiments.scenarios import DEFAULT_MAZE
 
     original = MotivationEstimator._solve
-    seen = {"incremental": 0, "full": 0}
+    seen = {"incremental": 0, "full": 0}     # solved without sweeps, or with
     worst = {"rule": 0.0, "exact": 0.0}
 
     def checked(self, m, n, R, absorbing):
@@ -197,8 +306,44 @@ def test_the_agent_solving_incrementally_meets_the_full_solves_stopping_rule(mon
         if k == 9:
             world.fire_event("a")
         run_episode(world, agent, max_steps=3000)
-    print(seen, worst, agent.motivation.solves)
-    assert seen["incremental"] > 3 * seen["full"] > 0
+    solves = agent.motivation.solves
+    print(seen, worst, solves)
+    assert solves["incremental"] > 3 * (solves["full"] + solves["ordered"])
+    assert solves["ordered"] > 0 and solves.get("invalidated", 0) > 0
     assert worst["rule"] <= 1.0
     mot = agent.motivation
     assert worst["exact"] <= mot.vi_tol / (mot.beta * (1.0 - mot.gamma))
+
+
+def test_the_greedy_probes_potentials_after_a_goal_change_are_exact():
+    """After a goal change V0 (Eq. 5 without options, the greedy probe's potentials and
+    the route reading) restarts from 0 and is solved in order of value
+    (kernels.ordered_solve): within vi_tol of the exact fixed point, as the synchronous
+    solve it replaces there."""
+    from maze_sim.maze import Maze
+    from tmgwr_agent.core.motivation import V_FLOOR
+    from tmgwr_agent.experiments.agent_factory import make_agent
+    from tmgwr_agent.experiments.runner import Caps, make_world, run_episode, set_goal
+    from tmgwr_agent.experiments.scenarios import DEFAULT_MAZE
+
+    maze = Maze.from_file(DEFAULT_MAZE)
+    world = make_world(maze, "G", Caps.for_maze(maze))
+    agent = make_agent("tmgwr", maze, np.random.default_rng(0))
+    set_goal(world, agent, "G")
+    for _ in range(4):
+        run_episode(world, agent, max_steps=3000)
+    mot, m = agent.motivation, agent.map
+    for goal in ("3", "G"):
+        set_goal(world, agent, goal)
+        assert mot._v0_zero
+        V0 = mot.exploit(m)
+        assert not mot._v0_zero                       # solved in order, not by sweeps
+        n = m.n
+        ref = np.zeros(n + 1)
+        kernels.value_iteration(m.out, m.E, mot.R, ref, n, mot.beta, mot.gamma, 1e-13,
+                                V_FLOOR, 10**6, mot._absorbing(m, n), m.alive, mot.U[:n],
+                                np.zeros((n, mot.n_primitives)), mot.osucc[:n], mot.onb[:n],
+                                mot.ong[:n])
+        assert (ref[:n] > 0.0).sum() > n // 2            # a route to most nodes
+        np.testing.assert_allclose(V0[:n], ref[:n], rtol=mot.vi_tol, atol=1e-12)
+        run_episode(world, agent, max_steps=3000)

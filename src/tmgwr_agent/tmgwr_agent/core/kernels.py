@@ -314,7 +314,7 @@ def stale_savings(w, alive, n, delta, L, gamma, grid, origin, tried, bump_e, suc
     before) or its best exit (:func:`wall_exits`, ``k`` cells along its run then one step
     out: ``k + 2``), against ``route`` steps. The pairs with a saving go to ``res_i``,
     ``res_a``, ``res_s``; returns how many. ``onb`` / ``ong``: scratch."""
-    x = np.empty(w.shape[1])
+    x, y, z = np.empty(w.shape[1]), np.empty(w.shape[1]), np.empty(w.shape[1])
     Vd = np.zeros(n + 1)                       # gamma^dg: wall_exits then picks min k + dg
     for q in range(n):
         if dg[q] >= 0:
@@ -337,7 +337,8 @@ def stale_savings(w, alive, n, delta, L, gamma, grid, origin, tried, bump_e, suc
                 for b in range(onb.shape[2]):
                     onb[i, a, b] = -1
                     ong[i, a, b] = 0.0
-                if wall_exits(w, i, a, x, delta, L, grid, origin, Vd, gamma, onb, ong):
+                if wall_exits_into(w, i, a, x, delta, L, grid, origin, Vd, gamma, onb, ong,
+                                   y, z):
                     for b in range(onb.shape[2]):
                         q = onb[i, a, b]
                         if q >= 0 and dg[q] >= 0:
@@ -614,24 +615,28 @@ def _heap_push(heap, pos, key, size, i, priority):
 
 
 @njit(cache=True)
-def prioritized_sweep(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
-                      onb, ong, first, pred, seeds, n_seeds, max_updates, heap, pos, key):
-    """Eq. 4-5' solved incrementally by prioritized sweeping (Moore & Atkeson 1993) from a
-    solution of a map that differs from this one in the rows ``seeds[:n_seeds]`` only
-    (their links, rewards, options or absorbing flag changed): each queued node's value is
-    set to its target (:func:`node_target`), largest change first, and the nodes that read
-    it (``pred``, :func:`predecessors`) are queued when their own change would exceed
-    ``tol V + v_floor``; it stops when the queue holds nothing above that. Returns the
-    updates made, or -1 after ``max_updates`` (the caller then solves in full: a change
-    that cuts a region off its sources decays only geometrically). ``heap``, ``pos``
-    (-1 = not queued) and ``key`` are work arrays of n entries; ``pos`` is left all -1."""
-    size = 0
+def _queue_seeds(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb,
+                 ong, seeds, n_seeds, heap, pos, key, size, by_value):
+    """Push every node of ``seeds[:n_seeds]`` whose target (:func:`node_target`) differs
+    from its V by more than ``tol`` times the target plus ``v_floor``, keyed by that
+    change, or with ``by_value`` by the target itself; returns the queue's size."""
     for k in range(n_seeds):
         i = seeds[k]
         t = node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb, ong)
         d = abs(t - V[i])
         if d > tol * t + v_floor:
-            size = _heap_push(heap, pos, key, size, i, d)
+            size = _heap_push(heap, pos, key, size, i, t if by_value else d)
+    return size
+
+
+@njit(cache=True)
+def _drain(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb, ong,
+           first, pred, max_updates, heap, pos, key, size, by_value):
+    """The loop of :func:`prioritized_sweep` and :func:`ordered_solve`: pop the node of
+    the largest key, set its V to its target, queue the nodes that read it whose own
+    change would exceed ``tol`` (keyed as :func:`_queue_seeds`); until the queue is empty
+    (returns the updates) or ``max_updates`` were made (returns -1, ``pos`` left all
+    -1)."""
     updates = 0
     while size > 0:
         i = heap[0]
@@ -655,8 +660,120 @@ def prioritized_sweep(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U,
                             ong)
             d = abs(t - V[p])
             if d > tol * t + v_floor:
-                size = _heap_push(heap, pos, key, size, p, d)
+                size = _heap_push(heap, pos, key, size, p, t if by_value else d)
     return updates
+
+
+@njit(cache=True)
+def prioritized_sweep(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
+                      onb, ong, first, pred, seeds, n_seeds, max_updates, heap, pos, key):
+    """Eq. 4-5' solved incrementally by prioritized sweeping (Moore & Atkeson 1993) from a
+    solution of a map that differs from this one in the rows ``seeds[:n_seeds]`` only
+    (their links, rewards, options or absorbing flag changed): each queued node's value is
+    set to its target (:func:`node_target`), largest change first, and the nodes that read
+    it (``pred``, :func:`predecessors`) are queued when their own change would exceed
+    ``tol V + v_floor``; it stops when the queue holds nothing above that. Returns the
+    updates made, or -1 after ``max_updates`` (the caller then solves in full: a change
+    that cuts a region off its sources decays only geometrically). ``heap``, ``pos``
+    (-1 = not queued) and ``key`` are work arrays of n entries; ``pos`` is left all -1."""
+    size = _queue_seeds(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
+                        onb, ong, seeds, n_seeds, heap, pos, key, 0, False)
+    return _drain(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb,
+                  ong, first, pred, max_updates, heap, pos, key, size, False)
+
+
+@njit(cache=True)
+def ordered_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
+                  onb, ong, first, pred, seeds, n_seeds, max_updates, heap, pos, key):
+    """Eq. 4-5' on the nodes ``seeds[:n_seeds]`` from values at or below their fixed point
+    (V = 0 after a goal change, or after :func:`invalidate`), largest value first, as
+    Dijkstra's algorithm settles a shortest path: with ``R`` = 0 a node is worth at most
+    gamma times its best successor (E <= 1, rho <= 1), so a node popped after every
+    larger one mostly has its final value at its first update. Two things break that,
+    and are dealt with: the nodes with R > 0 among the seeds (the goal and its
+    neighbours) feed each other, a goal and its neighbour converging by gamma^2 a round,
+    so they are first solved among themselves by Gauss-Seidel rounds until they change
+    by less than ``tol / 100`` of their value (the others at their current values); and
+    an option mixes two successors (``rho S + (1 - rho) stay``), so a node may rise again
+    when a smaller successor is settled: it is queued again, as by
+    :func:`prioritized_sweep`, whose stopping rule this shares. Returns the updates made
+    (the rounds of the first part not counted), or -1 after ``max_updates``."""
+    m = 0
+    for k in range(n_seeds):
+        if R[seeds[k]] > 0.0 and alive[seeds[k]]:
+            m += 1
+    cluster = np.empty(m, dtype=np.int64)          # the seeds with R > 0
+    m = 0
+    for k in range(n_seeds):
+        if R[seeds[k]] > 0.0 and alive[seeds[k]]:
+            cluster[m] = seeds[k]
+            m += 1
+    for _ in range(100000):                        # solved among themselves
+        change = 0.0
+        for i in cluster:
+            t = node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb,
+                            ong)
+            d = abs(t - V[i]) - 0.01 * tol * t
+            if d > change:
+                change = d
+            V[i] = t
+        if change <= v_floor:
+            break
+    size = 0
+    for j in cluster:                              # then who reads them, and the seeds
+        for c in range(first[j], first[j + 1]):
+            p = pred[c]
+            t = node_target(p, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb,
+                            ong)
+            if abs(t - V[p]) > tol * t + v_floor:
+                size = _heap_push(heap, pos, key, size, p, t)
+    size = _queue_seeds(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
+                        onb, ong, seeds, n_seeds, heap, pos, key, size, True)
+    return _drain(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb,
+                  ong, first, pred, max_updates, heap, pos, key, size, True)
+
+
+@njit(cache=True)
+def invalidate(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb,
+               ong, first, pred, seeds, n_seeds, found, mark):
+    """Before an incremental solve of a change that may lower values (a link removed, an
+    E, R or option gone, a node made absorbing or dead): the nodes whose value rested on
+    it, with V set to 0 (LPA*'s under-consistent nodes, Koenig & Likhachev). A seed whose
+    target (:func:`node_target`) fell below its V by more than ``tol V + v_floor`` is
+    one; so is every node that reads one of them (``pred``) whose target then falls so.
+    Lowering those values by sweeping would take geometrically many rounds where two
+    nodes held each other up (a region cut off from its sources); from 0 they rise to the
+    fixed point in one ordered pass (:func:`ordered_solve`). Writes them to ``found``
+    (n entries) and returns how many; ``mark`` (n booleans, all False) is left so."""
+    c = 0
+    for k in range(n_seeds):
+        i = seeds[k]
+        if mark[i] or V[i] <= 0.0:
+            continue
+        t = node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb, ong)
+        if t < V[i] - tol * V[i] - v_floor:
+            mark[i] = True
+            V[i] = 0.0
+            found[c] = i
+            c += 1
+    h = 0
+    while h < c:
+        j = found[h]
+        h += 1
+        for q in range(first[j], first[j + 1]):
+            p = pred[q]
+            if mark[p] or V[p] <= 0.0:
+                continue
+            t = node_target(p, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb,
+                            ong)
+            if t < V[p] - tol * V[p] - v_floor:
+                mark[p] = True
+                V[p] = 0.0
+                found[c] = p
+                c += 1
+    for k in range(c):
+        mark[found[k]] = False
+    return c
 
 
 @njit(cache=True)
@@ -861,6 +978,13 @@ def untried_chain(out, E, n, alive, absorbing, w, delta, L, grid, origin, tried,
 
 @njit(cache=True)
 def wall_exits(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong):
+    """:func:`wall_exits_into` with its own scratch."""
+    return wall_exits_into(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong,
+                           np.empty(w.shape[1]), np.empty(w.shape[1]))
+
+
+@njit(cache=True)
+def wall_exits_into(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong, y, z):
     """Where the remembered wall cell x (primitive a from node i bumped into it) leads if
     it opened (motivation.py, Eq. 5'): a wall opens along its run, so the cells opened
     with it may be a straight run of unknown cells from x in any direction but back to i
@@ -878,15 +1002,14 @@ def wall_exits(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong):
     the last solve's V go to ``onb[i, a]`` / ``ong[i, a]`` (ties: the nearest); the
     sweep takes the max over them with the V it iterates. Returns whether there is any
     exit. A primitive that never moved the agent (``|delta_a| <= L / 2``) has no cell
-    to open."""
+    to open. ``y``, ``z``: scratch of the sensation's size (this runs for every stale
+    wall at an episode's start)."""
     P = delta.shape[0]
     step2 = 0.0
     for k in range(w.shape[1]):
         step2 += delta[a, k] * delta[a, k]
     if step2 <= 0.25 * L * L:
         return False
-    y = np.empty(w.shape[1])
-    z = np.empty(w.shape[1])
     found = False
     for b in range(-1, P):
         back = False
@@ -992,6 +1115,14 @@ def option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, c
             j = succ[i, a]
         else:
             r = 0.0
+        if r == 0.0:                    # no option (most pairs): nothing to look up
+            for b in range(U.shape[1]):
+                onb[i, a, b] = -1
+                ong[i, a, b] = 0.0
+            rho[i, a] = 0.0
+            U[i, a] = 0.0
+            osucc[i, a] = -1
+            continue
         d = 0.0
         for k in range(w.shape[1]):
             x[k] = w[i, k] + delta[a, k]

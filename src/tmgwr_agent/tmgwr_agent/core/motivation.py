@@ -28,10 +28,18 @@ the right-hand side of Eq. 4-5' (:func:`kernels.node_target`), largest change fi
 the nodes that read it are queued when their own residual exceeds ``vi_tol (1 - gamma)
 V``; it stops when nothing above that is left. Every node then meets the synchronous
 solve's stopping rule, and V is as close to the fixed point as the synchronous solve's
-(test_incremental_vi.py). A goal change, a new map size, a change that may cut a node off
-its sources (a link removed, an E or R gone to 0, a node made absorbing, a last option
-gone: V = 0 is then reached only geometrically by sweeping) and a sweep of more updates
-than nodes fall back to the synchronous solve. Those rows are not searched for: the map
+(test_incremental_vi.py). A change that may lower values (a link removed, an E, R or
+last option gone, a node made absorbing) is not swept down: V = 0 is reached only
+geometrically where two nodes hold each other up (a region cut off its sources), so the
+nodes whose value rested on the change are first set to 0 (:func:`kernels.invalidate`,
+LPA*'s under-consistent nodes) and solved again from there in order of value. A goal
+change, a new map size and a sweep over its budget solve every node from V = 0 in order
+of value (:func:`kernels.ordered_solve`): with R = 0 a node is worth at most gamma times
+its best successor, so largest first (Dijkstra's order) settles most nodes at their first
+update, where synchronous sweeps from 0 take about as many rounds as the map is wide, and
+the goal and its neighbours (a 2-cycle converging by gamma^2 a round) are solved among
+themselves first; the synchronous solve remains as the fallback of the fallback. Those
+rows are not searched for: the map
 keeps a log of the rows each step changed (:class:`~tmgwr_agent.core.sensorimotor_map.
 RowLog`; a replica, of the slots each change wrote), and the copy, the frame coordinates,
 the rewards, the goal node and the absorbing masks are brought up to date on those rows
@@ -258,6 +266,12 @@ from tmgwr_common.params import Config, param
 #: Potentials below this are 0: gamma**d for d > 10,000 steps.
 V_FLOOR = 1e-150
 _NO_ROWS = np.zeros(0, dtype=np.int64)
+#: Updates a node an ordered solve from V = 0 may make before the synchronous solve
+#: takes over (MotivationEstimator._ordered).
+ORDERED_BUDGET = 8
+#: Updates a node an incremental solve may make before the ordered solve from V = 0
+#: takes over (which makes a few a node).
+INCREMENTAL_BUDGET = 3
 #: A node with R_i = sim(i, g) at least this represents the goal (a source of the
 #: reachability test; never absorbing).
 GOAL_R = 0.5
@@ -344,6 +358,8 @@ class IncrementalState:
         self.heap = np.empty(n + 1, dtype=np.int64)
         self.pos = np.full(n + 1, -1, dtype=np.int64)
         self.key = np.zeros(n + 1)
+        self.found = np.empty(n + 1, dtype=np.int64)     # kernels.invalidate's work arrays
+        self.mark = np.zeros(n + 1, dtype=bool)
 
     @classmethod
     def of(cls, m: SensorimotorMap, n: int, R: np.ndarray, absorbing: np.ndarray,
@@ -425,6 +441,7 @@ class MotivationEstimator:
         self.R = np.zeros(1)
         self.V0 = np.zeros(1)         # Eq. 5 without options (exploit), computed on demand
         self._v0_fresh = False
+        self._v0_zero = True
         self._options_key: tuple = ()
         self._dirty: set[int] = set()    # rows whose outcome memory changed since update
         self._alive_version, self._alive = -1, 0
@@ -460,6 +477,7 @@ class MotivationEstimator:
         self._R_key = None
         self.V0[:] = 0.0
         self._v0_fresh = False
+        self._v0_zero = True              # V0 restarts from 0 too: solved in order
 
     def follow_goal(self, goal_x: np.ndarray) -> bool:
         """The goal sensation that came with this step: :meth:`set_goal` when it differs
@@ -946,15 +964,16 @@ class MotivationEstimator:
     def _solve(self, m: SensorimotorMap, n: int, R: np.ndarray, absorbing: np.ndarray
                ) -> int:
         """Eq. 4-5' on this map: with ``vi_incremental`` by prioritized sweeping from the
-        last solution (:meth:`_incremental`); without it, or when that declines (a goal
-        change, a new map size, a change that may have cut a node off its sources, a
-        sweep over budget), by synchronous sweeps warm-started from the last V
-        (:func:`kernels.value_iteration`). Returns the sweeps of a synchronous solve (0:
-        solved incrementally). Either way every node ends with ``|beta (T(i) - V(i))| <=
-        vi_tol V(i)`` (``T``: the right-hand side of Eq. 4-5', :func:`kernels.
-        node_target`), the synchronous solve's stopping rule."""
+        last solution (:meth:`_incremental`), and when that declines (a goal change, a new
+        map size, a sweep over budget) by an ordered solve from V = 0 (:meth:`_ordered`);
+        without it, or when that too outgrows its budget, by synchronous sweeps
+        warm-started from the last V (:func:`kernels.value_iteration`). Returns the sweeps
+        of a synchronous solve (0: solved without). Either way every node ends with
+        ``|beta (T(i) - V(i))| <= vi_tol V(i)`` (``T``: the right-hand side of Eq. 4-5',
+        :func:`kernels.node_target`), the synchronous solve's stopping rule."""
         rows, self._opt_rows = self._opt_rows, None
-        if self.vi_incremental and self._incremental(m, n, R, absorbing, rows):
+        if self.vi_incremental and (self._incremental(m, n, R, absorbing, rows)
+                                    or self._ordered(m, n, R, absorbing)):
             return 0
         sweeps = kernels.value_iteration(
             m.out, m.E, R, self.V, n, self.beta, self.gamma, self.vi_tol, V_FLOOR,
@@ -965,14 +984,36 @@ class MotivationEstimator:
             self._inc = IncrementalState.of(m, n, R, absorbing, self)
         return sweeps
 
+    def _ordered(self, m: SensorimotorMap, n: int, R: np.ndarray, absorbing: np.ndarray
+                 ) -> bool:
+        """Eq. 4-5' from V = 0 on every node, the largest values first
+        (:func:`kernels.ordered_solve`: the goal's cluster solved among itself, then
+        outwards as Dijkstra's algorithm settles distances), with a fresh copy of the
+        inputs for the incremental solves after it. False (V left to the synchronous
+        solve) after ``ORDERED_BUDGET`` updates a node."""
+        inc = self._inc = IncrementalState.of(m, n, R, absorbing, self)
+        self.V[:n] = 0.0
+        done = kernels.ordered_solve(
+            m.out, m.E, R, self.V, n, self.gamma, self.vi_tol * (1.0 - self.gamma), V_FLOOR,
+            absorbing, m.alive, self.U, self.rho, self.osucc, self.onb, self.ong, inc.first,
+            inc.pred, np.arange(n, dtype=np.int64), n, ORDERED_BUDGET * n, inc.heap,
+            inc.pos, inc.key)
+        if done < 0:
+            return self._declined("ordered_budget")
+        self.solves["ordered"] = self.solves.get("ordered", 0) + 1
+        return True
+
     def _incremental(self, m: SensorimotorMap, n: int, R: np.ndarray, absorbing: np.ndarray,
                      rows: np.ndarray | None) -> bool:
         """Prioritized sweeping from the last solution, seeded with the rows that changed
         since (:func:`kernels.changed_rows`, and :func:`kernels.changed_options` over the
-        option rows recomputed since); at most one update per node. Declines (False)
-        without a last solution of a map of this size and goal, when a change may have cut
-        a node off its sources (Eq. 4-5's V = 0 without a route is reached only
-        geometrically by sweeping) or when the sweep outgrows its budget."""
+        option rows recomputed since), at most ``INCREMENTAL_BUDGET`` updates a node. A
+        change that may lower values (a link removed, an E, R or last option gone, a node
+        made absorbing: ``lost``) first sets to 0 the nodes whose value rested on it
+        (:func:`kernels.invalidate`; lowered by sweeping, two nodes that held each other
+        up fall only geometrically) and solves them again in order of value
+        (:func:`kernels.ordered_solve`). Declines (False) without a last solution of a
+        map of this size and goal, or when the sweep outgrows its budget."""
         inc = self._inc
         if inc is None or inc.goal_node != self.goal_node:
             return self._declined("goal")
@@ -986,23 +1027,29 @@ class MotivationEstimator:
             _NO_ROWS if logged is None else logged, -1 if logged is None else len(logged))
         inc.log, inc.log_pos, inc.epoch = log, (log.pos if log is not None else -1), self._epoch
         relinked_o = False
-        if rows is not None and not lost:
+        if rows is not None:
             c, lost_o, relinked_o = kernels.changed_options(
                 rows, len(rows), self.rho, self.U, self.osucc, self.onb, self.ong, inc.rho0,
                 inc.U0, inc.osucc0, inc.onb0, inc.ong0, inc.seeds, c)
             lost |= lost_o
-        if lost:
-            return self._declined("lost")
         self.solves["incremental"] += 1
         if c == 0:
             return True
         if relinked or relinked_o:
             inc.first, inc.pred = kernels.predecessors(m.out, n, m.alive, self.osucc,
                                                        self.onb)
-        done = kernels.prioritized_sweep(
-            m.out, m.E, R, self.V, n, self.gamma, self.vi_tol * (1.0 - self.gamma),
-            V_FLOOR, absorbing, m.alive, self.U, self.rho, self.osucc, self.onb, self.ong,
-            inc.first, inc.pred, inc.seeds, c, n, inc.heap, inc.pos, inc.key)
+        tol = self.vi_tol * (1.0 - self.gamma)
+        args = (m.out, m.E, R, self.V, n, self.gamma, tol, V_FLOOR, absorbing, m.alive,
+                self.U, self.rho, self.osucc, self.onb, self.ong, inc.first, inc.pred)
+        if lost:
+            self.solves["invalidated"] = self.solves.get("invalidated", 0) + 1
+            k = kernels.invalidate(*args, inc.seeds, c, inc.found, inc.mark)
+            seeds = np.concatenate((inc.seeds[:c], inc.found[:k]))
+            done = kernels.ordered_solve(*args, seeds, len(seeds), INCREMENTAL_BUDGET * n,
+                                         inc.heap, inc.pos, inc.key)
+        else:
+            done = kernels.prioritized_sweep(*args, inc.seeds, c, INCREMENTAL_BUDGET * n,
+                                             inc.heap, inc.pos, inc.key)
         if done < 0:
             self.solves["incremental"] -= 1
             return self._declined("budget")
@@ -1016,7 +1063,9 @@ class MotivationEstimator:
     def exploit(self, m: SensorimotorMap) -> np.ndarray:
         """The potentials of Eq. 5 without options (the learnt policy, for the greedy
         probe), on the map of the last :meth:`update`; V0 (n + 1 entries), computed once
-        per update, warm-started."""
+        per update, warm-started; after a goal change (V0 = 0) with ``vi_incremental`` by
+        an ordered solve (:func:`kernels.ordered_solve`: from 0 the synchronous sweeps
+        take about as many rounds as the map is wide)."""
         if not self.value_unknown:
             if not self.solved:
                 self.update(m)
@@ -1025,14 +1074,32 @@ class MotivationEstimator:
             n = self._prepare(m)
             if self.goal_x is None or n == 0:
                 self.V0[:] = 0.0
-            else:
+            elif not (self.vi_incremental and self._v0_zero and self._exploit_ordered(m, n)):
                 kernels.value_iteration(                     # Eq. 4-5, no option
                     m.out, m.E, self.R, self.V0, n, self.beta, self.gamma, self.vi_tol,
                     V_FLOOR, self.vi_max_sweeps, self._absorbing(m, n), m.alive,
                     self.U[:n], np.zeros((n, self.n_primitives)), self.osucc[:n], self.onb[:n],
                     self.ong[:n])
+                self._v0_zero = False
             self._v0_fresh = True
         return self.V0
+
+    def _exploit_ordered(self, m: SensorimotorMap, n: int) -> bool:
+        """V0 (Eq. 4-5 without options) from 0 by an ordered solve; False (V0 left to the
+        synchronous solve, from 0) after ``ORDERED_BUDGET`` updates a node."""
+        self.V0[:] = 0.0
+        heap, pos = np.empty(n + 1, dtype=np.int64), np.full(n + 1, -1, np.int64)
+        done = kernels.ordered_solve(
+            m.out, m.E, self.R, self.V0, n, self.gamma, self.vi_tol * (1.0 - self.gamma),
+            V_FLOOR, self._absorbing(m, n), m.alive, self.U,
+            np.zeros((n, self.n_primitives)), self.osucc, self.onb, self.ong,
+            *kernels.predecessors(m.out, n, m.alive, self.osucc, self.onb),
+            np.arange(n, dtype=np.int64), n, ORDERED_BUDGET * n, heap, pos, np.zeros(n + 1))
+        if done < 0:
+            self.V0[:] = 0.0
+            return False
+        self._v0_zero = self.goal_node < 0   # (no goal yet: solved again from 0 later)
+        return True
 
     def options_of(self, i: int, links: Links) -> Links:
         """Node i's links followed by its options as virtual links (Eq. 6 ranks both):

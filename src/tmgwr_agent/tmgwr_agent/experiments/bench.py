@@ -370,6 +370,9 @@ SCALING_STEPS = 2000
 SCALING_EPISODES = 12
 #: Learning tours of the maze before them.
 SCALING_TOURS = 3
+#: What the scaling rows may be timed by: wall-clock time (``make bench``), or the
+#: benchmarking thread's CPU time (comparisons on a machine shared with other work).
+CLOCKS = {"wall": time.perf_counter_ns, "cpu": time.thread_time_ns}
 
 
 def scaling_open_field(cells: int, rng: np.random.Generator, density: float = 0.08) -> str:
@@ -474,13 +477,12 @@ def tour_train(world, agent, tours: int = SCALING_TOURS,
     return {"episodes": max_episodes, "optimal": False}
 
 
-def lookup_floor_ns(agent, winners: np.ndarray) -> np.ndarray:
+def lookup_floor_ns(agent, winners: np.ndarray, clock=time.perf_counter_ns) -> np.ndarray:
     """Nanoseconds of a pure lookup of the winner's best link (its links' ``E V`` argmax,
     :func:`kernels.best_links`) for each of ``winners`` on the agent's map: the floor of a
     step that changes nothing."""
     m, V = agent.map, agent.motivation.V
     out = np.empty(len(winners), dtype=np.int64)
-    clock = time.perf_counter_ns
     for k, i in enumerate(winners):
         t0 = clock()
         kernels.best_links(m.out[i], m.E[i], V)
@@ -488,13 +490,14 @@ def lookup_floor_ns(agent, winners: np.ndarray) -> np.ndarray:
     return out
 
 
-def time_steps_winners(world, agent, n: int) -> tuple[np.ndarray, np.ndarray]:
+def time_steps_winners(world, agent, n: int, clock=time.perf_counter_ns
+                       ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`time_steps`, with the winner each step acted from."""
-    agent_ns, _, win = timed_steps(world, agent, n)
+    agent_ns, _, win = timed_steps(world, agent, n, clock)
     return agent_ns, win
 
 
-def goal_change_first_ms(world, agent, goal_cell) -> float:
+def goal_change_first_ms(world, agent, goal_cell, clock=time.perf_counter_ns) -> float:
     """Milliseconds of the agent's part of a goal change (``set_goal``, which re-solves
     Eq. 4-5 from V = 0) and of its first step after it, mid-episode."""
     obs, _ = world.reset()
@@ -505,19 +508,19 @@ def goal_change_first_ms(world, agent, goal_cell) -> float:
     world.set_goal(goal_cell)
     goal_obs = world.goal_observation()
     state = world.goal_state
-    t0 = time.perf_counter_ns()
+    t0 = clock()
     agent.set_goal(state, goal_obs)
     a = agent.act()
-    t1 = time.perf_counter_ns()
+    t1 = clock()
     obs, _, term, trunc, info = world.step(a)
-    t2 = time.perf_counter_ns()
+    t2 = clock()
     agent.observe(obs, info)
-    t3 = time.perf_counter_ns()
+    t3 = clock()
     world.end_episode()
     return ((t1 - t0) + (t3 - t2)) / 1e6
 
 
-def block_episode_ms(world, agent, seed: int) -> dict:
+def block_episode_ms(world, agent, seed: int, clock=time.perf_counter_ns) -> dict:
     """A cell of the agent's route is blocked (the first one from the route's middle on that
     leaves the goal reachable), then one learning episode from S is timed (``act`` +
     ``observe``, milliseconds) with its steps."""
@@ -531,7 +534,6 @@ def block_episode_ms(world, agent, seed: int) -> dict:
             continue
         blocked = cell
         break
-    clock = time.perf_counter_ns
     obs, _ = world.reset()
     agent.begin_episode(obs, world.cell)
     total, steps = 0, 0
@@ -567,14 +569,15 @@ def _greedy_cells(world, agent, d: int) -> list[tuple[int, int]]:
 
 
 def scaling_row(family: str, cells: int, seed: int, steps: int = SCALING_STEPS,
-                overrides: dict | None = None) -> dict:
+                overrides: dict | None = None, clock=time.perf_counter_ns) -> dict:
     """One row of the scaling benchmark (issue 27): the default TMGWR agent trained on
     :func:`scaling_maze` by :func:`tour_train`, then ``steps`` converged learning steps
     timed (median, p99, mean; ``solves``: how many the estimator solved incrementally), the
     lookup floor on the same winners, as many more steps with the incremental solve off
     (``full_solve_step_median_us``: the same map solved in full every step, an A/B in one
     run), the first step after a goal change (to the free cell nearest the maze's centre,
-    and back to G), and the episode after a block on the route."""
+    and back to G), and the episode after a block on the route; every time by ``clock``
+    (nanoseconds; :data:`CLOCKS`)."""
     maze = scaling_maze(family, cells, seed)
     caps = Caps.for_maze(maze)
     world = make_world(maze, "G", caps)
@@ -584,23 +587,23 @@ def scaling_row(family: str, cells: int, seed: int, steps: int = SCALING_STEPS,
     trained = tour_train(world, agent)
     train_s = time.perf_counter() - t0
     before = dict(getattr(agent.motivation, "solves", {}))
-    ns, winners = time_steps_winners(world, agent, steps)
+    ns, winners = time_steps_winners(world, agent, steps, clock)
     solves = {k: v - before.get(k, 0)
               for k, v in getattr(agent.motivation, "solves", {}).items()}
     full = None
     if getattr(agent.motivation, "vi_incremental", False):   # the same map, solved in full
         agent.motivation.vi_incremental = False
-        full = float(np.median(time_steps_winners(world, agent, steps)[0])) / 1e3
+        full = float(np.median(time_steps_winners(world, agent, steps, clock)[0])) / 1e3
         agent.motivation.vi_incremental = True
     us = ns / 1e3
-    floor = lookup_floor_ns(agent, winners) / 1e3
+    floor = lookup_floor_ns(agent, winners, clock) / 1e3
     free = maze.free_cells()
     centre = np.array(maze.walls.shape) / 2.0
     mid = min(free, key=lambda c: (abs(c[0] - centre[0]) + abs(c[1] - centre[1]), c))
-    goal_ms = goal_change_first_ms(world, agent, mid)
+    goal_ms = goal_change_first_ms(world, agent, mid, clock)
     world.set_goal("G")
-    back_ms = goal_change_first_ms(world, agent, maze.goal_cell("G"))
-    block = block_episode_ms(world, agent, seed)
+    back_ms = goal_change_first_ms(world, agent, maze.goal_cell("G"), clock)
+    block = block_episode_ms(world, agent, seed, clock)
     med = float(np.median(us))
     return {"family": family, "cells": len(free), "nodes": int(agent.map.size),
             "maze": maze.source, "train_s": round(train_s, 2), "trained": trained,
@@ -614,16 +617,16 @@ def scaling_row(family: str, cells: int, seed: int, steps: int = SCALING_STEPS,
 
 
 def scaling(seed: int, steps: int = SCALING_STEPS, cells=SCALING_CELLS,
-            families=SCALING_FAMILIES) -> dict:
+            families=SCALING_FAMILIES, clock: str = "wall") -> dict:
     """``scaling``: every row of :func:`scaling_row`; ``scaling_slopes``: per family, the
     log-log slope of the step's median against the node count from about 1,400 cells
-    on (:func:`scaling_slopes`)."""
+    on (:func:`scaling_slopes`); ``clock``: a key of :data:`CLOCKS`."""
     rows = []
     for family in families:
         for c in cells:
             print(f"bench: scaling, {family} ~{c} cells ...", file=sys.stderr)
-            rows.append(scaling_row(family, c, seed, steps))
-    return {"scaling": rows, "scaling_slopes": scaling_slopes(rows)}
+            rows.append(scaling_row(family, c, seed, steps, clock=CLOCKS[clock]))
+    return {"scaling": rows, "scaling_slopes": scaling_slopes(rows), "scaling_clock": clock}
 
 
 SCALING_HEADER = ("family", "cells", "nodes", "median us", "p99 us", "mean us",
@@ -636,7 +639,7 @@ def scaling_rows(result: dict) -> list[list[str]]:
     rows = []
     for r in result.get("scaling") or []:
         sv = r.get("solves") or {}
-        total = sum(v for k, v in sv.items() if k in ("incremental", "full"))
+        total = sum(v for k, v in sv.items() if k in ("incremental", "ordered", "full"))
         rows.append([r["family"], str(r["cells"]), str(r["nodes"]),
                      f"{r['step_median_us']:.1f}", f"{r['step_p99_us']:.0f}",
                      f"{r['step_mean_us']:.0f}", f"{r['median_over_floor']:.0f}",
@@ -683,6 +686,10 @@ def scaling_main(argv: list[str] | None = None) -> int:
                    help="converged steps timed per map (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="maze and agent seed (default 0)")
     p.add_argument("--json", default=None, metavar="OUT", help="also write the rows here")
+    p.add_argument("--clock", default="wall", choices=tuple(CLOCKS),
+                   help="wall: time.perf_counter_ns (default); cpu: this thread's CPU time "
+                   "(time.thread_time_ns), less hurt by other processes on a loaded "
+                   "machine")
     args = p.parse_args(argv)
     try:
         cells = tuple(int(c) for c in args.cells.split(","))
@@ -694,7 +701,7 @@ def scaling_main(argv: list[str] | None = None) -> int:
         p.error(f"--families must be among {', '.join(SCALING_FAMILIES)} (got "
                 f"{args.families!r}), --steps and --cells >= 1")
     warm_up()
-    result = scaling(args.seed, args.steps, cells, families)
+    result = scaling(args.seed, args.steps, cells, families, args.clock)
     print(scaling_table(result))
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
