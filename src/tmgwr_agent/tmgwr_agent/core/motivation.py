@@ -377,8 +377,9 @@ class MotivationEstimator:
         self._opt_rows: np.ndarray | None = None    # option rows recomputed since
         self.solves = {"incremental": 0, "full": 0}   # and why the incremental declined
         self.absorbing_terminals = config.absorbing_terminals
-        self.value_unknown = config.unknown != "none"
+        self.value_unknown = self._unknown = config.unknown != "none"
         self.frame = make_frame(config.unknown)     # where places are measured (frame.py)
+        self.lattice = np.ones(P, dtype=bool)       # primitives whose options are valued
         self._frame_episode = -1      # the episode the frame's basis was chosen in
         self._F: Frame | None = None  # the frame's coordinates of the last _prepare
         self.stale_prior, self.stale_horizon = config.stale_prior, config.stale_horizon
@@ -414,6 +415,7 @@ class MotivationEstimator:
         self._route_due = False       # the route is read off V0 at the episode's first solve
         self._stuck = False           # stuck when the last update solved Eq. 5'
         self.delta = np.zeros((P, 0))     # mean sensed displacement per primitive
+        self.delta_sq = np.zeros(P)       # and the mean of its squared length
         self.moves = np.zeros(P, dtype=np.int64)
         self.U = np.zeros((64, P))
         self.rho = np.zeros((64, P))
@@ -513,12 +515,16 @@ class MotivationEstimator:
             self._close_cell(node, a, w)
         elif winner >= 0 and (inserted or not outcome.bumped):
             self._mark_closed(winner, -1)     # a node stood on (or a new one) is open
+        moved = self.moves[a]
         if kernels.record_outcome(self.tried, self.bump_t, self.closed_t, self.bump_e,
                                   self.succ, self.delta, self.moves, w, node, winner,
                                   inserted, outcome.action, outcome.bumped, self.clock,
                                   self.episode):
             self._dirty.add(node)
             self._bumps += 1
+        if self.moves[a] != moved:            # a move: the forward model's spread too
+            d = w[winner] - w[node]
+            self.delta_sq[a] += (float(d @ d) - self.delta_sq[a]) / self.moves[a]
 
     #: The outcome memory's per-node arrays and the value of a new node's row.
     _MEMORY = (("tried", False), ("bump_t", -1), ("closed_t", -1), ("bump_e", -1),
@@ -535,7 +541,7 @@ class MotivationEstimator:
         predicted cell; a map loaded or rebuilt since may hold fewer nodes than ``succ``
         remembers)."""
         j = self.succ[node, a]
-        if j == node or j >= len(w):
+        if j == node or j >= len(w) or not self.lattice[a]:   # no cell it predicts
             return
         F = self.frame.of(w[[node, j]], np.zeros(w.shape[1]), self.delta[[a]], self._scale,
                           cache=False)
@@ -555,6 +561,7 @@ class MotivationEstimator:
                 "closed_t": self.closed_t.copy(), "bump_e": self.bump_e.copy(),
                 "succ": self.succ.copy(), "closed_e": self.closed_e.copy(),
                 "clock": int(self.clock), "delta": self.delta.copy(),
+                "delta_sq": self.delta_sq.copy(),
                 "moves": self.moves.copy(), "episode": int(self.episode),
                 "route": float(self.route), "retests": int(self.retests),
                 "wall_tests": int(self.wall_tests), "wall_opened": int(self.wall_opened),
@@ -586,6 +593,10 @@ class MotivationEstimator:
         self.chain = grown(np.array(d.get("chain", np.zeros((0, self.n_primitives))), dtype=bool),
                            len(self.succ), False)                      # older: none
         self.delta = np.array(d["delta"], dtype=float)
+        # absent from older checkpoints: no spread (every displacement its mean)
+        self.delta_sq = np.array(d["delta_sq"], dtype=float) if "delta_sq" in d else \
+            np.einsum("ij,ij->i", self.delta, self.delta) if self.delta.size else \
+            np.zeros(self.n_primitives)
         self.moves = np.array(d["moves"], dtype=np.int64)
         self._options_key = ()
         self._inc = None                  # the next solve is a full one
@@ -623,6 +634,7 @@ class MotivationEstimator:
         """The forward model ``delta`` for sensations of ``dim`` values (zero: unknown)."""
         if self.delta.shape != (self.n_primitives, dim):
             self.delta = np.zeros((self.n_primitives, dim))
+            self.delta_sq = np.zeros(self.n_primitives)
 
     def _changed_since_prepare(self, m: SensorimotorMap) -> np.ndarray | None:
         """The rows of m the map's change log lists since the last :meth:`_prepare` (None:
@@ -694,11 +706,40 @@ class MotivationEstimator:
         (None: unknown)."""
         again = self._frame_episode != self.episode
         if again or not self.frame.complete:
-            self.frame.refresh(self.delta, self.moves, self._scale, again)
+            self.frame.refresh(self.delta, self.moves, self._scale, again, self.spread())
             self._frame_episode = self.episode
+            self._follow_lattice(self.frame.lattice(self.n_primitives))
         goal = self.goal_x if self.goal_x is not None else np.zeros(m.w.shape[1])
         self._F = self.frame.of(m.w, goal, self.delta, self._scale, rows)
         return self._F
+
+    def spread(self) -> np.ndarray:
+        """Per primitive, the spread of its sensed displacements about their mean
+        ``delta``: the root mean square of ``|d - delta_a|`` over its moves (0 before
+        any)."""
+        if not self.delta.size:
+            return np.zeros(self.n_primitives)
+        var = self.delta_sq - np.einsum("ij,ij->i", self.delta, self.delta)
+        return np.sqrt(np.maximum(var, 0.0))
+
+    def _follow_lattice(self, lattice: np.ndarray) -> None:
+        """The primitives whose options Eq. 5' values: those the frame finds consistent
+        (frame.py); with none of them, the paper's Eq. 5 (``value_unknown`` off). A change
+        restarts the potentials and recomputes every option, as a new goal does."""
+        if np.array_equal(lattice, self.lattice):
+            return
+        self.lattice = lattice.copy()
+        self.value_unknown = self._unknown and bool(lattice.any())
+        self._options_key = ()
+        self.rho[:] = 0.0                 # recomputed in full when any is valued
+        self.U[:] = 0.0
+        self.osucc[:] = -1
+        self._inc = None
+        self._R_key = None
+        self._epoch += 1
+        self.V[:] = 0.0
+        self.V0[:] = 0.0
+        self._v0_fresh = False
 
     @staticmethod
     def _extended(V: np.ndarray, n: int) -> np.ndarray:
@@ -866,6 +907,13 @@ class MotivationEstimator:
                               self.stale_horizon, rho_max, self.rho_new, stuck, self._grid,
                               self._origin, self.V, self.sel, self.chain,
                               self.U, self.rho, self.osucc, self.onb, self.ong)
+        off = ~self.lattice
+        if off.any():                     # no lattice step: no option (frame.py)
+            r = rows[rows < n][:, None]
+            a_off = np.flatnonzero(off)[None, :]
+            self.rho[r, a_off] = 0.0
+            self.U[r, a_off] = 0.0
+            self.osucc[r, a_off] = -1
 
     def open_prior(self, m: SensorimotorMap, n: int) -> float:
         """rho of a primitive never tried (Eq. 5'): ``untried_rho``, or when that is
