@@ -1,8 +1,9 @@
 """The learnt frame checks its own lattice assumption (core/frame.py, "Is the forward model
 a lattice?"): a primitive whose sensed displacement depends on where it is taken (MiniGrid's
-forward and turns) is found inconsistent from the spread the forward model keeps, gets no
-option, and with no consistent primitive the estimator is the paper's Eq. 5; on the grid
-the check never trips."""
+forward and turns) is found inconsistent from the spread the forward model keeps; no rule
+that places its successor is used for it (an untried pair of it is unknown space at a
+distance no lattice measures), and with no consistent primitive the goal is where the agent
+sensed it; on the grid the check never trips."""
 
 import numpy as np
 from small_mazes import SMALL
@@ -63,14 +64,21 @@ def test_the_estimator_keeps_the_spread_and_drops_the_options_it_cannot_place():
         m.step(x, None)
     mo.update(m)
     np.testing.assert_array_equal(mo.lattice, [True, False])
-    assert mo.value_unknown                       # primitive 0 still has its options
-    assert not mo.rho[: m.n, 1].any() and mo.rho[: m.n, 0].any()
-    # every primitive inconsistent: the paper's Eq. 5, no option anywhere
+    assert mo.value_unknown
+    # primitive 1 was taken from nodes 0-3: no option (its successor cannot be placed)
+    assert not mo.rho[:4, 1].any() and mo.rho[:4, 0].any()
+    # every primitive inconsistent: only untried pairs have options, into unknown space
     moves_of(mo, w, [(1, 0, 3), (3, 0, 1)])
     mo.record(-1, 1, False, EPISODE_START, w)
+    m.step(w[4], None)                     # a fifth node, nothing tried from it
     mo.update(m)
     np.testing.assert_array_equal(mo.lattice, [False, False])
-    assert not mo.value_unknown and not mo.rho.any()
+    assert not mo.rho[:4][mo.tried[:4, :2]].any()
+    # node 4 is the goal sensation itself: h = 0 steps from the successor
+    np.testing.assert_allclose(mo.rho[4, :2], mo.rho_new)
+    np.testing.assert_allclose(mo.U[4, :2], mo.v_star)
+    assert (mo.osucc[: m.n, :2] == -1).all()
+    assert mo.goal_node == -1 and not mo.R.any()    # the goal never sensed
     # the spread travels with the outcome memory
     mo2 = MotivationEstimator(MotivationConfig(), primitives=np.eye(2))
     mo2.load_state_dict(mo.state_dict())
@@ -90,15 +98,22 @@ def drive(world, agent, steps):
 
 
 def test_minigrid_turns_and_forward_are_found_inconsistent():
-    """Forward follows the heading and turns rotate it: no lattice, so the default agent
-    values the unknown as the paper does (no option), as ``tmgwr:none`` would."""
+    """Forward follows the heading and turns rotate it: no lattice. The goal nodes are the
+    poses where the goal was sensed (R = 1 there, 0 elsewhere), and a tried pair has no
+    option."""
     world = MiniGridWorld(Maze.from_text(SMALL), "G", max_episode_steps=500)
     agent = TMGWRAgent(world_senses(world), np.random.default_rng(0))
-    drive(world, agent, 400)
-    mo = agent.motivation
+    drive(world, agent, 1500)
+    mo, m = agent.motivation, agent.map
     assert (mo.moves > 0).all()
     np.testing.assert_array_equal(mo.lattice, [False, False, False])
-    assert not mo.value_unknown and not mo.rho.any()
+    n = m.n
+    seen = mo.goal_seen[:n] & m.alive[:n]
+    assert seen.any() and mo.goal_node in np.flatnonzero(seen).tolist()
+    goal = np.array(world.goal_observation()) * agent.preprocessor.gain
+    assert np.abs(m.w[:n][seen][:, :2] - goal[:2]).max() < 0.05   # all at the goal cell
+    np.testing.assert_array_equal(mo.R[:n], seen.astype(float))
+    assert not mo.rho[:n][mo.tried[:n]].any()
 
 
 def test_grid_moves_stay_a_lattice():

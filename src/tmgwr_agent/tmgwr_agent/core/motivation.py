@@ -377,7 +377,7 @@ class MotivationEstimator:
         self._opt_rows: np.ndarray | None = None    # option rows recomputed since
         self.solves = {"incremental": 0, "full": 0}   # and why the incremental declined
         self.absorbing_terminals = config.absorbing_terminals
-        self.value_unknown = self._unknown = config.unknown != "none"
+        self.value_unknown = config.unknown != "none"
         self.frame = make_frame(config.unknown)     # where places are measured (frame.py)
         self.lattice = np.ones(P, dtype=bool)       # primitives whose options are valued
         self._frame_episode = -1      # the episode the frame's basis was chosen in
@@ -402,6 +402,7 @@ class MotivationEstimator:
         self.bump_e = np.full((64, P), -1, dtype=np.int64)    # episode of a bump
         self.succ = np.full((64, P), -1, dtype=np.int64)   # where a move led
         self.closed_e = np.full(64, -1, dtype=np.int64)   # episode a node's cell closed
+        self.goal_seen = np.zeros(64, dtype=bool)   # the current goal was sensed there
         self.sel = np.ones((64, P), dtype=bool)  # this episode's re-tests
         self.chain = np.zeros((64, P), dtype=bool)  # its untried chain
         self._closed: np.ndarray | None = None   # its trusted marks (derived, cached)
@@ -455,6 +456,7 @@ class MotivationEstimator:
     def set_goal(self, goal_x: np.ndarray) -> None:
         """A new goal state: the potentials restart from 0 (Algorithm 1, line 5)."""
         self.goal_x = np.asarray(goal_x, dtype=float)
+        self.goal_seen[:] = False
         self._options_key = ()
         self.route = 0.0                  # the route to the new goal is not known yet
         self.V[:] = 0.0
@@ -502,6 +504,10 @@ class MotivationEstimator:
         self._size_forward_model(w.shape[1])
         if inserted and winner >= 0:
             self._dirty.add(winner)
+        if winner >= 0 and self.goal_seen[winner] != (outcome.goal_reached or not inserted
+                                                      and self.goal_seen[winner]):
+            self.goal_seen[winner] = not self.goal_seen[winner]   # a goal node (_prepare)
+            self._R_key = None
         if 0 <= node and self.bump_t[node, outcome.action] >= 0:
             self.wall_tests += 1
             self.wall_opened += not outcome.bumped
@@ -528,7 +534,8 @@ class MotivationEstimator:
 
     #: The outcome memory's per-node arrays and the value of a new node's row.
     _MEMORY = (("tried", False), ("bump_t", -1), ("closed_t", -1), ("bump_e", -1),
-               ("succ", -1), ("closed_e", -1), ("sel", True), ("chain", False))
+               ("succ", -1), ("closed_e", -1), ("sel", True), ("chain", False),
+               ("goal_seen", False))
 
     def _grow_memory(self, n: int) -> None:
         """The outcome memory with at least n node rows (:func:`grown`)."""
@@ -560,6 +567,7 @@ class MotivationEstimator:
         return {"tried": self.tried.copy(), "bump_t": self.bump_t.copy(),
                 "closed_t": self.closed_t.copy(), "bump_e": self.bump_e.copy(),
                 "succ": self.succ.copy(), "closed_e": self.closed_e.copy(),
+                "goal_seen": self.goal_seen.copy(),
                 "clock": int(self.clock), "delta": self.delta.copy(),
                 "delta_sq": self.delta_sq.copy(),
                 "moves": self.moves.copy(), "episode": int(self.episode),
@@ -577,6 +585,8 @@ class MotivationEstimator:
         self.closed_e = grown(np.array(d.get("closed_e", ()), dtype=np.int64),
                               len(self.succ), -1)            # older checkpoints: none
         self._closed = None
+        self.goal_seen = grown(np.array(d.get("goal_seen", ()), dtype=bool), len(self.succ),
+                               False)                        # older checkpoints: none
         self.clock = int(d["clock"])
         # absent from older checkpoints: the episode counters start afresh and every
         # remembered wall is trusted from now on
@@ -668,6 +678,8 @@ class MotivationEstimator:
             self._scale_version = m.version
         F = self._in_frame(m, rows)
         g, g_moved = self._nearest_goal(m, n, rows)
+        if self.value_unknown and not self.lattice.any():
+            return self._sensed_goal(m, n)
         if g < 0 or (self.value_unknown                   # represented only once sensed
                      and math.dist(F.w[g].tolist(), F.goal.tolist()) > 0.5 * F.L):
             self.R = np.zeros(n)
@@ -676,6 +688,24 @@ class MotivationEstimator:
             return n
         self.goal_node = g
         self.R = self.rewards(F, m, g, None if g_moved else rows)
+        return n
+
+    def _sensed_goal(self, m: SensorimotorMap, n: int) -> int:
+        """Goal node and rewards without a lattice (no primitive consistent, frame.py):
+        the test "a node within half a step of the goal sensation" and Eq. 10's width in
+        link lengths both measure steps by a lattice, so the goal is represented by the
+        nodes where the agent sensed it (``goal_seen``, the outcome's goal sensing): R = 1
+        there, 0 elsewhere, the goal node the one of them nearest the goal sensation (-1
+        before any: the options lead). Returns n."""
+        seen = self.goal_seen[:n] & m.alive[:n]
+        R = seen.astype(float)
+        if len(self.R) != n or not np.array_equal(R, self.R):
+            self.R = R
+            self._R_key = None
+            self._epoch += 1
+        idx = np.flatnonzero(seen)
+        d = m.w[idx] - self.goal_x
+        self.goal_node = int(idx[np.argmin(np.einsum("ij,ij->i", d, d))]) if len(idx) else -1
         return n
 
     def _nearest_goal(self, m: SensorimotorMap, n: int, rows: np.ndarray | None
@@ -723,13 +753,12 @@ class MotivationEstimator:
         return np.sqrt(np.maximum(var, 0.0))
 
     def _follow_lattice(self, lattice: np.ndarray) -> None:
-        """The primitives whose options Eq. 5' values: those the frame finds consistent
-        (frame.py); with none of them, the paper's Eq. 5 (``value_unknown`` off). A change
-        restarts the potentials and recomputes every option, as a new goal does."""
+        """The primitives the frame finds consistent (frame.py), whose options the lattice
+        rules value (the others: :meth:`_unplaced_options`). A change restarts the
+        potentials and recomputes every option, as a new goal does."""
         if np.array_equal(lattice, self.lattice):
             return
         self.lattice = lattice.copy()
-        self.value_unknown = self._unknown and bool(lattice.any())
         self._options_key = ()
         self.rho[:] = 0.0                 # recomputed in full when any is valued
         self.U[:] = 0.0
@@ -907,13 +936,28 @@ class MotivationEstimator:
                               self.stale_horizon, rho_max, self.rho_new, stuck, self._grid,
                               self._origin, self.V, self.sel, self.chain,
                               self.U, self.rho, self.osucc, self.onb, self.ong)
-        off = ~self.lattice
-        if off.any():                     # no lattice step: no option (frame.py)
-            r = rows[rows < n][:, None]
-            a_off = np.flatnonzero(off)[None, :]
-            self.rho[r, a_off] = 0.0
-            self.U[r, a_off] = 0.0
-            self.osucc[r, a_off] = -1
+        if not self.lattice.all():
+            self._unplaced_options(m, rows[rows < n], np.flatnonzero(~self.lattice))
+
+    def _unplaced_options(self, m: SensorimotorMap, rows: np.ndarray,
+                          prims: np.ndarray) -> None:
+        """The options of the primitives ``prims`` that make no lattice step (frame.py),
+        on the nodes ``rows``. The forward model cannot place their successor, so no rule
+        that looks a place up applies (a known node there, a wall's exits, the untried
+        chain, a closed cell): only a primitive never taken from i has an option, into
+        unknown space, ``rho = rho_new`` and ``U = V* gamma^h``, ``h = max(0, |w_i - x_g|
+        / l - 1)`` with ``l`` the root mean square step of the longest-moving primitive:
+        a path of k moves covers about k l at most (the triangle inequality, in the
+        sensation's own norm), so h does not overestimate the steps from the successor to
+        the goal (the A* argument of the module docstring holds without a lattice)."""
+        r, a = rows[:, None], prims[None, :]
+        untried = ~self.tried[r, a] & m.alive[rows][:, None]
+        step = math.sqrt(max(float(self.delta_sq.max()), 0.0))
+        gap = np.sqrt(np.einsum("ij,ij->i", m.w[rows] - self.goal_x, m.w[rows] - self.goal_x))
+        h = np.maximum(gap / step - 1.0, 0.0) if step > 0.0 else np.zeros(len(rows))
+        self.rho[r, a] = np.where(untried, self.rho_new, 0.0)
+        self.U[r, a] = np.where(untried, (self.v_star * self.gamma ** h)[:, None], 0.0)
+        self.osucc[r, a] = -1
 
     def open_prior(self, m: SensorimotorMap, n: int) -> float:
         """rho of a primitive never tried (Eq. 5'): ``untried_rho``, or when that is
