@@ -36,9 +36,11 @@ is *consistent* while ``s_a <= CONSISTENT |delta_a|``, ``CONSISTENT`` = 1/2: its
 land, in the root mean square, within half of its own step of the place the mean
 predicts. A primitive never moved with counts as consistent (nothing contradicts it yet).
 An inconsistent primitive (a move that depends on where it is taken: a forward step that
-follows a heading, a turn that rotates it) joins no basis, and the value of the unknown
-gives it no option (the paper's Eq. 5 for its pairs); when no primitive is consistent,
-the estimator is the paper's (``none``) altogether. With :class:`SensorFrame` (``grid``)
+follows a heading, a turn that rotates it) joins no basis, and no rule that places its
+successor is used for it: a pair of it never tried is unknown space at a distance bounded
+without a lattice (``MotivationEstimator._unplaced_options``), a tried one has no option.
+When no primitive is consistent, the goal is represented by the nodes where the agent
+sensed it (``MotivationEstimator._sensed_goal``). With :class:`SensorFrame` (``grid``)
 the lattice is declared, not checked.
 """
 

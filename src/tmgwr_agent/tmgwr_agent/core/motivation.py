@@ -61,7 +61,11 @@ Gaussian is cut below ``goal_sim_floor`` (1e-3: beyond about 1.9 link lengths).
 or ``none`` = the paper's Eq. 5). Every place, distance and length below (``w``,
 ``delta``, ``x_g``, ``L``) is measured in the frame of :mod:`tmgwr_agent.core.frame`:
 the sensor's own axes for ``grid``, the learnt forward model's primitive steps for
-``learnt`` (then ``L`` = 1).
+``learnt`` (then ``L`` = 1). Every rule below that looks a place up assumes the
+primitives make lattice steps; ``learnt`` checks it from the forward model's spread
+(frame.py, "Is the forward model a lattice?") and where it fails uses none of them for
+that primitive (:meth:`MotivationEstimator._unplaced_options`,
+:meth:`MotivationEstimator._sensed_goal`).
 
 Eq. 5 only knows the links the agent has made: where the map knows no way
 to the goal every potential is 0 and the agent can only random-walk; a side corridor never
