@@ -241,8 +241,8 @@ by a step limit flag nothing.
 
 The outcome memory (primitives tried per node, step and episode of the last bump and since
 when a pair is known closed, where each move led, the step and episode clocks, the known
-route, this episode's re-tests and untried chain, the forward model ``delta``) is plain
-data:
+route, this episode's re-tests and untried chain, the forward model ``delta`` and its
+spread, the nodes where the goal was sensed) is plain data:
 :meth:`state_dict` / :meth:`load_state_dict`.
 """
 
