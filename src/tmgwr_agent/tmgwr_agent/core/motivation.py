@@ -508,9 +508,9 @@ class MotivationEstimator:
         self._size_forward_model(w.shape[1])
         if inserted and winner >= 0:
             self._dirty.add(winner)
-        if winner >= 0 and self.goal_seen[winner] != (outcome.goal_reached or not inserted
-                                                      and self.goal_seen[winner]):
-            self.goal_seen[winner] = not self.goal_seen[winner]   # a goal node (_prepare)
+        if (outcome.goal_reached or inserted) and winner >= 0 \
+                and self.goal_seen[winner] != outcome.goal_reached:
+            self.goal_seen[winner] = outcome.goal_reached   # a goal node, or a new slot
             self._R_key = None
         if 0 <= node and self.bump_t[node, outcome.action] >= 0:
             self.wall_tests += 1
