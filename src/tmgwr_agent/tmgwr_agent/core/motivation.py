@@ -708,8 +708,11 @@ class MotivationEstimator:
             self._R_key = None
             self._epoch += 1
         idx = np.flatnonzero(seen)
+        if not len(idx) or self.goal_x is None:
+            self.goal_node = -1
+            return n
         d = m.w[idx] - self.goal_x
-        self.goal_node = int(idx[np.argmin(np.einsum("ij,ij->i", d, d))]) if len(idx) else -1
+        self.goal_node = int(idx[np.argmin(np.einsum("ij,ij->i", d, d))])
         return n
 
     def _nearest_goal(self, m: SensorimotorMap, n: int, rows: np.ndarray | None
