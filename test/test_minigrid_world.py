@@ -245,3 +245,13 @@ def test_the_default_agent_converges_in_minigrid_and_detours_near_the_oracle():
         r = trial("tmgwr", t, seed, maze, "a", "G", world_spec=spec)
         assert r["train_episodes"] is not None, (t, r)
         assert r["steps"] is not None and r["steps"] <= 1.5 * oracle, (t, r, oracle)
+
+
+def test_the_graph_knows_minigrid_senses_by_name():
+    """The agent nodes host no world: the senses they take by name are the env's own."""
+    from tmgwr_agent.world_senses import GRAPH_WORLDS, named_world_senses, world_senses
+    assert "minigrid" in GRAPH_WORLDS
+    named = named_world_senses("minigrid")
+    built = world_senses(MiniGridWorld(Maze.from_text(SMALL), "G"))
+    assert named.dim == built.dim == 4
+    np.testing.assert_array_equal(named.primitives, built.primitives)
