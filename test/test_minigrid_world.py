@@ -231,3 +231,27 @@ def test_tabular_goal_key_with_an_open_heading():
     assert not key_matches((5, 6, 2), (5, 7, None))
     assert key_matches((5, 7), (5, 7)) and not key_matches((0, 1, -1), (0, 1, 3))
     assert not key_matches((0, 1, 3), (0, 1, -1))   # -1 (a view's "at goal") is a value
+
+
+def test_the_default_agent_converges_in_minigrid_and_detours_near_the_oracle():
+    """Forward and turns make no lattice (core/frame.py): the default agent must still
+    train to convergence and find the detour after the block (before the frame checked
+    its lattice it never converged in MiniGrid)."""
+    from tmgwr_agent.experiments.env_change import event_oracle, trial
+    from tmgwr_agent.experiments.parallel import trial_seeds
+    maze, spec = Maze.from_text(SMALL), parse_world("minigrid")
+    oracle = event_oracle(spec, maze, "a", "G")["oracle_steps"]
+    for t, seed in enumerate(trial_seeds(0, 3)):
+        r = trial("tmgwr", t, seed, maze, "a", "G", world_spec=spec)
+        assert r["train_episodes"] is not None, (t, r)
+        assert r["steps"] is not None and r["steps"] <= 1.5 * oracle, (t, r, oracle)
+
+
+def test_the_graph_knows_minigrid_senses_by_name():
+    """The agent nodes host no world: the senses they take by name are the env's own."""
+    from tmgwr_agent.world_senses import GRAPH_WORLDS, named_world_senses, world_senses
+    assert "minigrid" in GRAPH_WORLDS
+    named = named_world_senses("minigrid")
+    built = world_senses(MiniGridWorld(Maze.from_text(SMALL), "G"))
+    assert named.dim == built.dim == 4
+    np.testing.assert_array_equal(named.primitives, built.primitives)

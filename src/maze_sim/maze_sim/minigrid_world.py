@@ -305,6 +305,17 @@ class MiniGridWorld:
         return self.truth.walls
 
     @property
+    def grid(self) -> GridWorld:
+        """The book-keeper, as the simulator node restores it from a checkpoint (then
+        :meth:`sync`)."""
+        return self.truth
+
+    @property
+    def rng(self) -> np.random.Generator:
+        """The book-keeper's generator (what a checkpoint keeps)."""
+        return self.truth.rng
+
+    @property
     def fired(self) -> list[str]:
         return self.truth.fired
 
@@ -371,6 +382,12 @@ class MiniGridWorld:
     def _sync(self) -> None:
         terminals = [self.goal] + ([self.previous_goal] if self.previous_goal else [])
         self.base.edit(self.truth.walls, terminals)
+
+    def sync(self) -> None:
+        """Follow the book-keeper after its walls, goal and counters were restored
+        directly (a checkpoint): the running grid and the counters."""
+        self.episode, self.total_steps = self.truth.episode, self.truth.total_steps
+        self._sync()
 
     def check_goal(self, goal: str | Cell) -> Cell:
         return self.truth.check_goal(goal)

@@ -1,8 +1,9 @@
 """``ros2 run maze_sim maze_sim``: the grid world as a ROS 2 node (docs/graph.md).
 
 Hosts a world by name (parameter ``world``, :mod:`maze_sim.worlds`: ``grid``, our
-:class:`~maze_sim.world.GridWorld`, or ``pointmaze``, MuJoCo's PointMaze built from the maze
-file, :mod:`maze_sim.pointmaze_world`) and drives the lockstep ring: it publishes one
+:class:`~maze_sim.world.GridWorld`, ``minigrid``, :mod:`maze_sim.minigrid_world`, or
+``pointmaze``, MuJoCo's PointMaze built from the maze file,
+:mod:`maze_sim.pointmaze_world`) and drives the lockstep ring: it publishes one
 ``Observation`` per step and steps the world only when the ``Action`` carrying that
 observation's ``run_id`` and ``step_id`` arrives. The answer to a terminal observation is
 ``Action.NONE``; the simulator then starts the next episode. While it waits it resends the

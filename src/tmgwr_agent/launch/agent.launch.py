@@ -234,8 +234,8 @@ def generate_launch_description():
                                           "share/maze_sim/mazes"),
         DeclareLaunchArgument("world", default_value="grid",
                               description="the world maze_sim hosts, built from the maze "
-                                          "(grid, pointmaze: MuJoCo's PointMaze); the agent "
-                                          "nodes take its senses"),
+                                          "(grid, minigrid, pointmaze: MuJoCo's "
+                                          "PointMaze); the agent nodes take its senses"),
         DeclareLaunchArgument("goal", default_value="G",
                               description="initial goal: a goal name ('G', '1'-'9') or 'row,col'"),
         DeclareLaunchArgument("seed", default_value="0",

@@ -10,6 +10,8 @@ simulator that says so; the core is handed the result and knows nothing of mazes
 
 from __future__ import annotations
 
+import numpy as np
+
 from maze_sim.maze import ACTION_VECTORS
 from tmgwr_agent.core.senses import Senses
 
@@ -41,14 +43,18 @@ def world_senses(world) -> Senses:
 
 
 #: The worlds the ROS graph hosts (the agent nodes know their senses by name).
-GRAPH_WORLDS = ("grid", "pointmaze")
+GRAPH_WORLDS = ("grid", "minigrid", "pointmaze")
 
 
 def named_world_senses(name: str, **kwargs) -> Senses:
     """The senses of world ``name`` without building it (what the agent nodes are given:
-    they host no world): the grid's, or PointMaze's (``velocity``: 4 values)."""
+    they host no world): the grid's, MiniGrid's (``(row, col, cos h, sin h)`` and its three
+    native actions, one-hot), or PointMaze's (``velocity``: 4 values)."""
     if name == "grid":
         return maze_senses()
+    if name == "minigrid":
+        from maze_sim.minigrid_world import N_ACTIONS
+        return Senses(4, np.eye(N_ACTIONS))
     if name == "pointmaze":
         from maze_sim.pointmaze_world import PRIMITIVES
         return Senses(4 if kwargs.get("velocity") else 2, PRIMITIVES)

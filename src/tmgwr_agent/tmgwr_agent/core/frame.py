@@ -19,13 +19,29 @@ are offered, chosen by the estimator's ``unknown`` parameter:
   no primitive has moved along are completed by an orthonormal complement measured in
   link lengths. In these coordinates a sensation that is any invertible linear transform
   of another (units, rotation, shear) gives the same numbers, so the rules below work the
-  same. What it still assumes, and has learnt rather than been told: each primitive
+  same. What it still assumes, and checks rather than is told: each primitive
   displaces the sensation by about the same vector wherever it is taken (a lattice),
   and the primitives come in opposite pairs (then the L1 norm in these coordinates is the
   fewest primitive steps that cover a gap). Until the agent has moved along every
   direction its moves span, the sensor frame stands in. The basis is chosen at an
   episode's start and kept for the episode (the potentials are not re-solved for a drift
   of the mean displacement every step).
+
+**Is the forward model a lattice?** (:meth:`LearntFrame.refresh`, ``lattice``.) Beside
+the mean displacement ``delta_a`` the agent keeps its spread ``s_a``, the root mean square
+of ``|d - delta_a|`` over the moves ``d`` made with ``a`` (motivation.py). The rules that
+need a lattice find a move's successor as the place within half a step of ``w_i +
+delta_a`` (the cells of :func:`kernels.cell_grid`, the closed-cell test). So a primitive
+is *consistent* while ``s_a <= CONSISTENT |delta_a|``, ``CONSISTENT`` = 1/2: its moves
+land, in the root mean square, within half of its own step of the place the mean
+predicts. A primitive never moved with counts as consistent (nothing contradicts it yet).
+An inconsistent primitive (a move that depends on where it is taken: a forward step that
+follows a heading, a turn that rotates it) joins no basis, and no rule that places its
+successor is used for it: a pair of it never tried is unknown space at a distance bounded
+without a lattice (``MotivationEstimator._unplaced_options``), a tried one has no option.
+When no primitive is consistent, the goal is represented by the nodes where the agent
+sensed it (``MotivationEstimator._sensed_goal``). With :class:`SensorFrame` (``grid``)
+the lattice is declared, not checked.
 """
 
 from __future__ import annotations
@@ -58,8 +74,13 @@ class SensorFrame:
     complete = True
 
     def refresh(self, delta: np.ndarray, moves: np.ndarray, L: float,
-                again: bool = True) -> None:
+                again: bool = True, spread: np.ndarray | None = None) -> None:
         """Nothing to learn."""
+
+    @staticmethod
+    def lattice(n_primitives: int) -> np.ndarray:
+        """Every primitive: the grid rules declare the lattice."""
+        return np.ones(n_primitives, dtype=bool)
 
     def of(self, w: np.ndarray, goal: np.ndarray, delta: np.ndarray, L: float,
            rows: np.ndarray | None = None, cache: bool = True) -> Frame:
@@ -75,9 +96,13 @@ class LearntFrame:
     #: A primitive joins the basis when the part of its displacement outside the span of
     #: those chosen is at least this share of its length (it is a new direction).
     INDEPENDENT = 0.5
+    #: A primitive is consistent while the spread of its displacements is at most this
+    #: share of its mean displacement's length (the module docstring: half a step).
+    CONSISTENT = 0.5
 
     def __init__(self):
         self.T: np.ndarray | None = None     # None: the sensor frame stands in
+        self._lattice = np.ones(0, dtype=bool)   # the consistent primitives (refresh)
         self.chosen: tuple[int, ...] = ()    # the primitives of the basis
         self.version = 0                     # bumped whenever T changes
         self._w = np.zeros((0, 0))           # the last coordinates of the map's weights
@@ -86,18 +111,22 @@ class LearntFrame:
         self._goal = np.zeros(0)
 
     def refresh(self, delta: np.ndarray, moves: np.ndarray, L: float,
-                again: bool = True) -> None:
+                again: bool = True, spread: np.ndarray | None = None) -> None:
         """Choose the basis from the forward model ``delta`` (one row per primitive),
-        the most used primitives first (``moves``), ``L`` the median link length. With
-        ``again`` False the basis is re-estimated only when it gains a primitive (a new
-        direction moved along), not for the drift of the mean displacements."""
+        the most used primitives first (``moves``), ``L`` the median link length, among
+        the consistent primitives (``spread``: the spread of each one's displacements,
+        :meth:`consistent`; None: every primitive). With ``again`` False the basis is
+        re-estimated only when it gains a primitive (a new direction moved along), not
+        for the drift of the mean displacements."""
         dim = delta.shape[1]
+        self._lattice = self.consistent(delta, moves, spread)
         basis: list[np.ndarray] = []
         chosen: list[int] = []
         for a in np.argsort(-moves, kind="stable"):
             d = delta[a]
             length = float(np.linalg.norm(d))
-            if moves[a] == 0 or length == 0.0 or len(basis) == dim:    # never moved
+            if moves[a] == 0 or length == 0.0 or len(basis) == dim \
+                    or not self._lattice[a]:          # never moved, or no lattice step
                 continue
             if basis:
                 Q, _ = np.linalg.qr(np.array(basis).T)
@@ -121,6 +150,24 @@ class LearntFrame:
                 (T is not None and not np.array_equal(T, self.T)):
             self.T = T
             self.version += 1
+
+    @classmethod
+    def consistent(cls, delta: np.ndarray, moves: np.ndarray,
+                   spread: np.ndarray | None) -> np.ndarray:
+        """Per primitive: its displacements are consistent, ``spread <= CONSISTENT
+        |delta|``, or it never moved (the module docstring); every one without
+        ``spread``."""
+        if spread is None:
+            return np.ones(len(delta), dtype=bool)
+        length = np.sqrt(np.einsum("ij,ij->i", delta, delta))
+        return (moves == 0) | (spread <= cls.CONSISTENT * length)
+
+    def lattice(self, n_primitives: int) -> np.ndarray:
+        """The primitives found consistent at the last :meth:`refresh` (every one
+        before it)."""
+        if len(self._lattice) != n_primitives:
+            return np.ones(n_primitives, dtype=bool)
+        return self._lattice
 
     @property
     def complete(self) -> bool:

@@ -69,7 +69,11 @@ Gaussian is cut below ``goal_sim_floor`` (1e-3: beyond about 1.9 link lengths).
 or ``none`` = the paper's Eq. 5). Every place, distance and length below (``w``,
 ``delta``, ``x_g``, ``L``) is measured in the frame of :mod:`tmgwr_agent.core.frame`:
 the sensor's own axes for ``grid``, the learnt forward model's primitive steps for
-``learnt`` (then ``L`` = 1).
+``learnt`` (then ``L`` = 1). Every rule below that looks a place up assumes the
+primitives make lattice steps; ``learnt`` checks it from the forward model's spread
+(frame.py, "Is the forward model a lattice?") and where it fails uses none of them for
+that primitive (:meth:`MotivationEstimator._unplaced_options`,
+:meth:`MotivationEstimator._sensed_goal`).
 
 Eq. 5 only knows the links the agent has made: where the map knows no way
 to the goal every potential is 0 and the agent can only random-walk; a side corridor never
@@ -245,8 +249,8 @@ by a step limit flag nothing.
 
 The outcome memory (primitives tried per node, step and episode of the last bump and since
 when a pair is known closed, where each move led, the step and episode clocks, the known
-route, this episode's re-tests and untried chain, the forward model ``delta``) is plain
-data:
+route, this episode's re-tests and untried chain, the forward model ``delta`` and its
+spread, the nodes where the goal was sensed) is plain data:
 :meth:`state_dict` / :meth:`load_state_dict`.
 """
 
@@ -395,6 +399,7 @@ class MotivationEstimator:
         self.absorbing_terminals = config.absorbing_terminals
         self.value_unknown = config.unknown != "none"
         self.frame = make_frame(config.unknown)     # where places are measured (frame.py)
+        self.lattice = np.ones(P, dtype=bool)       # primitives whose options are valued
         self._frame_episode = -1      # the episode the frame's basis was chosen in
         self._F: Frame | None = None  # the frame's coordinates of the last _prepare
         self.stale_prior, self.stale_horizon = config.stale_prior, config.stale_horizon
@@ -417,6 +422,7 @@ class MotivationEstimator:
         self.bump_e = np.full((64, P), -1, dtype=np.int64)    # episode of a bump
         self.succ = np.full((64, P), -1, dtype=np.int64)   # where a move led
         self.closed_e = np.full(64, -1, dtype=np.int64)   # episode a node's cell closed
+        self.goal_seen = np.zeros(64, dtype=bool)   # the current goal was sensed there
         self.sel = np.ones((64, P), dtype=bool)  # this episode's re-tests
         self.chain = np.zeros((64, P), dtype=bool)  # its untried chain
         self._closed: np.ndarray | None = None   # its trusted marks (derived, cached)
@@ -430,6 +436,7 @@ class MotivationEstimator:
         self._route_due = False       # the route is read off V0 at the episode's first solve
         self._stuck = False           # stuck when the last update solved Eq. 5'
         self.delta = np.zeros((P, 0))     # mean sensed displacement per primitive
+        self.delta_sq = np.zeros(P)       # and the mean of its squared length
         self.moves = np.zeros(P, dtype=np.int64)
         self.U = np.zeros((64, P))
         self.rho = np.zeros((64, P))
@@ -470,6 +477,7 @@ class MotivationEstimator:
     def set_goal(self, goal_x: np.ndarray) -> None:
         """A new goal state: the potentials restart from 0 (Algorithm 1, line 5)."""
         self.goal_x = np.asarray(goal_x, dtype=float)
+        self.goal_seen[:] = False
         self._options_key = ()
         self.route = 0.0                  # the route to the new goal is not known yet
         self.V[:] = 0.0
@@ -518,6 +526,10 @@ class MotivationEstimator:
         self._size_forward_model(w.shape[1])
         if inserted and winner >= 0:
             self._dirty.add(winner)
+        if (outcome.goal_reached or inserted) and winner >= 0 \
+                and self.goal_seen[winner] != outcome.goal_reached:
+            self.goal_seen[winner] = outcome.goal_reached   # a goal node, or a new slot
+            self._R_key = None
         if 0 <= node and self.bump_t[node, outcome.action] >= 0:
             self.wall_tests += 1
             self.wall_opened += not outcome.bumped
@@ -531,16 +543,21 @@ class MotivationEstimator:
             self._close_cell(node, a, w)
         elif winner >= 0 and (inserted or not outcome.bumped):
             self._mark_closed(winner, -1)     # a node stood on (or a new one) is open
+        moved = self.moves[a]
         if kernels.record_outcome(self.tried, self.bump_t, self.closed_t, self.bump_e,
                                   self.succ, self.delta, self.moves, w, node, winner,
                                   inserted, outcome.action, outcome.bumped, self.clock,
                                   self.episode):
             self._dirty.add(node)
             self._bumps += 1
+        if self.moves[a] != moved:            # a move: the forward model's spread too
+            d = w[winner] - w[node]
+            self.delta_sq[a] += (float(d @ d) - self.delta_sq[a]) / self.moves[a]
 
     #: The outcome memory's per-node arrays and the value of a new node's row.
     _MEMORY = (("tried", False), ("bump_t", -1), ("closed_t", -1), ("bump_e", -1),
-               ("succ", -1), ("closed_e", -1), ("sel", True), ("chain", False))
+               ("succ", -1), ("closed_e", -1), ("sel", True), ("chain", False),
+               ("goal_seen", False))
 
     def _grow_memory(self, n: int) -> None:
         """The outcome memory with at least n node rows (:func:`grown`)."""
@@ -553,7 +570,7 @@ class MotivationEstimator:
         predicted cell; a map loaded or rebuilt since may hold fewer nodes than ``succ``
         remembers)."""
         j = self.succ[node, a]
-        if j == node or j >= len(w):
+        if j == node or j >= len(w) or not self.lattice[a]:   # no cell it predicts
             return
         F = self.frame.of(w[[node, j]], np.zeros(w.shape[1]), self.delta[[a]], self._scale,
                           cache=False)
@@ -572,7 +589,9 @@ class MotivationEstimator:
         return {"tried": self.tried.copy(), "bump_t": self.bump_t.copy(),
                 "closed_t": self.closed_t.copy(), "bump_e": self.bump_e.copy(),
                 "succ": self.succ.copy(), "closed_e": self.closed_e.copy(),
+                "goal_seen": self.goal_seen.copy(),
                 "clock": int(self.clock), "delta": self.delta.copy(),
+                "delta_sq": self.delta_sq.copy(),
                 "moves": self.moves.copy(), "episode": int(self.episode),
                 "route": float(self.route), "retests": int(self.retests),
                 "wall_tests": int(self.wall_tests), "wall_opened": int(self.wall_opened),
@@ -588,6 +607,8 @@ class MotivationEstimator:
         self.closed_e = grown(np.array(d.get("closed_e", ()), dtype=np.int64),
                               len(self.succ), -1)            # older checkpoints: none
         self._closed = None
+        self.goal_seen = grown(np.array(d.get("goal_seen", ()), dtype=bool), len(self.succ),
+                               False)                        # older checkpoints: none
         self.clock = int(d["clock"])
         # absent from older checkpoints: the episode counters start afresh and every
         # remembered wall is trusted from now on
@@ -604,6 +625,10 @@ class MotivationEstimator:
         self.chain = grown(np.array(d.get("chain", np.zeros((0, self.n_primitives))), dtype=bool),
                            len(self.succ), False)                      # older: none
         self.delta = np.array(d["delta"], dtype=float)
+        # absent from older checkpoints: no spread (every displacement its mean)
+        self.delta_sq = np.array(d["delta_sq"], dtype=float) if "delta_sq" in d else \
+            np.einsum("ij,ij->i", self.delta, self.delta) if self.delta.size else \
+            np.zeros(self.n_primitives)
         self.moves = np.array(d["moves"], dtype=np.int64)
         self._options_key = ()
         self._inc = None                  # the next solve is a full one
@@ -641,6 +666,7 @@ class MotivationEstimator:
         """The forward model ``delta`` for sensations of ``dim`` values (zero: unknown)."""
         if self.delta.shape != (self.n_primitives, dim):
             self.delta = np.zeros((self.n_primitives, dim))
+            self.delta_sq = np.zeros(self.n_primitives)
 
     def _changed_since_prepare(self, m: SensorimotorMap) -> np.ndarray | None:
         """The rows of m the map's change log lists since the last :meth:`_prepare` (None:
@@ -674,6 +700,8 @@ class MotivationEstimator:
             self._scale_version = m.version
         F = self._in_frame(m, rows)
         g, g_moved = self._nearest_goal(m, n, rows)
+        if self.value_unknown and not self.lattice.any():
+            return self._sensed_goal(m, n)
         if g < 0 or (self.value_unknown                   # represented only once sensed
                      and math.dist(F.w[g].tolist(), F.goal.tolist()) > 0.5 * F.L):
             self.R = np.zeros(n)
@@ -682,6 +710,27 @@ class MotivationEstimator:
             return n
         self.goal_node = g
         self.R = self.rewards(F, m, g, None if g_moved else rows)
+        return n
+
+    def _sensed_goal(self, m: SensorimotorMap, n: int) -> int:
+        """Goal node and rewards without a lattice (no primitive consistent, frame.py):
+        the test "a node within half a step of the goal sensation" and Eq. 10's width in
+        link lengths both measure steps by a lattice, so the goal is represented by the
+        nodes where the agent sensed it (``goal_seen``, the outcome's goal sensing): R = 1
+        there, 0 elsewhere, the goal node the one of them nearest the goal sensation (-1
+        before any: the options lead). Returns n."""
+        seen = self.goal_seen[:n] & m.alive[:n]
+        R = seen.astype(float)
+        if len(self.R) != n or not np.array_equal(R, self.R):
+            self.R = R
+            self._R_key = None
+            self._epoch += 1
+        idx = np.flatnonzero(seen)
+        if not len(idx) or self.goal_x is None:
+            self.goal_node = -1
+            return n
+        d = m.w[idx] - self.goal_x
+        self.goal_node = int(idx[np.argmin(np.einsum("ij,ij->i", d, d))])
         return n
 
     def _nearest_goal(self, m: SensorimotorMap, n: int, rows: np.ndarray | None
@@ -712,11 +761,39 @@ class MotivationEstimator:
         (None: unknown)."""
         again = self._frame_episode != self.episode
         if again or not self.frame.complete:
-            self.frame.refresh(self.delta, self.moves, self._scale, again)
+            self.frame.refresh(self.delta, self.moves, self._scale, again, self.spread())
             self._frame_episode = self.episode
+            self._follow_lattice(self.frame.lattice(self.n_primitives))
         goal = self.goal_x if self.goal_x is not None else np.zeros(m.w.shape[1])
         self._F = self.frame.of(m.w, goal, self.delta, self._scale, rows)
         return self._F
+
+    def spread(self) -> np.ndarray:
+        """Per primitive, the spread of its sensed displacements about their mean
+        ``delta``: the root mean square of ``|d - delta_a|`` over its moves (0 before
+        any)."""
+        if not self.delta.size:
+            return np.zeros(self.n_primitives)
+        var = self.delta_sq - np.einsum("ij,ij->i", self.delta, self.delta)
+        return np.sqrt(np.maximum(var, 0.0))
+
+    def _follow_lattice(self, lattice: np.ndarray) -> None:
+        """The primitives the frame finds consistent (frame.py), whose options the lattice
+        rules value (the others: :meth:`_unplaced_options`). A change restarts the
+        potentials and recomputes every option, as a new goal does."""
+        if np.array_equal(lattice, self.lattice):
+            return
+        self.lattice = lattice.copy()
+        self._options_key = ()
+        self.rho[:] = 0.0                 # recomputed in full when any is valued
+        self.U[:] = 0.0
+        self.osucc[:] = -1
+        self._inc = None
+        self._R_key = None
+        self._epoch += 1
+        self.V[:] = 0.0
+        self.V0[:] = 0.0
+        self._v0_fresh = False
 
     @staticmethod
     def _extended(V: np.ndarray, n: int) -> np.ndarray:
@@ -884,6 +961,28 @@ class MotivationEstimator:
                               self.stale_horizon, rho_max, self.rho_new, stuck, self._grid,
                               self._origin, self.V, self.sel, self.chain,
                               self.U, self.rho, self.osucc, self.onb, self.ong)
+        if not self.lattice.all():
+            self._unplaced_options(m, rows[rows < n], np.flatnonzero(~self.lattice))
+
+    def _unplaced_options(self, m: SensorimotorMap, rows: np.ndarray,
+                          prims: np.ndarray) -> None:
+        """The options of the primitives ``prims`` that make no lattice step (frame.py),
+        on the nodes ``rows``. The forward model cannot place their successor, so no rule
+        that looks a place up applies (a known node there, a wall's exits, the untried
+        chain, a closed cell): only a primitive never taken from i has an option, into
+        unknown space, ``rho = rho_new`` and ``U = V* gamma^h``, ``h = max(0, |w_i - x_g|
+        / l - 1)`` with ``l`` the root mean square step of the longest-moving primitive:
+        a path of k moves covers about k l at most (the triangle inequality, in the
+        sensation's own norm), so h does not overestimate the steps from the successor to
+        the goal (the A* argument of the module docstring holds without a lattice)."""
+        r, a = rows[:, None], prims[None, :]
+        untried = ~self.tried[r, a] & m.alive[rows][:, None]
+        step = math.sqrt(max(float(self.delta_sq.max()), 0.0))
+        gap = np.sqrt(np.einsum("ij,ij->i", m.w[rows] - self.goal_x, m.w[rows] - self.goal_x))
+        h = np.maximum(gap / step - 1.0, 0.0) if step > 0.0 else np.zeros(len(rows))
+        self.rho[r, a] = np.where(untried, self.rho_new, 0.0)
+        self.U[r, a] = np.where(untried, (self.v_star * self.gamma ** h)[:, None], 0.0)
+        self.osucc[r, a] = -1
 
     def open_prior(self, m: SensorimotorMap, n: int) -> float:
         """rho of a primitive never tried (Eq. 5'): ``untried_rho``, or when that is

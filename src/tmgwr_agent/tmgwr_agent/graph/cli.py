@@ -36,7 +36,8 @@ def register(subparsers) -> None:
                    "exploration policy")
     p.add_argument("--goal", metavar="NAME", help="initial goal name in the maze (G, 1-9)")
     p.add_argument("--world", metavar="NAME", help="the world the simulator hosts, built "
-                   "from the maze: grid (default) or pointmaze (MuJoCo's PointMaze); the "
+                   "from the maze: grid (default), minigrid (native turn / forward) or "
+                   "pointmaze (MuJoCo's PointMaze); the "
                    "agent nodes take its senses")
     p.add_argument("--no-record", action="store_true", help="do not start the recorder")
     p.add_argument("--record-dir", metavar="DIR", help="record here instead of "
