@@ -20,6 +20,7 @@ import re
 import signal
 import subprocess
 import time
+import warnings
 
 import pytest
 from measure_ctrl_c import NODES, one_stop
@@ -173,11 +174,24 @@ def test_ros2_launch_ends_non_zero_when_a_running_node_dies(ros_domain, tmp_path
 
 @pytest.mark.timeout(300)
 def test_ctrl_c_mid_stepping_is_clean(ros_domain, tmp_path):
-    """Three Ctrl-C stops of a stepping launch (the measurement runs 20+)."""
+    """Three Ctrl-C stops of a stepping launch (the measurement runs 20+): every node ends
+    with exit code 0, no traceback, its state saved before its DDS teardown.
+
+    What this does not claim: that Fast DDS's own teardown always finishes. Rarely it hangs
+    (CI: once in a few dozen stops, inside rclpy's destroy_node holding the GIL); the node
+    then cuts it after a bound (node.guard_teardown, tested by
+    test_a_hung_teardown_after_the_node_end_is_cut_with_its_reason) and exits with its own
+    code 0, saying so in the log. Such a stop passes here and is reported as a warning."""
     for seed, wait in ((0, 2.0), (1, 3.5), (2, 5.0)):
         ok, why, code = one_stop(ros_domain, seed, wait, ["record:=true",
                                  f"output_dir:={tmp_path}/bag{seed}"], tmp_path)
-        assert ok, f"stop {seed}: {why} (log {tmp_path}/launch_{seed}.log)"
+        log = tmp_path / f"launch_{seed}.log"
+        assert ok, f"stop {seed}: {why} (log {log})"
+        cut = [ln for ln in log.read_text(errors="replace").splitlines()
+               if "DDS teardown did not finish" in ln]
+        if cut:
+            warnings.warn(f"stop {seed}: a DDS teardown was cut: {cut[0].strip()} (log {log})",
+                          stacklevel=1)
 
 
 def test_the_launch_file_sets_no_dds_setting():
