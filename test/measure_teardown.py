@@ -4,8 +4,9 @@ a node's DDS teardown hung inside ``destroy_node``).
 
 Each stop: a launch (its own ROS_DOMAIN_ID), a first goal, a random 2-6 s of stepping, one
 SIGINT to the launch's process group (a terminal's Ctrl-C). Any node process still alive
-``--catch-after`` s later is stopped by ``gdb -p`` long enough to print every thread's
-native backtrace into ``<out>/stack_<stop>_<pid>.txt``. A stop is clean as in
+``--catch-after`` s later has every thread's stack, Python and native, written to
+``<out>/stack_<stop>_<node>_<pid>.txt`` (``py-spy dump --native`` when ``pip install py-spy``
+put it in the venv, else ``gdb -p``). A stop is clean as in
 ``measure_ctrl_c.py``. Options: ``--load K`` adds K busy-loop processes for the run;
 ``--profile FILE`` another Fast DDS profile (e.g. one without shared memory). Run from the
 repository root::
@@ -44,10 +45,14 @@ def alive(pid: int) -> bool:
 
 
 def native_stack(pid: int, path: Path) -> None:
+    """Every thread's stack, Python and native frames: ``py-spy dump --native`` when the
+    venv has it (quick), else ``gdb -p`` (slow to load a node's libraries)."""
+    spy = Path(sys.executable).with_name("py-spy")
+    cmd = ([str(spy), "dump", "--native", "--pid", str(pid)] if spy.exists() else
+           ["gdb", "-p", str(pid), "-batch", "-nx", "-ex", "set pagination off",
+            "-ex", "thread apply all bt"])
     with open(path, "w") as out:
-        subprocess.run(["gdb", "-p", str(pid), "-batch", "-nx",
-                        "-ex", "set pagination off", "-ex", "thread apply all bt"],
-                       stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+        subprocess.run(cmd, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                        timeout=120, check=False)
 
 
