@@ -387,8 +387,9 @@ def wait_for_acknowledgments(node, timeout: float = 1.0) -> bool:
 #: rclpy.shutdown; well under 1 s normally) may take before the process exits without it.
 TEARDOWN_LIMIT = 3.0
 #: Seconds after TEARDOWN_LIMIT at which the C library's own timers (:mod:`native_exit`)
-#: end a process whose hung teardown holds the GIL, so that no Python thread can run.
-NATIVE_GRACE = 1.5
+#: end a process whose hung teardown holds the GIL, so that no Python thread can run (the
+#: sum stays under the 5 s ``ros2 launch`` waits after a SIGINT before its SIGTERM).
+NATIVE_GRACE = 1.0
 
 
 def guard_teardown(name: str, code: int, limit: float = TEARDOWN_LIMIT,
