@@ -95,7 +95,12 @@ def main() -> int:
     ap.add_argument("--gap", type=float, default=2.0, help="seconds of stepping between kills")
     ap.add_argument("--episodes", type=int, default=5)
     ap.add_argument("--warmup-episodes", type=int, default=12)
+    ap.add_argument("--victims", default=",".join(VICTIMS),
+                    help="the processes killed in turn (comma-separated)")
     args = ap.parse_args()
+    victims = args.victims.split(",")
+    if set(victims) - set(VICTIMS):
+        ap.error(f"--victims: unknown {sorted(set(victims) - set(VICTIMS))}; one of {VICTIMS}")
 
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -137,7 +142,7 @@ def main() -> int:
         before = [e.steps for e in monitor.episodes[-args.episodes:]]
         n_before = len(monitor.episodes)
         for k in range(args.kills):
-            name = VICTIMS[k % len(VICTIMS)]
+            name = victims[k % len(victims)]
             pid = current_pid(g, args.mode, name)
             mark = len(g.lines)
             os.kill(pid, signal.SIGKILL)

@@ -20,6 +20,7 @@ import re
 import signal
 import subprocess
 import time
+import warnings
 
 import pytest
 from measure_ctrl_c import NODES, one_stop
@@ -173,11 +174,24 @@ def test_ros2_launch_ends_non_zero_when_a_running_node_dies(ros_domain, tmp_path
 
 @pytest.mark.timeout(300)
 def test_ctrl_c_mid_stepping_is_clean(ros_domain, tmp_path):
-    """Three Ctrl-C stops of a stepping launch (the measurement runs 20+)."""
+    """Three Ctrl-C stops of a stepping launch (the measurement runs 20+): every node ends
+    with exit code 0, no traceback, its state saved before its DDS teardown.
+
+    What this does not claim: that Fast DDS's own teardown always finishes. Rarely it hangs
+    (CI: once in a few dozen stops, inside rclpy's destroy_node holding the GIL); the node
+    then cuts it after a bound (node.guard_teardown, tested by
+    test_a_hung_teardown_after_the_node_end_is_cut_with_its_reason) and exits with its own
+    code 0, saying so in the log. Such a stop passes here and is reported as a warning."""
     for seed, wait in ((0, 2.0), (1, 3.5), (2, 5.0)):
         ok, why, code = one_stop(ros_domain, seed, wait, ["record:=true",
                                  f"output_dir:={tmp_path}/bag{seed}"], tmp_path)
-        assert ok, f"stop {seed}: {why} (log {tmp_path}/launch_{seed}.log)"
+        log = tmp_path / f"launch_{seed}.log"
+        assert ok, f"stop {seed}: {why} (log {log})"
+        cut = [ln for ln in log.read_text(errors="replace").splitlines()
+               if "DDS teardown did not finish" in ln]
+        if cut:
+            warnings.warn(f"stop {seed}: a DDS teardown was cut: {cut[0].strip()} (log {log})",
+                          stacklevel=1)
 
 
 def test_the_launch_file_sets_no_dds_setting():
@@ -194,6 +208,8 @@ def test_the_launch_file_sets_no_dds_setting():
 
 
 STUCK_TEARDOWN = r"""
+import ctypes
+import sys
 import time
 from rclpy.node import Node
 from tmgwr_common.node import run
@@ -202,11 +218,14 @@ class Stuck(Node):
     def __init__(self):
         super().__init__("stuck")
         self.finished = True                      # spinning stops at once
+        self.exit_code = int(sys.argv[2])
 
     def on_shutdown(self):
         print("state saved", flush=True)
 
     def destroy_node(self):                       # a middleware teardown that never ends
+        if sys.argv[1] == "holds-gil":            # as a hung rclpy call into Fast DDS does
+            ctypes.PyDLL(None).sleep(60)          # a C call that keeps the GIL
         time.sleep(60)
 
 raise SystemExit(run(Stuck, "stuck"))
@@ -214,15 +233,24 @@ raise SystemExit(run(Stuck, "stuck"))
 
 
 @pytest.mark.timeout(60)
-def test_a_hung_teardown_after_the_node_end_is_cut_with_its_reason(ros_domain):
-    from tmgwr_common.node import TEARDOWN_LIMIT
+@pytest.mark.parametrize("how", ["releases-gil", "holds-gil"])
+@pytest.mark.parametrize("code", [0, 3])
+def test_a_hung_teardown_after_the_node_end_is_cut_with_its_reason(ros_domain, how, code):
+    """A node's DDS teardown that never ends is cut after a bound, saying so and where it
+    hung, and the process exits with the node's own exit code. Before, a hang that held the
+    GIL (CI: sensory_preprocessor inside rclpy's destroy_node after a Ctrl-C) could only be
+    ended by faulthandler's watchdog, with exit code 1, which ``ros2 launch`` reports as a
+    node that died."""
+    from tmgwr_common.node import NATIVE_GRACE, TEARDOWN_LIMIT
     t0 = time.monotonic()
-    p = spawn_python(STUCK_TEARDOWN, domain=ros_domain, name="stuck")
-    out = p.wait(timeout=40)                      # exit code 0: the node's own code
+    p = spawn_python(STUCK_TEARDOWN, how, str(code), domain=ros_domain, name="stuck")
+    out = p.wait(timeout=40, check=False)
     took = time.monotonic() - t0
+    assert p.proc.returncode == code, p.describe(f"exit code {p.proc.returncode}, not {code}")
     assert "state saved" in out and "DDS teardown did not finish" in out, out
-    assert "destroy_node" in out, out             # where it hung
-    assert took < TEARDOWN_LIMIT + 30, took
+    assert f"exiting with code {code} without it" in out, out
+    assert "destroy_node" in out, out             # where it hung (the Python threads)
+    assert took < TEARDOWN_LIMIT + NATIVE_GRACE + 30, took
 
 
 @pytest.mark.timeout(300)

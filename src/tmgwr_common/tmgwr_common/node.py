@@ -386,33 +386,58 @@ def wait_for_acknowledgments(node, timeout: float = 1.0) -> bool:
 #: Seconds the DDS teardown after a node's end (acknowledgments, destroy_node,
 #: rclpy.shutdown; well under 1 s normally) may take before the process exits without it.
 TEARDOWN_LIMIT = 3.0
+#: Seconds after TEARDOWN_LIMIT at which the C library's own timers (:mod:`native_exit`)
+#: end a process whose hung teardown holds the GIL, so that no Python thread can run (the
+#: sum stays under the 5 s ``ros2 launch`` waits after a SIGINT before its SIGTERM).
+NATIVE_GRACE = 1.0
 
 
-def guard_teardown(name: str, code: int, limit: float = TEARDOWN_LIMIT) -> Callable[[], None]:
+def guard_teardown(name: str, code: int, limit: float = TEARDOWN_LIMIT,
+                   grace: float = NATIVE_GRACE) -> Callable[[], None]:
     """Bound the teardown that follows a node's end; returns the call that disarms it.
 
     The node's state is saved by then (:func:`end_node`); what is left is the middleware's.
-    Once, under heavy load, a node hung there for 15 s after writing its checkpoint (and was
-    killed by its supervisor); it was never seen again in 60 stops under a profiler. If that
-    happens, after ``limit`` s the node says so, prints where each thread was (to find the
-    cause) and exits with its own code; the interpreter-free watchdog of :mod:`faulthandler`
-    ends it (code 1, with the same dump) should the first need the GIL a hung call holds."""
+    Fast DDS can hang there for good (a destruction deadlock: eProsima/Fast-DDS#6193; seen
+    here inside ``destroy_node`` after a Ctrl-C). If the teardown takes longer than
+    ``limit`` s, the process says so, prints where each thread was and exits with the
+    node's own ``code``: from a Python thread when the interpreter is free; else (the hung
+    call holds the GIL, as rclpy's calls into the middleware do) the interpreter-free
+    dump of :mod:`faulthandler` prints the Python threads and the C library's timers of
+    :mod:`tmgwr_common.native_exit` print the reason and exit with ``code``, ``grace`` s
+    after the limit. Without those timers (not Linux) faulthandler's watchdog exits, with
+    code 1."""
+    from tmgwr_common import native_exit
+
+    def say(late: float, how: str) -> str:
+        return (f"[{name}] DDS teardown did not finish within {late:.1f} s of the node's end "
+                f"(its state is saved): exiting with code {code} without it{how}")
+
     def cut():
-        print(f"[{name}] DDS teardown did not finish within {limit:.0f} s of the node's end "
-              "(its state is saved): exiting without it; the threads were at:",
-              file=sys.stderr, flush=True)
+        print(say(limit, "; the threads were at:"), file=sys.stderr, flush=True)
         faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
         sys.stdout.flush()
         os._exit(code)
 
+    sys.stdout.flush()
+    sys.stderr.flush()
     timer = threading.Timer(limit, cut)
     timer.daemon = True
     timer.start()
-    faulthandler.dump_traceback_later(limit + 2.0, exit=True)
+    try:
+        cancel_native = native_exit.arm(
+            limit + grace, code, say(limit + grace / 2, " (a C call holds the Python "
+                                     "interpreter; its threads follow on stderr)"),
+            say_before=grace / 2)
+        faulthandler.dump_traceback_later(limit + grace * 0.6, exit=False)
+    except OSError:
+        cancel_native = None
+        faulthandler.dump_traceback_later(limit + grace, exit=True)
 
     def disarm():
         timer.cancel()
         faulthandler.cancel_dump_traceback_later()
+        if cancel_native is not None:
+            cancel_native()
     return disarm
 
 

@@ -71,9 +71,22 @@ class ActionSelectorNode(Node):
         self.checkpoints = Checkpointer("action_selector", self.p, self.get_logger(),
                                         namespace=self.get_namespace())
         self.checkpoints.resume(check=self.restore)
+        self.load_kernels()
         self.get_logger().info(f"action_selector ready: seed {self.p['seed']}, "
                                f"epsilon {self.core.policy.epsilon:.3f}, "
                                f"{config.as_dict()}")
+
+    def load_kernels(self) -> None:
+        """Rank the links of a made-up node once (Eq. 6) with a spare selector, before the
+        ready line: numba loads a kernel from its on-disk cache at the kernel's first call
+        in a process, which otherwise fell on the first step after a (re)start, after the
+        ready line, and delayed the ring's rejoin by as much."""
+        spare = ActionSelector(np.random.default_rng(0), self.core.config,
+                               primitives=self.core.primitives)
+        P = spare.primitives
+        links = Links(targets=np.arange(len(P), dtype=np.int64), E=np.ones(len(P)),
+                      actions=P.copy())
+        spare.greedy(links, np.ones(len(P) + 2))
 
     def on_motivation(self, f):
         """A MotivationField (its fields, read by tmgwr_common.cdr)."""

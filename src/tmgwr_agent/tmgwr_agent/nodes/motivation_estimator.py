@@ -43,6 +43,7 @@ from std_srvs.srv import Trigger
 from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
 from tmgwr_agent.core.sensorimotor_map import Links
 from tmgwr_agent.map_replica import APPLIED, GAP, Replica
+from tmgwr_agent.nodes.preload import load_cached_kernels
 from tmgwr_agent.nodes.step_messages import change_of, outcome_of
 from tmgwr_agent.world_senses import node_senses
 from tmgwr_common import topics
@@ -119,6 +120,7 @@ class MotivationEstimatorNode(Node):
         self.checkpoints = Checkpointer("motivation_estimator", self.p, self.get_logger(),
                                         namespace=self.get_namespace())
         self.checkpoints.resume(check=self.restore)
+        load_cached_kernels()               # Eq. 4-5' kernels: not on the first step
         self.get_logger().info(f"motivation_estimator ready: {config.as_dict()}")
 
     # ------------------------------------------------------------------ per step
