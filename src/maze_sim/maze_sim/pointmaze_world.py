@@ -56,6 +56,11 @@ Oracle (:meth:`PointMazeWorld.shortest_path_length`): the primitive steps a scri
 controller takes on the same physics: the point at rest at the start cell's centre, each
 step it applies the primitive towards the next cell of a BFS shortest path from the cell it
 is in, until the env's success test holds. Measured once per layout and goal (cached).
+Being a controller's route rather than a proven shortest one, the convergence probe counts
+a greedy route within :data:`PROBE_TOLERANCE` of it (or shorter) as converged.
+
+Goal region (``goal_tolerance``, told to the agent through its ``Senses``): the success
+radius, in metres of the position sensation.
 
 Events, cell edits and goal changes are validated by a :class:`~maze_sim.world.GridWorld`
 kept as the book-keeper (the same refusals as the grid world); an edit of the walls rebuilds
@@ -90,6 +95,12 @@ BRAKE_MARGIN = 4
 BUMP_COSINE = 0.5
 #: Speed (m/s) below which the brake counts the point at rest.
 REST_SPEED = 1e-3
+#: The share of the oracle's primitive steps by which a greedy probe's route may exceed
+#: them and still count as converged (``probe_tolerance``, experiments/runner.py). The
+#: oracle is one controller's route, not a search over primitive sequences, and a map
+#: of continuous places is not a lattice; the share is the experimenter's choice, not
+#: derived, and every JSON measured with it records it.
+PROBE_TOLERANCE = 0.2
 
 
 def _gym_robotics():
@@ -314,6 +325,12 @@ class PointMazeWorld:
 
     #: The declared motor vector of each action (``Senses``): its force direction.
     primitive_vectors = PRIMITIVES
+    #: How near the goal sensation a sensation ends an episode at the goal (``Senses``,
+    #: metres): the env's success radius. With ``velocity`` it bounds the position part
+    #: alone (the env's test ignores the velocity).
+    goal_tolerance = SUCCESS_RADIUS
+    #: The convergence probe's tolerance over the scripted oracle (:data:`PROBE_TOLERANCE`).
+    probe_tolerance = PROBE_TOLERANCE
 
     # ------------------------------------------------------------------ the contract
     @property
