@@ -93,6 +93,21 @@ def test_the_goal_is_reached_by_the_envs_success_test():
     assert w.env.compute_terminated(obs, w.env.goal, {})
 
 
+def test_the_move_into_the_goal_region_runs_to_its_end():
+    # the test holds 0.45 m from the centre, a few centimetres into the move from the
+    # lattice point 0.5 m away; the move still comes to rest, at the goal's centre, far
+    # from that lattice point (a place of its own in the agent's map)
+    w = PointMazeWorld(Maze.from_text(SMALL), "G")
+    w.reset(start=(1, 4))
+    before, *_ = w.step(RIGHT)
+    obs, _, terminated, _, info = w.step(RIGHT)
+    assert terminated and info.reached_goal
+    assert np.linalg.norm(before - w.goal_observation()) > SUCCESS_RADIUS
+    assert np.linalg.norm(obs - w.goal_observation()) < 0.1
+    assert np.abs(w.data.qvel[:2]).max() < 0.05
+    assert np.linalg.norm(obs - before) > 0.8 * step_length()
+
+
 def test_oracle_by_the_scripted_controller(world):
     # S (1,1) to G (1,5): 4 m straight right, half a metre a primitive; the success test
     # holds 0.45 m before the goal's centre: 7 or 8 primitives, as many as RIGHT takes

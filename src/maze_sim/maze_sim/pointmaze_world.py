@@ -44,8 +44,16 @@ Outcome: ``bumped`` is the touch sensor: during the primitive the point met a wa
 of its push (a MuJoCo contact between the point's geom and a ``block_*`` geom whose normal
 is within 60 degrees of the push direction; a wall slid along does not count). A goal counts
 as reached by the env's own success test (``PointMazeEnv.compute_terminated`` of an
-episodic env: within 0.45 m of the goal), checked after every physics step: the primitive
-stops at the step that reaches it, as the env's episode would.
+episodic env: within 0.45 m of the goal), checked after every physics step: a primitive
+during which it held ends the episode at the goal. The primitive itself runs to its end,
+as every primitive does, and the episode's last sensation is where it came to rest. (Were
+the sensation taken at the physics step the test first held, the region's edge, 0.45 m
+from the goal's centre, it would lie a few centimetres from the move lattice's points
+just outside the region, half a metre from the centre, where a primitive that does not
+enter the region rests: no map of half-metre places could tell the two apart, and an
+agent that came to such a point from a side where the next move does not enter the region
+took it for the goal. Run to its end, a move into the region from the lattice comes to rest
+at the goal's centre, a place of its own.)
 
 Tabular state (``info.cell``, :attr:`PointMazeWorld.state`, what Q-learning and Dyna-Q+
 key on): the cell the sensed position lies in (the floor discretisation above at the
@@ -276,12 +284,13 @@ class PointMazeWorld:
         return bool(self.env.compute_terminated(self.data.qpos[:2].copy(), goal_xy, {}))
 
     def _primitive(self, action: int, goals: list[np.ndarray]) -> tuple[Primitive, int]:
-        """Run primitive ``action``; stop at the first physics step at which the env's test
-        holds for one of ``goals`` (its index, else -1)."""
+        """Run primitive ``action`` to its end; the first of ``goals`` for which the env's
+        test held at one of its physics steps (its index, else -1)."""
         model, data = self.model, self.data
         push = PRIMITIVES[action]
         bumped = False
         steps = 0
+        reached = -1
         for k in range(self.k_push + self.k_brake):
             if k >= self.k_push:
                 if np.abs(data.qvel[:2]).max() <= REST_SPEED:
@@ -292,10 +301,11 @@ class PointMazeWorld:
             physics_step(model, data, ctrl)
             steps += 1
             bumped = bumped or self._blocked(push)
-            for gi, g in enumerate(goals):
+            for gi, g in enumerate(goals if reached < 0 else ()):
                 if self._success(g):
-                    return Primitive(bumped, True, steps), gi
-        return Primitive(bumped, False, steps), -1
+                    reached = gi
+                    break
+        return Primitive(bumped, reached >= 0, steps), reached
 
     # ------------------------------------------------------------------ sensing
     def sense(self) -> np.ndarray:
