@@ -93,6 +93,21 @@ def test_the_goal_is_reached_by_the_envs_success_test():
     assert w.env.compute_terminated(obs, w.env.goal, {})
 
 
+def test_the_move_into_the_goal_region_runs_to_its_end():
+    # the test holds 0.45 m from the centre, a few centimetres into the move from the
+    # lattice point 0.5 m away; the move still comes to rest, at the goal's centre, far
+    # from that lattice point (a place of its own in the agent's map)
+    w = PointMazeWorld(Maze.from_text(SMALL), "G")
+    w.reset(start=(1, 4))
+    before, *_ = w.step(RIGHT)
+    obs, _, terminated, _, info = w.step(RIGHT)
+    assert terminated and info.reached_goal
+    assert np.linalg.norm(before - w.goal_observation()) > SUCCESS_RADIUS
+    assert np.linalg.norm(obs - w.goal_observation()) < 0.1
+    assert np.abs(w.data.qvel[:2]).max() < 0.05
+    assert np.linalg.norm(obs - before) > 0.8 * step_length()
+
+
 def test_oracle_by_the_scripted_controller(world):
     # S (1,1) to G (1,5): 4 m straight right, half a metre a primitive; the success test
     # holds 0.45 m before the goal's centre: 7 or 8 primitives, as many as RIGHT takes
@@ -164,3 +179,90 @@ def test_make_world_by_name():
         make_world("mars", m)
     with pytest.raises(WorldError, match="unexpected keyword"):
         make_world("pointmaze", m, colour="red")
+
+
+def test_the_goal_region_is_declared_and_told_to_the_agent():
+    from tmgwr_agent.core.senses import Senses, SensesError
+    from tmgwr_agent.world_senses import maze_senses, named_world_senses, world_senses
+
+    w = PointMazeWorld(Maze.from_text(SMALL), "G")
+    assert world_senses(w).goal_tolerance == SUCCESS_RADIUS
+    assert named_world_senses("pointmaze").goal_tolerance == SUCCESS_RADIUS
+    assert maze_senses().goal_tolerance == 0.0          # the grid: one exact sensation
+    with pytest.raises(SensesError, match="goal tolerance must be a finite distance"):
+        Senses(2, PRIMITIVES, -0.1)
+
+
+def _goal_node(goal_tolerance):
+    """The goal node of an estimator over a corridor of places half a metre apart (feature
+    gain 0.1 a metre, the preprocessor's default) that ends 0.5 m short of the goal
+    sensation, where an episode stops by a goal region of 0.45 m."""
+    from maze_sim.maze import ACTION_VECTORS
+    from tmgwr_agent.core.motivation import MotivationEstimator
+    from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap
+
+    m = SensorimotorMap(dim=2, config=MapConfig(a_T=0.99, h_T=0.75, alpha_c=0.0,
+                                                insert_at=1.0), primitives=ACTION_VECTORS)
+    for k in range(4):                          # 0, 0.5, 1.0, 1.5 m, moved along by 'right'
+        m.step(np.array([0.0, 0.05 * k]), ACTION_VECTORS[RIGHT] if k else None)
+        m.h[m.winner] = 0.5
+    assert m.size == 4
+    est = MotivationEstimator(primitives=ACTION_VECTORS, goal_tolerance=goal_tolerance)
+    est.set_goal(np.array([0.0, 0.2]))          # 2.0 m: 0.5 m beyond the last place
+    est.update(m)
+    return est.goal_node
+
+
+def test_a_node_near_the_goal_region_represents_the_goal():
+    # the nearest place is a step (0.5 m) from the goal sensation, more than the half step
+    # a point goal allows, but within half a step of the region the world declares: told
+    # the region, the estimator has a goal node and plans to it; not told, it never does
+    assert _goal_node(0.1 * SUCCESS_RADIUS) == 3
+    assert _goal_node(0.0) == -1
+
+
+class _DetourAgent:
+    """Takes ``detour`` moves down and as many back up, then the oracle's own scripted
+    primitives: a route longer than the oracle's."""
+
+    def __init__(self, world, detour):
+        self.world, self.detour, self.k = world, detour, 0
+
+    def begin_episode(self, obs, cell=None, learn=True):
+        self.k = 0
+
+    def act(self, explore=True):
+        from maze_sim.maze import bfs_distances
+        self.k += 1
+        if self.k <= 2 * self.detour:
+            return DOWN if self.k <= self.detour else UP
+        w = self.world
+        return w._towards(w.grid.walls, bfs_distances(w.grid.walls, w.goal), w.goal)
+
+    def observe(self, obs, info, learn=True):
+        pass
+
+
+def test_the_greedy_probe_allows_the_worlds_declared_tolerance():
+    from maze_sim.worlds import parse_world
+    from tmgwr_agent.experiments.runner import (
+        declared_probe_tolerance,
+        greedy_optimal,
+        run_episode,
+    )
+
+    w = PointMazeWorld(Maze.from_text(SMALL), "G")
+    assert w.probe_tolerance >= 0
+    assert declared_probe_tolerance(parse_world("pointmaze")) == w.probe_tolerance
+    assert declared_probe_tolerance(parse_world("grid")) == 0.0
+    d = w.shortest_path_length()
+    assert greedy_optimal(w, _DetourAgent(w, 0))              # the oracle's own route
+    ep = run_episode(w, _DetourAgent(w, 1), max_steps=4 * d)
+    assert ep.reached_goal and ep.steps > d
+    w.probe_tolerance = (ep.steps - d + 0.5) / d                # cap: that route's length
+    assert greedy_optimal(w, _DetourAgent(w, 1))
+    w.probe_tolerance = (ep.steps - d - 0.5) / d                # one step short of it
+    assert not greedy_optimal(w, _DetourAgent(w, 1))
+    w.probe_tolerance = 0.0                     # an exact oracle: exactly D steps
+    assert not greedy_optimal(w, _DetourAgent(w, 1))
+    assert greedy_optimal(w, _DetourAgent(w, 0))

@@ -919,7 +919,7 @@ def test_defaults_are_declared_once_in_the_config_dataclasses():
                 SensoryPreprocessor):
         for name, par in inspect.signature(cls).parameters.items():
             assert name in ("rng", "dim", "action_dim", "config", "primitives",
-                                "n_actions"), (cls, name)   # the senses, not parameters
+                            "n_actions", "goal_tolerance"), (cls, name)   # the senses
 
 
 # ---------------------------------------------------------------- behaviour on mazes

@@ -3,10 +3,11 @@
 Per maze, agent and trial (a fresh agent, its generator from the trial's seed), the
 protocol of the env-change scenario (experiments/env_change.py, steps 1-3) on PointMaze:
 train to convergence (runner.train_until_converged: ten consecutive greedy rollouts that
-reach the goal in the oracle's primitive steps), fire the block event, count the steps of
-the next episode (``steps``, null when the episode cap runs out). TMGWR also reports its
-map's nodes per free cell after training. The JSON keeps the env-change contract
-(``oracle_steps``, ``agents[NAME].steps``, ...) and gains ``"world": "pointmaze"``.
+reach the goal within the oracle's primitive steps and the world's probe_tolerance), fire
+the block event, count the steps of the next episode (``steps``, null when the episode cap
+runs out). TMGWR also reports its map's nodes per free cell after training. The JSON
+keeps the env-change contract (``oracle_steps``, ``agents[NAME].steps``, ...) and gains
+``"world": "pointmaze"`` and the probe's ``probe_tolerance``.
 
     python tools/pointmaze_check.py --mazes default,braided:0,open:0 --trials 3 \\
         --agents tmgwr,q_learning,dyna_q_plus --out results/pointmaze_check.json
@@ -26,9 +27,15 @@ import numpy as np
 
 from maze_sim.maze import Maze, maze_file
 from maze_sim.suite import generate
-from maze_sim.worlds import make_world
+from maze_sim.worlds import make_world, world_class
 from tmgwr_agent.experiments.agent_factory import make_agent
-from tmgwr_agent.experiments.runner import Caps, run_episode, set_goal, train_until_converged
+from tmgwr_agent.experiments.runner import (
+    Caps,
+    probe_tolerance,
+    run_episode,
+    set_goal,
+    train_until_converged,
+)
 from tmgwr_agent.experiments.stats import stat
 from tmgwr_agent.world_senses import world_senses
 
@@ -52,6 +59,7 @@ def trial(agent: str, path: str, t: int, seed: int, event: str, budget: int) -> 
     conv = train_until_converged(world, ag, caps)
     out = {"train_episodes": conv.episodes, "train_steps": conv.steps,
            "cpu_s": time.process_time() - t0}
+    out["last_train_steps"] = conv.curve[-1] if conv.curve else None
     if agent.startswith("tmgwr"):
         out["nodes_per_free_cell"] = int(ag.map.alive[:ag.map.n].sum()) / len(maze.free_cells())
     world.fire_event(event)
@@ -74,7 +82,8 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     tmp = Path(tempfile.mkdtemp(prefix="pointmaze_check_"))
     result = {"world": "pointmaze", "seed": a.seed, "trials": a.trials,
-              "budget_per_free_cell": a.budget, "mazes": {}}
+              "budget_per_free_cell": a.budget,
+              "probe_tolerance": probe_tolerance(world_class("pointmaze")), "mazes": {}}
     with ProcessPoolExecutor(a.jobs) as pool:
         for spec in a.mazes.split(","):
             name, path = load(spec, a.seed, tmp)

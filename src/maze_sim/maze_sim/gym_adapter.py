@@ -157,6 +157,7 @@ class GymWorld:
         from maze_sim.minigrid_world import N_ACTIONS, PoseSensation, discretise
         self._discretise = discretise
         self.env = PoseSensation(NativeActions(base, N_ACTIONS), offset=0)
+        self.goal_tolerance = PoseSensation.GOAL_TOLERANCE
         self.n_actions = N_ACTIONS
         self.env.reset(seed=self.layout_seed)
         self.walls = minigrid_walls(self.env)

@@ -224,6 +224,11 @@ class PoseSensation(gym.ObservationWrapper):
     grid position of maze cell (0, 0) (1 for :class:`MazeMiniGridEnv`'s border, 0 for a
     registered env, whose cells are its own)."""
 
+    #: The goal sensation has a zero heading and any heading at the goal cell reaches it:
+    #: every sensation there lies at the heading vector's length, 1, from it, every other
+    #: sensation farther (``Senses.goal_tolerance``).
+    GOAL_TOLERANCE = 1.0
+
     def __init__(self, env: gym.Env, offset: int = 0):
         super().__init__(env)
         self.offset = int(offset)
@@ -263,6 +268,7 @@ class MiniGridWorld:
     docstring). ``start_dir``: the heading at S (default 0, east)."""
 
     identity = False                  # tabular agents key on discretise(sensation)
+    goal_tolerance = PoseSensation.GOAL_TOLERANCE
     n_actions = N_ACTIONS
     name = "minigrid"
 

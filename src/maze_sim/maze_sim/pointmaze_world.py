@@ -44,8 +44,16 @@ Outcome: ``bumped`` is the touch sensor: during the primitive the point met a wa
 of its push (a MuJoCo contact between the point's geom and a ``block_*`` geom whose normal
 is within 60 degrees of the push direction; a wall slid along does not count). A goal counts
 as reached by the env's own success test (``PointMazeEnv.compute_terminated`` of an
-episodic env: within 0.45 m of the goal), checked after every physics step: the primitive
-stops at the step that reaches it, as the env's episode would.
+episodic env: within 0.45 m of the goal), checked after every physics step: a primitive
+during which it held ends the episode at the goal. The primitive itself runs to its end,
+as every primitive does, and the episode's last sensation is where it came to rest. (Were
+the sensation taken at the physics step the test first held, the region's edge, 0.45 m
+from the goal's centre, it would lie a few centimetres from the move lattice's points
+just outside the region, half a metre from the centre, where a primitive that does not
+enter the region rests: no map of half-metre places could tell the two apart, and an
+agent that came to such a point from a side where the next move does not enter the region
+took it for the goal. Run to its end, a move into the region from the lattice comes to rest
+at the goal's centre, a place of its own.)
 
 Tabular state (``info.cell``, :attr:`PointMazeWorld.state`, what Q-learning and Dyna-Q+
 key on): the cell the sensed position lies in (the floor discretisation above at the
@@ -56,6 +64,11 @@ Oracle (:meth:`PointMazeWorld.shortest_path_length`): the primitive steps a scri
 controller takes on the same physics: the point at rest at the start cell's centre, each
 step it applies the primitive towards the next cell of a BFS shortest path from the cell it
 is in, until the env's success test holds. Measured once per layout and goal (cached).
+Being a controller's route rather than a proven shortest one, the convergence probe counts
+a greedy route as short as it, or shorter, as converged (:data:`PROBE_TOLERANCE`).
+
+Goal region (``goal_tolerance``, told to the agent through its ``Senses``): the success
+radius, in metres of the position sensation.
 
 Events, cell edits and goal changes are validated by a :class:`~maze_sim.world.GridWorld`
 kept as the book-keeper (the same refusals as the grid world); an edit of the walls rebuilds
@@ -90,6 +103,13 @@ BRAKE_MARGIN = 4
 BUMP_COSINE = 0.5
 #: Speed (m/s) below which the brake counts the point at rest.
 REST_SPEED = 1e-3
+#: The share of the oracle's primitive steps by which a greedy probe's route may exceed
+#: them and still count as converged (``probe_tolerance``, experiments/runner.py). 0: no
+#: share can be derived from the world, and one chosen after seeing a trial's routes would
+#: be fit to that trial; a breadth-first search over the physics (states to 1 cm) found the
+#: scripted controller's route shortest on the maze where it was checked. A route shorter
+#: than the oracle's counts as converged whatever the share.
+PROBE_TOLERANCE = 0.0
 
 
 def _gym_robotics():
@@ -265,12 +285,13 @@ class PointMazeWorld:
         return bool(self.env.compute_terminated(self.data.qpos[:2].copy(), goal_xy, {}))
 
     def _primitive(self, action: int, goals: list[np.ndarray]) -> tuple[Primitive, int]:
-        """Run primitive ``action``; stop at the first physics step at which the env's test
-        holds for one of ``goals`` (its index, else -1)."""
+        """Run primitive ``action`` to its end; the first of ``goals`` for which the env's
+        test held at one of its physics steps (its index, else -1)."""
         model, data = self.model, self.data
         push = PRIMITIVES[action]
         bumped = False
         steps = 0
+        reached = -1
         for k in range(self.k_push + self.k_brake):
             if k >= self.k_push:
                 if np.abs(data.qvel[:2]).max() <= REST_SPEED:
@@ -281,10 +302,11 @@ class PointMazeWorld:
             physics_step(model, data, ctrl)
             steps += 1
             bumped = bumped or self._blocked(push)
-            for gi, g in enumerate(goals):
+            for gi, g in enumerate(goals if reached < 0 else ()):
                 if self._success(g):
-                    return Primitive(bumped, True, steps), gi
-        return Primitive(bumped, False, steps), -1
+                    reached = gi
+                    break
+        return Primitive(bumped, reached >= 0, steps), reached
 
     # ------------------------------------------------------------------ sensing
     def sense(self) -> np.ndarray:
@@ -314,6 +336,12 @@ class PointMazeWorld:
 
     #: The declared motor vector of each action (``Senses``): its force direction.
     primitive_vectors = PRIMITIVES
+    #: How near the goal sensation a sensation ends an episode at the goal (``Senses``,
+    #: metres): the env's success radius. With ``velocity`` it bounds the position part
+    #: alone (the env's test ignores the velocity).
+    goal_tolerance = SUCCESS_RADIUS
+    #: The convergence probe's tolerance over the scripted oracle (:data:`PROBE_TOLERANCE`).
+    probe_tolerance = PROBE_TOLERANCE
 
     # ------------------------------------------------------------------ the contract
     @property

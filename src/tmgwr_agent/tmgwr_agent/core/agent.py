@@ -86,8 +86,9 @@ class TMGWRAgent:
         self.preprocessor = SensoryPreprocessor(config.preprocessor)
         self.map = SensorimotorMap(dim=senses.dim, action_dim=senses.action_dim,
                                    config=config.map, primitives=senses.primitives)
-        self.motivation = MotivationEstimator(config.motivation,
-                                              primitives=senses.primitives)
+        self.motivation = MotivationEstimator(
+            config.motivation, primitives=senses.primitives,
+            goal_tolerance=self.preprocessor.gain * senses.goal_tolerance)
         self.selector = ActionSelector(rng, config.selector, primitives=senses.primitives)
         self.winner = -1
         self.last_action = -1

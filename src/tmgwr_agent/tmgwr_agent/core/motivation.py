@@ -213,11 +213,18 @@ successor, an *option*, in the max of Eq. 5::
   generated large maze's agent stood beside the goal after the block and then searched
   the unknown for many times the route's length.
 * The goal node exists only once the map represents the goal (a node within ``L / 2`` of
-  the goal sensation, i.e. the goal has been sensed): before that ``R = 0`` everywhere and
+  the goal region, i.e. the goal has been sensed): before that ``R = 0`` everywhere and
   the options alone lead the agent, by the nearest plausible unknown, towards the goal
   sensation. (The paper's ``g = SM.Map(x_g)`` is otherwise the node *most like* a goal in
   unvisited space, often a dead end behind a wall, where Eq. 6 then oscillated; this
-  replaces ``goal_search``.)
+  replaces ``goal_search``.) The goal region is what the world declares
+  (``Senses.goal_tolerance``): the sensations within that distance of the goal sensation,
+  any of which ends the episode at the goal; the goal sensation alone when it is 0 (a grid
+  cell). Why half a step beyond it: the agent senses only where its primitives stop, places
+  one step ``L`` apart, so the sensation at which it first meets the region, and the node
+  that matched it, may lie up to half a step off any given point of it; a region the
+  primitives end *inside* is met at its edge (an episode stops there), never nearer its
+  centre, so without the tolerance a goal wider than a step is never represented.
 * The options are part of the potentials the action selector climbs (Eq. 6 ranks them
   with the links: :meth:`MotivationEstimator.options_of`), which replaces the former
   ``try_untried`` rule. The experimenter's greedy probe (``explore`` False) is the learnt
@@ -381,13 +388,15 @@ class MotivationEstimator:
     notes what an action did, :meth:`update` re-solves Eq. 4-5'."""
 
     def __init__(self, config: MotivationConfig = MotivationConfig(), *,
-                 primitives: np.ndarray):
+                 primitives: np.ndarray, goal_tolerance: float = 0.0):
         """``primitives``: the motor vector of each action (:class:`~tmgwr_agent.core.
         senses.Senses`): an option's action label; their number sizes the outcome
-        memory."""
+        memory. ``goal_tolerance``: the world's (``Senses``), in the units of the goal
+        sensation given to :meth:`set_goal`."""
         kernels.announce_compilation()
         self.config = config
         self.primitives = np.ascontiguousarray(primitives, dtype=float)
+        self.goal_tolerance = float(goal_tolerance)
         P = self.n_primitives = len(self.primitives)
         self.gamma, self.beta = config.gamma, config.beta
         self.goal_sigma, self.goal_sim_floor = config.goal_sigma, config.goal_sim_floor
@@ -703,7 +712,7 @@ class MotivationEstimator:
         if self.value_unknown and not self.lattice.any():
             return self._sensed_goal(m, n)
         if g < 0 or (self.value_unknown                   # represented only once sensed
-                     and math.dist(F.w[g].tolist(), F.goal.tolist()) > 0.5 * F.L):
+                     and not self._represents_goal(F, m, g)):
             self.R = np.zeros(n)
             self._R_key = None
             self._epoch += 1
@@ -732,6 +741,16 @@ class MotivationEstimator:
         d = m.w[idx] - self.goal_x
         self.goal_node = int(idx[np.argmin(np.einsum("ij,ij->i", d, d))])
         return n
+
+    def _represents_goal(self, F: Frame, m: SensorimotorMap, g: int) -> bool:
+        """Does node ``g`` represent the goal: is it within half a step (``F.L / 2``, in
+        the frame) of the world's goal region, the sensations within ``goal_tolerance`` of
+        the goal sensation? (A point region when the tolerance is 0.)"""
+        gap = math.dist(F.w[g].tolist(), F.goal.tolist())
+        if self.goal_tolerance > 0.0:      # the part of the gap outside the region
+            d = math.dist(m.w[g].tolist(), self.goal_x.tolist())
+            gap *= max(0.0, 1.0 - self.goal_tolerance / d) if d > 0.0 else 0.0
+        return gap <= 0.5 * F.L
 
     def _nearest_goal(self, m: SensorimotorMap, n: int, rows: np.ndarray | None
                       ) -> tuple[int, bool]:

@@ -3,7 +3,10 @@
 The paper's agent (Table 1) senses a vector and acts with motor primitives; it is told no
 cell, no geometry and no transition model. :class:`Senses` is that contract: the
 sensation's dimension and the motor primitives' vectors (the action labels of the
-sensorimotor links, Eq. 1-2). It comes from the world, as Gymnasium spaces
+sensorimotor links, Eq. 1-2), and how near the goal sensation a sensation must be for the
+world to count the goal reached (``goal_tolerance``, in sensation units: 0 where the goal
+is one exact sensation, as a grid cell's coordinates; PointMaze's success radius). It
+comes from the world, as Gymnasium spaces
 (:meth:`Senses.from_spaces`): a ``Box`` observation, and ``Discrete`` actions whose
 primitives are the world's declared vectors, or one-hot vectors when it declares none.
 Nothing in the core assumes more of the sensation than this: the value of the unknown
@@ -13,6 +16,7 @@ moves.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -26,10 +30,14 @@ class SensesError(ValueError):
 @dataclass(frozen=True, eq=False)
 class Senses:
     """``dim``: the sensation's dimension; ``primitives``: one motor vector per action
-    (row a is the vector of action a, the label a link made with it carries)."""
+    (row a is the vector of action a, the label a link made with it carries);
+    ``goal_tolerance``: the largest distance (Euclidean, sensation units) from the goal
+    sensation at which the world ends an episode at the goal (0: only the goal sensation
+    itself)."""
 
     dim: int
     primitives: np.ndarray
+    goal_tolerance: float = 0.0
 
     def __post_init__(self):
         p = np.ascontiguousarray(self.primitives, dtype=float)
@@ -43,8 +51,13 @@ class Senses:
                               "tell them apart")
         if int(self.dim) < 1:
             raise SensesError(f"the sensation's dimension must be >= 1, got {self.dim}")
+        tol = float(self.goal_tolerance)
+        if not math.isfinite(tol) or tol < 0.0:
+            raise SensesError(f"the goal tolerance must be a finite distance >= 0 (sensation "
+                              f"units), got {self.goal_tolerance}")
         object.__setattr__(self, "primitives", p)
         object.__setattr__(self, "dim", int(self.dim))
+        object.__setattr__(self, "goal_tolerance", tol)
 
     @property
     def n_actions(self) -> int:
@@ -56,10 +69,11 @@ class Senses:
 
     @classmethod
     def from_spaces(cls, observation_space: Any, action_space: Any,
-                    primitives: np.ndarray | None = None) -> Senses:
+                    primitives: np.ndarray | None = None,
+                    goal_tolerance: float = 0.0) -> Senses:
         """From Gymnasium spaces: a 1-D ``Box`` observation and ``Discrete`` actions (their
-        ``primitives`` declared by the world, else one-hot). Refused with the reason
-        otherwise."""
+        ``primitives`` declared by the world, else one-hot), and the world's declared
+        ``goal_tolerance``. Refused with the reason otherwise."""
         from gymnasium import spaces  # the only place the core meets Gymnasium
         if not isinstance(observation_space, spaces.Box) or \
                 len(observation_space.shape) != 1:
@@ -74,4 +88,4 @@ class Senses:
         primitives = np.asarray(primitives, dtype=float)
         if len(primitives) != n:
             raise SensesError(f"{len(primitives)} motor primitives declared for {n} actions")
-        return cls(int(observation_space.shape[0]), primitives)
+        return cls(int(observation_space.shape[0]), primitives, goal_tolerance)

@@ -23,7 +23,7 @@ from maze_sim.worlds import WorldError, WorldSpec, parse_world
 from tmgwr_agent.experiments import env_change, goal_change, sample_complexity, timing
 from tmgwr_agent.experiments.agent_factory import AGENT_NAMES, make_agent, parse_spec
 from tmgwr_agent.experiments.names import SCENARIOS
-from tmgwr_agent.experiments.runner import Caps
+from tmgwr_agent.experiments.runner import Caps, declared_probe_tolerance
 from tmgwr_agent.experiments.sensing import check_sensor, check_world
 
 DEFAULT_MAZE = maze_file()
@@ -257,6 +257,8 @@ def _run_scenario(scenario, maze_path, agents, trials, seed, goals, episodes, ev
            "sensor": spec.text, "world": wspec.text}
     if wspec.kwargs:
         out["world_kwargs"] = dict(wspec.kwargs)
+    if declared_probe_tolerance(wspec):
+        out["probe_tolerance"] = declared_probe_tolerance(wspec)
     out.update({k: v for k, v in body.items() if k != "agents"})
     out["caps"] = asdict(Caps.for_maze(maze))
     if overrides is not None:

@@ -86,7 +86,12 @@ from maze_sim.suite import SuiteError, SuiteMaze, suite
 from maze_sim.worlds import WorldSpec
 from tmgwr_agent.experiments import env_change, goal_change
 from tmgwr_agent.experiments.parallel import run_items, trial_seeds
-from tmgwr_agent.experiments.runner import Caps, scenario_trial, with_overrides
+from tmgwr_agent.experiments.runner import (
+    Caps,
+    declared_probe_tolerance,
+    scenario_trial,
+    with_overrides,
+)
 from tmgwr_agent.experiments.scenarios import (
     DEFAULTS,
     UsageError,
@@ -364,6 +369,8 @@ def _run(scenario, spec, agents, trials, seed, suite_seed, first, kind, episodes
                  "sensor": sensor, "world": wspec.text}
     if wspec.kwargs:
         out["world_kwargs"] = dict(wspec.kwargs)
+    if declared_probe_tolerance(wspec):
+        out["probe_tolerance"] = declared_probe_tolerance(wspec)
     if scenario == "env-change":
         out.update({"event": kind, "goal": GOAL})
     else:
