@@ -323,6 +323,11 @@ class MotivationConfig(Config):
                                low=-1.0, high=1.0)
 
 
+#: R_i, gamma and the option arrays U, rho, osucc, onb, ong (:meth:`MotivationEstimator.
+#: option_terms`).
+OptionTerms = tuple
+
+
 def laplace(k: int, t: int) -> float:
     """Laplace's rule of succession: the chance of a success after k in t trials,
     (k + 1) / (t + 2) (1/2 before any trial)."""
@@ -1113,6 +1118,14 @@ class MotivationEstimator:
                                            self.U, self.rho, self.osucc, self.onb,
                                            self.ong, R_i,
                                            self.gamma, self.primitives))
+
+    def option_terms(self, i: int) -> OptionTerms | None:
+        """What Eq. 6 needs to rank node i's options beside its links without building
+        them (:func:`kernels.eq6_choices`), None when :meth:`options_of` adds none."""
+        if not self.value_unknown or i < 0 or i >= len(self.V) - 1:
+            return None
+        return (self.R[i] if i < len(self.R) else 0.0, self.gamma, self.U, self.rho,
+                self.osucc, self.onb, self.ong)
 
     def links_of(self, m: SensorimotorMap, i: int) -> Links:
         """:meth:`options_of` node i's links in map m (what Eq. 6 ranks in-process)."""
