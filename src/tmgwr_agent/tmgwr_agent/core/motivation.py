@@ -469,6 +469,7 @@ class MotivationEstimator:
         self._abs = self._abs_terminal = np.zeros(0, bool)
         self._abs_key: tuple = ()
         self._abs_log, self._abs_pos, self._abs_count = None, -1, 0
+        self._abs_seen: tuple | None = None     # (log, prepare) positions of the last call
         self._closed_none = np.zeros(0, bool)
 
     # ------------------------------------------------------------------ goal
@@ -741,6 +742,8 @@ class MotivationEstimator:
         rows = None
         if self._abs_key == (n, self._epoch, id(self.R)) and log is not None \
                 and log is self._abs_log:
+            if self._abs_seen == (log.pos, self._prep_pos, self._prep_log is log):
+                return self._abs if closed else self._abs_terminal    # nothing new
             rows = log.since(self._abs_pos)
         if rows is None:
             self._abs, self._abs_terminal = np.zeros(n, bool), np.zeros(n, bool)
@@ -752,6 +755,8 @@ class MotivationEstimator:
         # R is of the last _prepare: rows logged after it are looked at again next time
         self._abs_log = log
         self._abs_pos = self._prep_pos if log is self._prep_log else -1
+        self._abs_seen = (log.pos, self._prep_pos, self._prep_log is log) \
+            if log is not None else None
         return self._abs if closed else self._abs_terminal
 
     def _no_cells(self, n: int) -> np.ndarray:
