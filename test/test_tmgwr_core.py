@@ -878,6 +878,14 @@ def test_eq6_with_option_terms_chooses_as_the_virtual_links(try_untried):
         virtual = Links(*kernels.option_links(out, E, A, V, i, U, rho, osucc, onb, ong,
                                               R_i, gamma, ACTION_VECTORS.astype(float)))
         terms = (R_i, gamma, U, rho, osucc, onb, ong)
+        targets = virtual.targets if try_untried else \
+            np.where(virtual.targets == i, -1, virtual.targets)
+        best = kernels.best_links(targets, virtual.E, V)     # Eq. 6's argmax, as ranked
+        slots, acts, took = np.empty(K + P, np.int64), np.empty(K + P, np.int64), \
+            np.empty(K + P, np.bool_)
+        c = kernels.eq6_choices(out, E, A, V, i, not try_untried, *terms,
+                                ACTION_VECTORS.astype(float), slots, acts, took)
+        assert slots[:c].tolist() == best.tolist(), case
         fused.took_option = False
         a = fused.select(lambda _i: Links(out, E, A), i, V, -1, options=lambda _i: terms)
         b = built.select(lambda _i: virtual, i, V, -1)
