@@ -849,6 +849,52 @@ primitives=ACTION_VECTORS)
     assert paper.select(lambda i: links, 0, V, goal_node=-1) == (RIGHT, False)
 
 
+@pytest.mark.parametrize("try_untried", [True, False])
+def test_eq6_with_option_terms_chooses_as_the_virtual_links(try_untried):
+    """Eq. 6 over a node's links with its option terms (the in-process path, options
+    ranked without building them) chooses what it chooses over the virtual links
+    :func:`kernels.option_links` makes (the graph's path): same action, same option flag,
+    same tie-breaking draws; on random rows with ties, options worth nothing, V(i) = 0."""
+    rng = np.random.default_rng(7)
+    P, K, n = len(ACTION_VECTORS), 6, 9
+    config = SelectorConfig(eps_start=0.0, eps_min=0.0, try_untried=try_untried)
+    fused = ActionSelector(np.random.default_rng(3), config, primitives=ACTION_VECTORS)
+    built = ActionSelector(np.random.default_rng(3), config, primitives=ACTION_VECTORS)
+    options_taken = 0
+    for case in range(400):
+        V = np.append(rng.choice([0.0, 0.25, 0.5, 0.75], n), 0.0)
+        i = int(rng.integers(n))
+        if case % 7 == 0:
+            V[i] = 0.0
+        out = np.where(rng.random(K) < 0.6, rng.integers(n, size=K), -1)
+        E = rng.choice([0.5, 1.0], K)
+        A = ACTION_VECTORS[rng.integers(P, size=K)].astype(float)
+        U = rng.choice([0.0, 0.5], (n, P))
+        rho = rng.choice([0.0, 0.5, 1.0], (n, P))
+        osucc = rng.integers(-2, n, size=(n, P))
+        onb = rng.integers(-1, n, size=(n, P, P))
+        ong = rng.choice([0.0, 0.9], (n, P, P))
+        R_i, gamma = float(rng.choice([0.0, 0.3])), 0.9
+        virtual = Links(*kernels.option_links(out, E, A, V, i, U, rho, osucc, onb, ong,
+                                              R_i, gamma, ACTION_VECTORS.astype(float)))
+        terms = (R_i, gamma, U, rho, osucc, onb, ong)
+        targets = virtual.targets if try_untried else \
+            np.where(virtual.targets == i, -1, virtual.targets)
+        best = kernels.best_links(targets, virtual.E, V)     # Eq. 6's argmax, as ranked
+        slots, acts, took = np.empty(K + P, np.int64), np.empty(K + P, np.int64), \
+            np.empty(K + P, np.bool_)
+        c = kernels.eq6_choices(out, E, A, V, i, not try_untried, *terms,
+                                ACTION_VECTORS.astype(float), slots, acts, took)
+        assert slots[:c].tolist() == best.tolist(), case
+        fused.took_option = False
+        a = fused.select(lambda _i: Links(out, E, A), i, V, -1, options=lambda _i: terms)
+        b = built.select(lambda _i: virtual, i, V, -1)
+        assert a == b, case
+        options_taken += fused.took_option
+    assert options_taken > 20 if try_untried else options_taken == 0
+    assert fused.rng.random() == built.rng.random()     # the same draws were made
+
+
 def test_outcome_terminal_rule():
     """One rule for 'the task ended the episode here' (absorbing in Eq. 5)."""
     assert Outcome(action=UP, episode_over=True).ends_episode

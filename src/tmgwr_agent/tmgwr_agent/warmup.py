@@ -38,7 +38,7 @@ def warm_up(max_steps: int = 3000) -> list[str]:
     while steps < max_steps and kernels.uncached():
         obs, _ = world.reset()
         agent.begin_episode(obs, world.cell)
-        explore = bool(world.episode % 2)      # greedy episodes reach Eq. 6 (best_links)
+        explore = bool(world.episode % 2)      # greedy episodes reach Eq. 6
         for _ in range(400):
             obs, _, terminated, truncated, info = world.step(agent.act(explore=explore))
             agent.observe(obs, info)
@@ -48,6 +48,11 @@ def warm_up(max_steps: int = 3000) -> list[str]:
         # the motivation estimator's node solves Eq. 4-5 on a snapshot of the map
         if hasattr(MapSnapshot, "of"):
             agent.motivation.update(MapSnapshot.of(agent.map))
+        # ... and sends the winner's links with its options as virtual links (the
+        # in-process agent ranks them unbuilt); the bench's floor ranks links alone
+        if agent.winner >= 0:
+            links = agent.motivation.links_of(agent.map, agent.winner)
+            kernels.best_links(links.targets, links.E, agent.motivation.V)
     return kernels.uncached()
 
 

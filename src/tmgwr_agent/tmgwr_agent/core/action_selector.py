@@ -55,7 +55,7 @@ import numpy as np
 
 from tmgwr_agent.core import kernels
 from tmgwr_agent.core.exploration import EpsilonGreedy, ExplorationConfig
-from tmgwr_agent.core.motivation import grown
+from tmgwr_agent.core.motivation import OptionTerms, grown
 from tmgwr_agent.core.outcome import Outcome
 from tmgwr_agent.core.sensorimotor_map import Links
 from tmgwr_common.params import param
@@ -84,6 +84,11 @@ class SelectorConfig(ExplorationConfig):
                                    "false: the paper's blind first episode)")
 
 
+#: No options (the terms of :func:`kernels.eq6_choices` for links alone).
+_NO_OPTIONS = (0.0, 0.0, np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0), np.int64),
+               np.zeros((0, 0, 0), np.int64), np.zeros((0, 0, 0)))
+
+
 class ActionSelector:
     def __init__(self, rng: np.random.Generator, config: SelectorConfig = SelectorConfig(),
                  *, primitives: np.ndarray):
@@ -98,6 +103,9 @@ class ActionSelector:
         self.searching = False      # stood on the goal node this episode, goal not there
         self.try_untried = config.try_untried
         self.took_option = False    # the last Eq. 6 choice was an option of Eq. 5'
+        # Eq. 6's choices (kernels.eq6_choices): slots, primitives, whether options
+        self._slots = self._acts = np.empty(0, dtype=np.int64)
+        self._took = np.empty(0, dtype=np.bool_)
         # walk_while_novel: nodes acted from, learning steps, the step that found the last
         # new one, whether a goal was ever attained
         self.acted = np.zeros(64, dtype=bool)
@@ -134,32 +142,44 @@ class ActionSelector:
             self.attained = True
         self.policy.observe(outcome.action, outcome.bumped, outcome.goal_reached, learn)
 
-    def greedy(self, links: Links, V: np.ndarray, node: int = -1) -> int | None:
-        """Eq. 6 over a node's links (and options, virtual links to ``node`` itself): the
-        discrete action of a_{i k_max}, or None without opinion (no link, or no
-        neighbour with motivation)."""
-        targets = links.targets
-        if node >= 0 and not self.try_untried:
-            targets = np.where(targets == node, -1, targets)
-        best = kernels.best_links(targets, links.E, V)
-        if not len(best):
+    def greedy(self, links: Links, V: np.ndarray, node: int = -1,
+               options: OptionTerms | None = None) -> int | None:
+        """Eq. 6 over a node's links (and options, virtual links to ``node`` itself, or
+        with ``options`` the terms of node's options ranked alongside its links, as
+        :meth:`~tmgwr_agent.core.motivation.MotivationEstimator.options_of` would make
+        them, without building them): the discrete action of a_{i k_max}, or None
+        without opinion (no link, or no neighbour with motivation)."""
+        exclude = node >= 0 and not self.try_untried
+        R_i, gamma, U, rho, osucc, onb, ong = options or _NO_OPTIONS
+        size = len(links.targets) + rho.shape[1]
+        if len(self._slots) < size:
+            self._slots, self._acts = (np.empty(2 * size, dtype=np.int64) for _ in range(2))
+            self._took = np.empty(2 * size, dtype=np.bool_)
+        c = kernels.eq6_choices(links.targets, links.E, links.actions, V, node, exclude, R_i,
+                                gamma, U, rho, osucc, onb, ong, self.primitives,
+                                self._slots, self._acts, self._took)
+        if not c:
             return None
-        slot = best[0] if len(best) == 1 else best[self.rng.integers(len(best))]
-        self.took_option = node >= 0 and targets[slot] == node
-        return self.action_index(links.actions[slot])
+        k = 0 if c == 1 else self.rng.integers(c)
+        self.took_option = bool(node >= 0 and self._took[k])
+        return int(self._acts[k])
 
     def action_index(self, a: np.ndarray) -> int:
         """The motor primitive nearest the action vector (the action map's codebook)."""
         return int(kernels.nearest_row(self.primitives, a))
 
     def select(self, links_of: Callable[[int], Links], node: int, V: np.ndarray,
-               goal_node: int, explore: bool = True) -> tuple[int, bool]:
+               goal_node: int, explore: bool = True,
+               options: Callable[[int], OptionTerms | None] | None = None
+               ) -> tuple[int, bool]:
         """(action, explored) at the winner ``node``, whose outgoing links and options
         ``links_of(node)`` gives (read only when Eq. 6 acts), under the potentials V
         (``V[-1]`` = 0 for empty slots) of the goal node ``goal_node``: the random walk with
         probability epsilon, else Eq. 6; the random walk for the rest of the episode once
         the agent stood on the goal node with the episode still running (``goal_search``).
-        ``explored`` is True for a random-walk step or an option taken.
+        ``explored`` is True for a random-walk step or an option taken. ``options``: the
+        terms of a node's options (:meth:`~tmgwr_agent.core.motivation.
+        MotivationEstimator.option_terms`), when ``links_of`` gives its links alone.
         """
         if explore and self.goal_search and node >= 0 and node == goal_node:
             self.searching = True
@@ -168,7 +188,7 @@ class ActionSelector:
         if node < 0:
             return self.policy.walk.action(), True
         links = links_of(node)
-        a = self.greedy(links, V, node)
+        a = self.greedy(links, V, node, options(node) if options is not None else None)
         if a is None:
             return self.policy.walk.action(), True
         return a, bool(self.took_option)

@@ -118,16 +118,14 @@ class TMGWRAgent:
         if explore:
             if not self.motivation.solved and not self.selector.policy.draw_ahead():
                 self.motivation.update(self.map)    # epsilon fell since the estimator ran
-            links_of, V = self._links_and_options, self.motivation.V
+            options, V = self.motivation.option_terms, self.motivation.V
         else:
-            links_of, V = self.map.links_of, self.motivation.exploit(self.map)
-        a, self.last_explored = self.selector.select(links_of, self.winner, V,
-                                                     self.motivation.goal_node, explore)
+            options, V = None, self.motivation.exploit(self.map)
+        a, self.last_explored = self.selector.select(self.map.links_of, self.winner, V,
+                                                     self.motivation.goal_node, explore,
+                                                     options)
         self.last_action = a
         return a
-
-    def _links_and_options(self, i: int):
-        return self.motivation.links_of(self.map, i)
 
     def state_dict(self) -> dict:
         """What continues a run besides the map (SensorimotorMap.state_dict) and the

@@ -1284,6 +1284,63 @@ def best_links(out_i, E_i, V):
 
 
 @njit(cache=True)
+def eq6_choices(out_i, E_i, A_i, V, i, exclude_self, R_i, gamma, U, rho, osucc, onb, ong,
+                primitives, slots, acts, took):
+    """Eq. 6 at node i in one pass (action_selector.py): the choices attaining
+    max E V(target) > 0 over i's links and, with options (``U`` holding row i), i's options
+    ranked as the virtual links :func:`option_links` makes of them (the same arithmetic,
+    hence the same ties as :func:`option_links` then :func:`best_links`), targets equal
+    to i ignored with ``exclude_self``. Writes for each choice, links first: its slot
+    (K + a for option a), the nearest motor primitive of its action vector
+    (:func:`nearest_row`) and whether it is an option (target i); returns their count."""
+    K = out_i.shape[0]
+    P = rho.shape[1] if U.shape[0] > i else 0
+    stay = 0.0
+    if P:
+        for s in range(K):
+            j = out_i[s]
+            if j >= 0:
+                ev = E_i[s] * V[j]
+                if ev > stay:
+                    stay = ev
+        stay = R_i + gamma * stay
+    with_options = P > 0 and V[i] > 0.0 and not exclude_self
+    top = 0.0
+    for s in range(K + (P if with_options else 0)):
+        ev = _eq6_term(out_i, E_i, V, i, exclude_self, stay, gamma, U, rho, osucc, onb, ong,
+                       K, s)
+        if ev > top:
+            top = ev
+    c = 0
+    if top <= 0.0:
+        return c
+    for s in range(K + (P if with_options else 0)):
+        if _eq6_term(out_i, E_i, V, i, exclude_self, stay, gamma, U, rho, osucc, onb, ong,
+                     K, s) == top:
+            slots[c] = s
+            acts[c] = nearest_row(primitives, A_i[s] if s < K else primitives[s - K])
+            took[c] = s >= K or out_i[s] == i
+            c += 1
+    return c
+
+
+@njit(cache=True)
+def _eq6_term(out_i, E_i, V, i, exclude_self, stay, gamma, U, rho, osucc, onb, ong, K, s):
+    """E V(target) of choice s of :func:`eq6_choices` (0: none)."""
+    if s < K:
+        j = out_i[s]
+        if j < 0 or (exclude_self and j == i):
+            return 0.0
+        return E_i[s] * V[j]
+    a = s - K
+    r = rho[i, a]
+    if r <= 0.0:
+        return 0.0
+    sv = option_successor(V, U, osucc, onb, ong, i, a, gamma)
+    return ((r * sv + (1.0 - r) * stay) / V[i]) * V[i]
+
+
+@njit(cache=True)
 def habituate(h, i, tau, kappa):
     """GWR habituation: h_i += tau (kappa (1 - h_i) - 1)."""
     h[i] += tau * (kappa * (1.0 - h[i]) - 1.0)

@@ -334,6 +334,11 @@ class MotivationConfig(Config):
                                low=-1.0, high=1.0)
 
 
+#: R_i, gamma and the option arrays U, rho, osucc, onb, ong (:meth:`MotivationEstimator.
+#: option_terms`).
+OptionTerms = tuple
+
+
 def laplace(k: int, t: int) -> float:
     """Laplace's rule of succession: the chance of a success after k in t trials,
     (k + 1) / (t + 2) (1/2 before any trial)."""
@@ -480,6 +485,7 @@ class MotivationEstimator:
         self._abs = self._abs_terminal = np.zeros(0, bool)
         self._abs_key: tuple = ()
         self._abs_log, self._abs_pos, self._abs_count = None, -1, 0
+        self._abs_seen: tuple | None = None     # (log, prepare) positions of the last call
         self._closed_none = np.zeros(0, bool)
 
     # ------------------------------------------------------------------ goal
@@ -832,6 +838,8 @@ class MotivationEstimator:
         rows = None
         if self._abs_key == (n, self._epoch, id(self.R)) and log is not None \
                 and log is self._abs_log:
+            if self._abs_seen == (log.pos, self._prep_pos, self._prep_log is log):
+                return self._abs if closed else self._abs_terminal    # nothing new
             rows = log.since(self._abs_pos)
         if rows is None:
             self._abs, self._abs_terminal = np.zeros(n, bool), np.zeros(n, bool)
@@ -843,6 +851,8 @@ class MotivationEstimator:
         # R is of the last _prepare: rows logged after it are looked at again next time
         self._abs_log = log
         self._abs_pos = self._prep_pos if log is self._prep_log else -1
+        self._abs_seen = (log.pos, self._prep_pos, self._prep_log is log) \
+            if log is not None else None
         return self._abs if closed else self._abs_terminal
 
     def _no_cells(self, n: int) -> np.ndarray:
@@ -1231,6 +1241,14 @@ class MotivationEstimator:
                                            self.U, self.rho, self.osucc, self.onb,
                                            self.ong, R_i,
                                            self.gamma, self.primitives))
+
+    def option_terms(self, i: int) -> OptionTerms | None:
+        """What Eq. 6 needs to rank node i's options beside its links without building
+        them (:func:`kernels.eq6_choices`), None when :meth:`options_of` adds none."""
+        if not self.value_unknown or i < 0 or i >= len(self.V) - 1:
+            return None
+        return (self.R[i] if i < len(self.R) else 0.0, self.gamma, self.U, self.rho,
+                self.osucc, self.onb, self.ong)
 
     def links_of(self, m: SensorimotorMap, i: int) -> Links:
         """:meth:`options_of` node i's links in map m (what Eq. 6 ranks in-process)."""
