@@ -158,3 +158,48 @@ def test_the_graph_path_holds_the_agents_map_and_memory_after_merges():
             obs, _ = world.reset()
             outcome = EPISODE_START
     assert merged > 0, "the run never merged: it tests nothing"
+
+
+@pytest.mark.ros
+@pytest.mark.timeout(400)
+def test_the_graph_with_noisy_sensors_walks_the_in_process_agents_cells(ros_domain,
+                                                                          tmp_path):
+    """The five nodes over DDS with sensor noise (merges on the way, carried by the
+    MapChange of each step): cell for cell the in-process TMGWRAgent loop."""
+    from ros_helpers import parse_json_line
+    from test_nodes import MAZE, start_graph, stop_graph
+
+    from tmgwr_agent.experiments.lockstep import read_trajectory, run_reference
+
+    steps, noise = 2000, 0.2
+    traj = tmp_path / "trajectory.txt"
+    procs = start_graph(ros_domain, tmp_path, sim_args=[
+        "-p", f"max_steps:={steps}", "-p", "exit_when_done:=true",
+        "-p", f"sensor_noise:={noise}", "-p", f"trajectory_path:={traj}"])
+    try:
+        summary = parse_json_line(procs["maze_sim"].wait(timeout=300), "SUMMARY ")
+    finally:
+        stop_graph(procs)
+    assert summary["steps"] == steps
+    graph, _ = read_trajectory(traj)
+    ref, _ = run_reference(MAZE, steps, goal="2", world_seed=0, agent_seed=1,
+                           sensor_noise=noise)
+    first = next((i for i, (a, b) in enumerate(zip(graph, ref)) if a != b), None)
+    assert first is None and len(graph) == steps, \
+        f"graph and in-process differ from step {first}"
+    # the run merged nodes (what this test is about): the in-process twin says so
+    maze = Maze.from_file(MAZE)
+    world = GridWorld(maze, "2", noise, seed=0)
+    agent = TMGWRAgent(maze_senses(), np.random.default_rng(1))
+    agent.set_goal(world.goal, world.goal_observation())
+    obs, _ = world.reset()
+    agent.begin_episode(obs, world.cell)
+    merged = 0
+    for _ in range(steps - 1):
+        obs, _, terminated, truncated, info = world.step(agent.act())
+        agent.observe(obs, info)
+        merged += len(agent.map.merges)
+        if terminated or truncated:
+            obs, _ = world.reset()
+            agent.begin_episode(obs, world.cell)
+    assert merged > 0, "no merge in the run: it tests nothing"
