@@ -60,7 +60,7 @@ def as_message(c: MapChange, numpy_arrays: bool = False) -> SimpleNamespace:
         degree=c.degree, dim=c.dim, slots=arr("i", c.slots, np.int32),
         alive=arr("B", c.alive, np.uint8), terminal_nodes=arr("B", c.terminal, np.uint8),
         weights=arr("d", c.w, np.float64), link_targets=arr("i", c.out, np.int32),
-        link_reliability=arr("d", c.E, np.float64))
+        link_reliability=arr("d", c.E, np.float64), merges=arr("i", c.merges, np.int32))
 
 
 def evolve(maze: Maze, steps: int, seed: int, goals=(), events=(), config=None,

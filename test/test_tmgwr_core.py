@@ -104,8 +104,9 @@ def test_an_episode_end_flags_every_node_of_its_place():
     """A second node for node 2's place (0.003 away: within the GWR's radius -ln a_T =
     0.051; in a run, a node reached in another temporal context): an episode ending on
     node 2 flags both, not node 1 (0.1 away); walking on from the second clears both, and
-    not the flag of another place (node 0)."""
-    m = chain_map()
+    not the flag of another place (node 0). (``merge`` off: the map would merge the two,
+    test_map_merge.py; mark_terminal serves maps that hold them.)"""
+    m = chain_map(merge=False)
     twin = m._insert(m.w[2] + [0.0, 0.003], m.c[2])
     m.mark_terminal(0)
     m.mark_terminal(2)

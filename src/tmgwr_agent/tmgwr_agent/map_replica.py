@@ -32,7 +32,7 @@ ROS-free: the nodes and the bag tools convert messages (any object with the fiel
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -68,6 +68,9 @@ class MapChange:
     E: np.ndarray            # float64, len(slots) x degree
     run_id: int = 0
     step_id: int = -1
+    #: pairs (keep, gone) the map merged in this change, in order (SensorimotorMap.merges):
+    #: what a consumer's per-node memory applies (the rows above already hold the result)
+    merges: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))
 
     @property
     def full(self) -> bool:
@@ -87,7 +90,9 @@ class MapChange:
                    w=_array(m.weights, np.float64).reshape(k, dim),
                    out=_array(m.link_targets, np.int32).astype(np.int64).reshape(k, degree),
                    E=_array(m.link_reliability, np.float64).reshape(k, degree),
-                   run_id=int(run_id), step_id=int(step_id))
+                   run_id=int(run_id), step_id=int(step_id),
+                   merges=_array(getattr(m, "merges", ()), np.int32).astype(np.int64)
+                   .reshape(-1, 2))
 
     def problem(self) -> str | None:
         """Why this change cannot be of a learner (a stray message), or None."""
@@ -102,12 +107,14 @@ class MapChange:
             return f"a slot outside [0, {self.n})"
         if self.out.size and (self.out.min() < -1 or self.out.max() >= self.n):
             return f"a link target outside [-1, {self.n})"
+        if self.merges.size and (self.merges.min() < 0 or self.merges.max() >= self.n):
+            return f"a merged node outside [0, {self.n})"
         return None
 
     def nbytes(self) -> int:
         """Bytes of its arrays as a message carries them (slot ids and targets int32)."""
         k = len(self.slots)
-        return k * (4 + 2 + 8 * self.dim + 12 * self.degree)
+        return k * (4 + 2 + 8 * self.dim + 12 * self.degree) + 4 * self.merges.size
 
 
 def _array(a, dtype) -> np.ndarray:
@@ -132,6 +139,7 @@ class Replica:
         self.n, self.degree, self.dim = 0, 0, 0
         self.arrays = {name: np.zeros((0,), dtype) for name, (dtype, _) in ROWS.items()}
         self.log = RowLog()         # the slots each change wrote (the estimator's input)
+        self.merges = np.zeros((0, 2), dtype=np.int64)   # applied, not yet taken
 
     @property
     def synced(self) -> bool:
@@ -172,9 +180,17 @@ class Replica:
             self.arrays[name][c.slots] = getattr(c, name)
         if not c.full:
             self.log.touch(c.slots)
+        self.merges = np.concatenate([self.merges, c.merges]) \
+            if len(self.merges) and not c.full else c.merges
         self.map_id, self.sequence, self.version = c.map_id, c.sequence, c.version
         self.run_id, self.step_id = c.run_id, c.step_id
         return APPLIED
+
+    def take_merges(self) -> np.ndarray:
+        """The merges of the changes applied since the last call (pairs ``(keep, gone)``,
+        in order): what the consumer's per-node memory has yet to apply."""
+        merges, self.merges = self.merges, np.zeros((0, 2), dtype=np.int64)
+        return merges
 
     def resize(self, n: int, degree: int) -> None:
         """``n`` slots of ``degree`` link columns; new slots and columns are empty, rows
@@ -272,9 +288,11 @@ class ChangeEncoder:
             version=int(m.version), slots=slots,
             **{name: getattr(m, name)[slots].astype(ROWS[name][0], copy=False)
                for name in ROWS},
-            run_id=int(run_id), step_id=int(step_id))
+            run_id=int(run_id), step_id=int(step_id),
+            merges=np.asarray(getattr(m, "merges", ()), dtype=np.int64).reshape(-1, 2))
         status = sent.apply(change)
         assert status == APPLIED, status
+        sent.take_merges()                  # (no memory of its own to move)
         return change
 
     def snapshot(self) -> MapChange | None:

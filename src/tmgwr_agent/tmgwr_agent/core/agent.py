@@ -34,7 +34,7 @@ from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
 from tmgwr_agent.core.outcome import EPISODE_START, Outcome
 from tmgwr_agent.core.preprocessor import PreprocessorConfig, SensoryPreprocessor
 from tmgwr_agent.core.senses import Senses
-from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap
+from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap, survivor
 from tmgwr_common.params import make_config, resolve, specs
 
 
@@ -153,6 +153,9 @@ class TMGWRAgent:
         x = self.preprocessor(obs, episode_start=outcome.episode_start)  # sensory_preprocessor
         acted_from = self.winner
         self.winner = self.map.experience(x, outcome, learn)             # map_learner
+        if self.map.merges:         # nodes merged this step (one node a place)
+            self.motivation.merge(self.map.merges)
+            acted_from = survivor(acted_from, self.map.merges)
         if learn:
             self.motivation.record(acted_from, self.winner, self.map.inserted,  # motivation_
                                    outcome, self.map.w)                           # estimator

@@ -46,6 +46,32 @@ def merge_distance_argmin(w, c, alive, n, x, C, alpha_c):
 
 
 @njit(cache=True)
+def close_pair(w, c, alive, n, rows, alpha_c, r2):
+    """The nearest pair (i, j), i in ``rows``, of live nodes closer than the GWR's matching
+    radius, ``d_ij = (1 - alpha_c)|w_i - w_j|^2 + alpha_c |c_i - c_j|^2 < r2``
+    (sensorimotor_map.py, the merge); (-1, -1) when none."""
+    bi, bj, best = -1, -1, r2
+    dim = w.shape[1]
+    for i in rows:
+        if i < 0 or i >= n or not alive[i]:
+            continue
+        for j in range(n):
+            if j == i or not alive[j]:
+                continue
+            dx = 0.0
+            dc = 0.0
+            for k in range(dim):
+                t = w[i, k] - w[j, k]
+                dx += t * t
+                u = c[i, k] - c[j, k]
+                dc += u * u
+            d = (1.0 - alpha_c) * dx + alpha_c * dc
+            if d < best:
+                bi, bj, best = i, j, d
+    return bi, bj
+
+
+@njit(cache=True)
 def nearest_weight(w, alive, n, x):
     """argmin_n |x - w_n|^2 over live nodes (-1 if none)."""
     best, best_d = -1, np.inf

@@ -579,6 +579,36 @@ class MotivationEstimator:
         for name, fill in self._MEMORY:
             setattr(self, name, grown(getattr(self, name), n, fill))
 
+    def merge(self, merges) -> None:
+        """The map merged node ``gone`` into node ``keep`` for each pair of ``merges``
+        (:attr:`~tmgwr_agent.core.sensorimotor_map.SensorimotorMap.merges`, in order):
+        ``keep`` takes ``gone``'s outcome memory of each primitive it has not tried itself,
+        every move remembered to lead to ``gone`` leads to ``keep``, ``gone``'s row is a
+        new node's, and the options are recomputed in full at the next update."""
+        for keep, gone in merges:
+            keep, gone = int(keep), int(gone)
+            if max(keep, gone) >= len(self.tried):
+                self._grow_memory(max(keep, gone) + 1)
+            take = ~self.tried[keep] & self.tried[gone]
+            for name, fill in self._MEMORY:
+                a = getattr(self, name)
+                if name in ("sel", "chain"):        # this episode's re-tests, its chain
+                    a[keep] |= a[gone]
+                elif a.ndim == 2:
+                    a[keep, take] = a[gone, take]
+                else:                               # closed_e: the later closing
+                    a[keep] = max(a[keep], a[gone])
+                a[gone] = fill
+            self.succ[self.succ == gone] = keep
+            for V in (self.V, self.V0):
+                if gone < len(V) - 1 and keep < len(V) - 1:
+                    V[keep], V[gone] = max(V[keep], V[gone]), 0.0
+            if self._winner == gone:
+                self._winner = keep
+        if len(merges):
+            self._closed = None
+            self._options_key = ()
+
     def _close_cell(self, node: int, a: int, w: np.ndarray) -> None:
         """Primitive a, a move made before from ``node``, bumps now: the cell it led to has
         closed, from every side (the node it led to, while that node is still at the

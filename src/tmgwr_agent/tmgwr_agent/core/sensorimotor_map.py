@@ -52,6 +52,29 @@ unknown space, and Eq. 5' sent the agent into it: one episode lost in 4 of 5 tri
 suite maze). Neighbours for adaptation are the nodes linked to the winner in either
 direction.
 
+**One node a place** (``merge``, our addition, on by default; off under ``paper``). GWR
+inserts a node only where no node matches within its radius, ``sqrt(d) < -ln a_T``; that
+invariant should hold afterwards too, but adaptation breaks it: a node habituated to its
+place (its own rate frozen near ``eps_b / kappa``) is still pulled by its neighbours'
+wins (``eps_n``), a noisy sample beyond the radius then inserts a second node for the
+place, and the two come within the radius of each other. Their wins then alternate with
+the noise, so the links of one action into the place split their reliability between
+them, and Eq. 5's ``max_k E V(k)`` undervalues the move (a route then detours round a
+cell it knows). So after each learning step, two live nodes of which one moved and that
+lie within the matching radius of each other (the ``d`` above, context included: nodes
+of one sensation told apart by their contexts stay apart) are merged
+(:meth:`SensorimotorMap._merge`): the more habituated one stays (``keep``), at the
+midpoint of the two weights and contexts, with the fresher habituation (it re-centres on
+its samples); the other's links, in and out, become ``keep``'s, and a link ``s -> k``
+that both had is one link: under the credit rule the reliabilities of one action's
+links out of a node are running means of the indicator that the action reached each
+target, so the indicator of reaching either of two targets that are one place is their
+sum, ``E = min(1, E_1 + E_2)`` (links of different actions: the more reliable one);
+a link between the two goes (a move within a place is not stored, as a bump); terminal
+flags are or-ed. The pairs ``(keep, gone)`` of the last step are in :attr:`merges`, for
+the consumers that keep memory per node (the motivation estimator's outcome memory; over
+the graph, :class:`~tmgwr_agent.map_replica.MapChange` carries them).
+
 Storage is fixed-width adjacency (``out[i, :K]`` target ids, -1 = empty slot) so that value
 iteration over the map is a few vectorised numpy operations. Node ids are slot indices; a
 freed slot is reused by the next insertion (lowest first) and ``version`` counts structural
@@ -111,6 +134,9 @@ class MapConfig(Config):
                          low=0.0, high=1.0)
     eta_a: float = param(1.0, "rate at which a link's action vector a_ij follows the action "
                          "that traversed it (0 = fixed at creation)", low=0.0, high=1.0)
+    merge: bool = param(True, "merge two live nodes that come within the GWR matching "
+                        "radius of each other, links and E combined (sensorimotor_map.py; "
+                        "false: GWR as published)")
     link_rule: str = param("credit", "Eq. 1-2 reading: 'literal' or 'credit' "
                            "(docs/interpretation.md)",
                            choices=("literal", "credit"))
@@ -203,6 +229,14 @@ class MapSnapshot:
         return int(kernels.nearest_weight(self.w, self.alive, self.n, x))
 
 
+def survivor(i: int, merges) -> int:
+    """Node i's id after the ``merges`` (pairs ``(keep, gone)``, in order)."""
+    for keep, gone in merges:
+        if i == gone:
+            i = int(keep)
+    return i
+
+
 _INITIAL_CAPACITY = 64
 _INITIAL_DEGREE = 4
 
@@ -230,6 +264,8 @@ class SensorimotorMap:
         self.alpha, self.sigma_a, self.eta_a = c.alpha, c.sigma_a, c.eta_a
         self.E_init, self.E_min = c.E_init, c.E_min
         self.link_rule = c.link_rule
+        self.merge = c.merge
+        self.merges: list[tuple[int, int]] = []   # (keep, gone) of the last step's merges
         self._alloc(_INITIAL_CAPACITY, _INITIAL_DEGREE)
         self.n = 0                 # slots in use are [0, n); dead slots have alive False
         self.version = 0           # bumped on every structural change
@@ -370,6 +406,7 @@ class SensorimotorMap:
         With ``learn`` False only the winner is found (greedy rollouts).
         """
         x = np.asarray(x, dtype=float)
+        self.merges = []
         C = self.C_t    # written by match: context(), x at an episode start (neutral)
         self.inserted = False
         # winner, GWR test, adaptation of the winner and its neighbours
@@ -397,8 +434,79 @@ class SensorimotorMap:
                 self.log.touch(at)
                 self.log.touch(self.prev)
             self._update_links(self.prev, winner, np.asarray(action, dtype=float))
+        if learn and self.merge and len(moved):
+            winner = self._merge_close(moved, winner)
         self.prev = self.winner = winner
         return winner
+
+    # ------------------------------------------------------------------ one node a place
+    def _merge_close(self, moved: np.ndarray, winner: int) -> int:
+        """Merge every pair of live nodes within the matching radius of which one is in
+        ``moved`` (the nodes this step adapted; the module docstring); returns the
+        winner's id after the merges."""
+        r2 = math.log(self.a_T) ** 2
+        rows = np.asarray(moved, dtype=np.int64)
+        while True:
+            i, j = kernels.close_pair(self.w, self.c, self.alive, self.n, rows,
+                                      self.alpha_c, r2)
+            if i < 0:
+                return winner
+            keep, gone = (i, j) if self.h[i] <= self.h[j] else (j, i)
+            self._merge(keep, gone)
+            winner = keep if winner == gone else winner
+            rows = np.append(rows[rows != gone], keep)
+
+    def _merge(self, keep: int, gone: int) -> None:
+        """Node ``gone`` becomes part of node ``keep`` (the module docstring): weights and
+        contexts at their midpoint, the fresher habituation, links in and out joined
+        (:meth:`_join_link`), terminal flags or-ed; ``gone``'s slot is freed."""
+        i, j = keep, gone
+        self.w[i] = 0.5 * (self.w[i] + self.w[j])
+        self.c[i] = 0.5 * (self.c[i] + self.c[j])
+        self.h[i] = max(self.h[i], self.h[j])
+        self.terminal[i] = self.terminal[i] or self.terminal[j]
+        for s in np.flatnonzero(self.out[j] >= 0):          # j -> t becomes i -> t
+            t = int(self.out[j, s])
+            if t != i:
+                self._join_link(i, t, self.E[j, s], self.a[j, s].copy(), self.age[j, s])
+        touched = [i, j]
+        for src in np.flatnonzero((self.out[: self.n] == j).any(axis=1)):
+            slot = int(np.flatnonzero(self.out[src] == j)[0])   # src -> j becomes src -> i
+            link = self.E[src, slot], self.a[src, slot].copy(), self.age[src, slot]
+            self.out[src, slot], self.E[src, slot], self.age[src, slot] = -1, 0.0, 0
+            self.a[src, slot] = 0.0
+            if src != i:
+                self._join_link(int(src), i, *link)
+                touched.append(int(src))
+        self.out[j], self.E[j], self.a[j], self.age[j] = -1, 0.0, 0.0, 0
+        self.alive[j] = self.terminal[j] = False
+        self.version += 1
+        self.merges.append((i, j))
+        self.rebuild_in_links()
+        self.log.touch(np.asarray(touched, dtype=np.int64))
+
+    def _join_link(self, s: int, t: int, E: float, a: np.ndarray, age: int) -> None:
+        """Link s -> t (reliability E, action a, age) added to row s: joined with the link
+        s -> t already there (same action, ``sim >= 1/2`` by Eq. 2: ``E`` summed up to 1,
+        the action the E-weighted mean; else the more reliable one), or in a free slot."""
+        have = np.flatnonzero(self.out[s] == t)
+        if len(have):
+            k = int(have[0])
+            E0, a0 = self.E[s, k], self.a[s, k].copy()
+            if kernels.sim_action(a0, a, self.sigma_a) >= 0.5:
+                if E0 + E > 0.0:
+                    self.a[s, k] = (E0 * a0 + E * a) / (E0 + E)
+                self.E[s, k] = min(1.0, E0 + E)
+            elif E > E0:
+                self.E[s, k], self.a[s, k] = E, a
+            self.age[s, k] = min(self.age[s, k], age)
+            return
+        free = np.flatnonzero(self.out[s] < 0)
+        if not len(free):
+            self._grow_degree()
+            free = np.flatnonzero(self.out[s] < 0)
+        k = int(free[0])
+        self.out[s, k], self.E[s, k], self.a[s, k], self.age[s, k] = t, E, a, age
 
     def _insert(self, w: np.ndarray, c: np.ndarray) -> int:
         free = np.flatnonzero(~self.alive[: self.n])

@@ -9,7 +9,8 @@ the map does not know no value (Eq. 5 as printed, our other additions kept: the 
 frame assumes primitives that displace the sensation alike everywhere, which MiniGrid's
 turn / forward do not); ``paper`` turns our
 additions off (``absorbing_terminals``; ``unknown`` none and ``try_untried``, the options
-of Eq. 5' and Eq. 6; ``goal_search``; ``walk_while_novel``: the agent of Eq. 1-7 as
+of Eq. 5' and Eq. 6; ``goal_search``; ``walk_while_novel``; ``merge``, one node a
+place: the agent of Eq. 1-7 as
 printed), e.g.
 ``tmgwr:literal+paper``. The baselines (:data:`BASELINES`) take no option. Options are
 parameter overrides, checked like any other (an unknown name is refused).
@@ -45,7 +46,8 @@ TMGWR_OPTIONS = {
     "grid": {"unknown": "grid"},
     "none": {"unknown": "none"},
     "paper": {"absorbing_terminals": False, "unknown": "none", "goal_search": False,
-              "try_untried": False, "walk_while_novel": False, "eps_min": 0.1},
+              "try_untried": False, "walk_while_novel": False, "eps_min": 0.1,
+              "merge": False},
 }
 
 

@@ -41,7 +41,7 @@ from rclpy.node import Node
 from std_srvs.srv import Trigger
 
 from tmgwr_agent.core.motivation import MotivationConfig, MotivationEstimator
-from tmgwr_agent.core.sensorimotor_map import Links
+from tmgwr_agent.core.sensorimotor_map import Links, survivor
 from tmgwr_agent.map_replica import APPLIED, GAP, Replica
 from tmgwr_agent.nodes.preload import load_cached_kernels
 from tmgwr_agent.nodes.step_messages import change_of, outcome_of
@@ -234,7 +234,11 @@ class MotivationEstimatorNode(Node):
         m = self.replica.snapshot()
         # what TMGWRAgent.step does here: note what the last action did (Eq. 5' options),
         # then re-solve Eq. 4-5 on this step's map
-        self.core.record(s.previous_winner, s.winner, s.inserted, outcome_of(s), m.w)
+        merges = self.replica.take_merges()     # nodes the map merged this step
+        if len(merges):
+            self.core.merge(merges)
+        self.core.record(survivor(s.previous_winner, merges), s.winner, s.inserted,
+                         outcome_of(s), m.w)
         heard = self.heard if self.heard and self.heard[:2] == (s.run_id, s.step_id - 1) \
             else None               # the selector's action of the step before
         # solved without the draw (a resend, the action missing; a run's first step; a

@@ -36,6 +36,7 @@ def fill_change(msg, c: MapChange) -> None:
     msg.weights = c.w.ravel()
     msg.link_targets = c.out.ravel()
     msg.link_reliability = c.E.ravel()
+    msg.merges = c.merges.ravel()
 
 
 def change_of(msg) -> MapChange:

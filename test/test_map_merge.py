@@ -1,0 +1,205 @@
+"""One node a place (SensorimotorMap merge, core/sensorimotor_map.py), against the real core.
+
+What must hold: after every learning step of an agent with noisy sensors no two live nodes
+lie within the GWR matching radius of each other (and without the merge they do: the
+duplicates of issue 28); a merge joins the links of one action into one place by the
+rule stated in the module (E summed up to 1), frees the slot and keeps the links in
+(``inn``) exact; the graph's path, a replica fed the step's MapChange (through the
+message's fields) and an estimator that applies the change's merges before it records
+the step, holds the same map and the same outcome memory as the in-process agent after
+every step.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from test_map_replica import as_message, evolve
+
+from maze_sim import GridWorld, Maze
+from maze_sim.maze import maze_file
+from tmgwr_agent.core.agent import TMGWRAgent
+from tmgwr_agent.core.motivation import MotivationEstimator
+from tmgwr_agent.core.outcome import EPISODE_START, Outcome
+from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap, survivor
+from tmgwr_agent.map_replica import APPLIED, ChangeEncoder, MapChange, Replica
+from tmgwr_agent.world_senses import maze_senses
+
+LEFT, RIGHT = np.array([-1.0, 0.0]), np.array([1.0, 0.0])
+
+
+def close_pairs(m: SensorimotorMap) -> np.ndarray:
+    """Pairs (i, j), i < j, of live nodes within the matching radius, d as the map
+    measures it."""
+    idx = np.flatnonzero(m.alive[: m.n])
+    w, c = m.w[idx], m.c[idx]
+    d = (1 - m.alpha_c) * ((w[:, None] - w[None]) ** 2).sum(-1) \
+        + m.alpha_c * ((c[:, None] - c[None]) ** 2).sum(-1)
+    i, j = np.nonzero(np.triu(d < math.log(m.a_T) ** 2, 1))
+    return np.stack([idx[i], idx[j]], axis=1)
+
+
+@pytest.mark.parametrize("merge", [True, False])
+def test_no_two_nodes_of_one_place_with_noisy_sensors(merge):
+    maze = Maze.from_file(maze_file())
+    merged, duplicates = 0, 0
+    for k, agent in evolve(maze, 3000, seed=4, config={"merge": merge}, noise=0.2):
+        m = agent.map
+        merged += len(m.merges)
+        pairs = close_pairs(m)
+        duplicates += bool(len(pairs))
+        if merge:
+            assert not len(pairs), (k, pairs)
+    if merge:
+        assert merged > 0, "the run never merged: it tests nothing"
+    else:
+        assert duplicates > 0, "without the merge the run has no duplicates to test"
+
+
+def hand_map() -> SensorimotorMap:
+    """Nodes 0 (x=0), 1 (x=-1), 2 (x=-1.3): the links of LEFT from 0 split between 1 and 2
+    (E 0.75 and 0.48), 2 -> 0 by RIGHT, 1 -> 2 within the place."""
+    m = SensorimotorMap(dim=2, config=MapConfig(alpha_c=0.0))
+    for x in ((0.0, 0.0), (-1.0, 0.0), (-1.3, 0.0)):
+        m._insert(np.array(x), np.array(x))
+    m.out[0, :2], m.E[0, :2], m.a[0, :2] = (1, 2), (0.75, 0.48), (LEFT, LEFT)
+    m.out[2, 0], m.E[2, 0], m.a[2, 0], m.age[2, 0] = 0, 0.9, RIGHT, 5
+    m.out[1, 0], m.E[1, 0], m.a[1, 0] = 2, 0.6, LEFT
+    m.h[:3] = (0.1, 0.2, 1.0)
+    m.rebuild_in_links()
+    return m
+
+
+def test_a_merge_joins_the_links_of_one_place():
+    m = hand_map()
+    pos, version = m.log.pos, m.version
+    m._merge(1, 2)
+    assert not m.alive[2] and (m.out[2] < 0).all() and m.merges == [(1, 2)]
+    assert m.version == version + 1
+    np.testing.assert_allclose(m.w[1], (-1.15, 0.0))
+    assert m.h[1] == 1.0                                   # the fresher habituation
+    # 0 -> {1, 2} by LEFT: one link, E summed (capped at 1)
+    row = {int(t): (e, tuple(a)) for t, e, a in zip(m.out[0], m.E[0], m.a[0]) if t >= 0}
+    assert row == {1: (1.0, tuple(LEFT))}
+    # 2 -> 0 became 1 -> 0; 1 -> 2 (within the place) is gone
+    row = {int(t): (e, tuple(a)) for t, e, a in zip(m.out[1], m.E[1], m.a[1]) if t >= 0}
+    assert row == {0: (0.9, tuple(RIGHT))}
+    kept = [set(r[r >= 0].tolist()) for r in m.inn[: m.n]]
+    m.rebuild_in_links()
+    assert kept == [set(r[r >= 0].tolist()) for r in m.inn[: m.n]]
+    assert {0, 1, 2} <= set(m.log.since(pos).tolist())
+    # different actions into one place: the more reliable link stays
+    m = hand_map()
+    m.a[0, 1] = RIGHT
+    m._merge(1, 2)
+    assert {int(t): e for t, e in zip(m.out[0], m.E[0]) if t >= 0} == {1: 0.75}
+
+
+def test_the_estimator_moves_its_memory_to_the_kept_node():
+    est = MotivationEstimator(primitives=np.array([[0, 1], [0, -1], [-1, 0], [1, 0]], float))
+    w = np.array([[0.0, 0.0], [-1.0, 0.0], [-1.3, 0.0]])
+    est.record(-1, 0, True, EPISODE_START, w)
+    est.record(0, 2, True, Outcome(action=2), w)           # LEFT from 0 led to 2
+    est.record(2, 2, False, Outcome(action=0, bumped=True), w)    # up from 2 bumped
+    est.record(2, 1, True, Outcome(action=3), w)           # RIGHT from 2 led to 1
+    est.record(1, 1, False, Outcome(action=3, bumped=True), w)    # RIGHT from 1 bumped
+    est.merge([(1, 2)])
+    assert est.succ[0, 2] == 1                             # where LEFT led: the kept node
+    assert est.tried[1, 0] and est.bump_t[1, 0] >= 0       # 2's wall, untried from 1
+    assert est.bump_t[1, 3] >= 0 and est.succ[1, 3] == -1  # 1's own outcome stays
+    assert not est.tried[2].any() and (est.succ[2] < 0).all()
+    assert est._winner == 1
+    assert survivor(2, [(1, 2)]) == 1 and survivor(0, [(1, 2)]) == 0
+
+
+def test_the_graph_path_holds_the_agents_map_and_memory_after_merges():
+    """What the estimator node does with each step's state (nodes/motivation_estimator.py
+    motivate): apply the change to its replica, the change's merges to its memory, then
+    record the step from the survivor of the previous winner."""
+    maze = Maze.from_file(maze_file())
+    world = GridWorld(maze, goal="G", seed=6, sensor_noise=0.2)
+    agent = TMGWRAgent(maze_senses(), np.random.default_rng(6))
+    est = MotivationEstimator(agent.motivation.config, primitives=agent.senses.primitives)
+    encoder, replica = ChangeEncoder(map_id=5), Replica()
+    agent.set_goal(world.goal, world.goal_observation())
+    obs, _ = world.reset()
+    outcome, merged, info = EPISODE_START, 0, None
+    for k in range(2500):
+        prev = agent.winner
+        if outcome.episode_start:
+            agent.begin_episode(obs, world.cell)
+        else:
+            agent.observe(obs, info)
+        m = agent.map
+        c = encoder.encode(m, run_id=1, step_id=k)
+        assert np.array_equal(c.merges, np.asarray(m.merges, dtype=np.int64).reshape(-1, 2))
+        assert replica.apply(MapChange.of_fields(as_message(c), c.version, 1, k)) == APPLIED
+        assert replica.equals(m), k
+        merges = replica.take_merges()
+        assert np.array_equal(merges, c.merges) and not len(replica.take_merges())
+        merged += len(merges)
+        est.merge(merges)
+        est.follow_goal(agent.motivation.goal_x)
+        est.record(-1 if outcome.episode_start else survivor(prev, merges), m.winner,
+                   m.inserted, outcome, replica.snapshot().w)
+        est.update(replica.snapshot(), skip=agent.walk_next)
+        mine, theirs = est.state_dict(), agent.motivation.state_dict()
+        for name in ("tried", "bump_t", "closed_t", "bump_e", "succ", "closed_e", "delta"):
+            a, b = mine[name], theirs[name]
+            if name == "delta" and a.shape != b.shape:
+                continue                    # (sized by the first update's map)
+            n = min(len(a), len(b), m.n)
+            assert np.array_equal(a[:n], b[:n]), (k, name)
+        obs, _, terminated, truncated, info = world.step(agent.act())
+        outcome = Outcome.of_step(info)
+        if terminated or truncated:
+            obs, _ = world.reset()
+            outcome = EPISODE_START
+    assert merged > 0, "the run never merged: it tests nothing"
+
+
+@pytest.mark.ros
+@pytest.mark.timeout(400)
+def test_the_graph_with_noisy_sensors_walks_the_in_process_agents_cells(ros_domain,
+                                                                          tmp_path):
+    """The five nodes over DDS with sensor noise (merges on the way, carried by the
+    MapChange of each step): cell for cell the in-process TMGWRAgent loop."""
+    from ros_helpers import parse_json_line
+    from test_nodes import MAZE, start_graph, stop_graph
+
+    from tmgwr_agent.experiments.lockstep import read_trajectory, run_reference
+
+    steps, noise = 2000, 0.2
+    traj = tmp_path / "trajectory.txt"
+    procs = start_graph(ros_domain, tmp_path, sim_args=[
+        "-p", f"max_steps:={steps}", "-p", "exit_when_done:=true",
+        "-p", f"sensor_noise:={noise}", "-p", f"trajectory_path:={traj}"])
+    try:
+        summary = parse_json_line(procs["maze_sim"].wait(timeout=300), "SUMMARY ")
+    finally:
+        stop_graph(procs)
+    assert summary["steps"] == steps
+    graph, _ = read_trajectory(traj)
+    ref, _ = run_reference(MAZE, steps, goal="2", world_seed=0, agent_seed=1,
+                           sensor_noise=noise)
+    first = next((i for i, (a, b) in enumerate(zip(graph, ref)) if a != b), None)
+    assert first is None and len(graph) == steps, \
+        f"graph and in-process differ from step {first}"
+    # the run merged nodes (what this test is about): the in-process twin says so
+    maze = Maze.from_file(MAZE)
+    world = GridWorld(maze, "2", noise, seed=0)
+    agent = TMGWRAgent(maze_senses(), np.random.default_rng(1))
+    agent.set_goal(world.goal, world.goal_observation())
+    obs, _ = world.reset()
+    agent.begin_episode(obs, world.cell)
+    merged = 0
+    for _ in range(steps - 1):
+        obs, _, terminated, truncated, info = world.step(agent.act())
+        agent.observe(obs, info)
+        merged += len(agent.map.merges)
+        if terminated or truncated:
+            obs, _ = world.reset()
+            agent.begin_episode(obs, world.cell)
+    assert merged > 0, "no merge in the run: it tests nothing"
