@@ -19,12 +19,25 @@ Families:
   default 0), so start, goal and walls
   stay fixed and "convergence" means something. An env whose goal cannot be reached with
   those three actions (a locked door, lava on every route) is refused.
-* ``PointMaze_*`` (``gymnasium-robotics``): sensation the ``achieved_goal`` (the ball's
-  x, y), goal sensation the ``desired_goal``; the env's own success test (``success`` in
-  its info) ends an episode. Its actions are continuous forces: the discrete motor
-  primitives and the oracle in primitive steps are those of maze_sim.pointmaze_world
-  (the pointmaze world's module); without it the family is refused as "not available in
-  this build".
+* ``PointMaze_*`` (``gymnasium-robotics``, the ``*Dense*`` ids too): the registered env's
+  layout built into :class:`maze_sim.pointmaze_world.PointMazeWorld` (its sensation, motor
+  primitives, ``K``, goal region and oracle; see that module): walls the ``maze_map``'s 1
+  cells, every other cell free. Start and goal cells are the env's own draw: the env made
+  with its registered (and ``--world-kwargs``) arguments and reset once with the layout
+  seed (default 0), its ``goal`` and ``reset_pos`` taken to the cells they lie in (the
+  draw's position noise, under a quarter cell, dropped: the world starts at rest at the
+  start cell's centre and its goal is the goal cell's centre). So a ``maze_map`` of plain
+  0/1 (UMaze, Open, Medium) draws among all free cells, one with ``g``/``r``/``c`` cells
+  among those, and the same seed gives the same cells every episode. An episode ends at
+  the env's success test (within 0.45 m of the goal), whatever ``continuing_task`` says
+  (the registered ids are continuing tasks, which never terminate: the adapter takes the
+  first success as the episode's end); the env's reward (``reward_type``, sparse or dense)
+  is not the agent's input and is ignored; the episode cap is the scenario's, in primitive
+  steps (the registered ``max_episode_steps`` count physics steps). Refused, naming the
+  kwarg: ``reset_target`` true (the goal jumps when reached: no fixed goal to map), a
+  ``position_noise_range`` other than 0 (the world has no position noise) and any kwarg
+  the env does not take or the adapter does not know. Without maze_sim.pointmaze_world
+  the family is refused as "not available in this build".
 
 Only the event-free scenarios run here (training to convergence, sample complexity): a
 registered env has no events and no named goals.
@@ -32,6 +45,7 @@ registered env has no events and no named goals.
 
 from __future__ import annotations
 
+import os
 from typing import Any, Hashable
 
 import gymnasium as gym
@@ -97,6 +111,101 @@ def check_env_id(env_id: str) -> str:
     return fam
 
 
+def check_layout_seed(env_id: str, layout_seed: Any) -> int:
+    if isinstance(layout_seed, bool) or not isinstance(layout_seed, int) or layout_seed < 0:
+        raise _error(f"gym:{env_id}: layout_seed must be an integer >= 0, "
+                     f"got {layout_seed!r}")
+    return layout_seed
+
+
+def make_gym_world(env_id: str, max_episode_steps: int | None = None,
+                   seed: int | None = None, **kwargs: Any):
+    """The world of a registered env id (``--world gym:ID``): its family's mapping (module
+    doc); ``kwargs``: ``layout_seed`` and the env's own (``--world-kwargs``)."""
+    fam = check_env_id(env_id)
+    if fam == "pointmaze":
+        return pointmaze_world(env_id, max_episode_steps, seed, **kwargs)
+    return GymWorld(env_id, max_episode_steps=max_episode_steps, seed=seed, **kwargs)
+
+
+#: The ``gymnasium.make`` kwargs of a PointMaze env the adapter maps (module doc); the
+#: world's own: ``layout_seed`` and ``velocity`` (PointMazeWorld's).
+POINTMAZE_ENV_KWARGS = ("maze_map", "reward_type", "continuing_task", "reset_target",
+                        "position_noise_range")
+
+
+def pointmaze_layout(env_id: str, layout_seed: int = 0, **env_kwargs: Any):
+    """``(walls, start, goal)`` of a PointMaze env: its ``maze_map`` and its own draw of
+    the goal and reset cells at ``reset(seed=layout_seed)`` (module doc)."""
+    check_env_id(env_id)
+    name = f"gym:{env_id}"
+    unknown = sorted(set(env_kwargs) - set(POINTMAZE_ENV_KWARGS))
+    if unknown:
+        raise _error(f"{name}: --world-kwargs {', '.join(map(repr, unknown))} cannot be "
+                     f"mapped (PointMaze kwargs: layout_seed, velocity, "
+                     f"{', '.join(POINTMAZE_ENV_KWARGS)})")
+    if env_kwargs.get("reset_target"):
+        raise _error(f"{name}: reset_target=true moves the goal when it is reached; the "
+                     f"adapter maps one fixed goal")
+    if env_kwargs.get("position_noise_range", 0) != 0:
+        raise _error(f"{name}: position_noise_range="
+                     f"{env_kwargs['position_noise_range']!r} cannot be mapped (the world "
+                     f"starts at rest at the start cell's centre: 0 only)")
+    bad = (TypeError, ValueError, AssertionError, IndexError, KeyError)
+    maze_map = env_kwargs.get("maze_map", gym.spec(env_id).kwargs.get("maze_map"))
+    try:
+        free = sum(cell != 1 for row in maze_map for cell in row)
+    except TypeError:
+        raise _error(f"{name}: maze_map must be a list of rows, got {maze_map!r}") from None
+    if free < 2:    # the env's draw would look for a start apart from the goal for ever
+        raise _error(f"{name}: maze_map has {free} free cell(s); a start and a goal need 2")
+    try:
+        env = gym.make(env_id, **env_kwargs)
+    except bad as exc:
+        raise _error(f"{name}: --world-kwargs: {exc!r}") from None
+    u = env.unwrapped
+    try:
+        try:
+            u.reset(seed=layout_seed)
+        except bad:
+            raise _error(f"{name}: the env cannot draw a start and a goal cell from its "
+                         f"maze_map (too few free cells)") from None
+        maze = u.maze
+        walls = np.array([[cell == 1 for cell in row] for row in maze.maze_map], dtype=bool)
+        goal = tuple(int(v) for v in maze.cell_xy_to_rowcol(np.asarray(u.goal)))
+        start = tuple(int(v) for v in maze.cell_xy_to_rowcol(np.asarray(u.reset_pos)))
+    finally:
+        env.close()
+        try:
+            os.remove(u.tmp_xml_file_path)   # compiled already; the env never removes it
+        except (OSError, AttributeError):
+            pass
+    return walls, start, goal
+
+
+def pointmaze_world(env_id: str, max_episode_steps: int | None = None,
+                    seed: int | None = None, layout_seed: int = 0, velocity: bool = False,
+                    **env_kwargs: Any):
+    """A ``PointMaze_*`` id as a :class:`maze_sim.pointmaze_world.PointMazeWorld` (module
+    doc), with the ``GymWorld`` surface the scenarios read: ``name``, ``start_pose`` (the
+    start cell), ``layout_seed``."""
+    from maze_sim.maze import MazeError
+    from maze_sim.pointmaze_world import PointMazeWorld
+    layout_seed = check_layout_seed(env_id, layout_seed)
+    walls, start, goal = pointmaze_layout(env_id, layout_seed, **env_kwargs)
+    name = f"gym:{env_id}"
+    try:
+        world = PointMazeWorld.from_layout(walls, start, goal, f"{name} (layout seed "
+                                           f"{layout_seed})", max_episode_steps, seed,
+                                           velocity=velocity)
+    except MazeError as exc:
+        raise _error(str(exc)) from None
+    world.name = name
+    world.start_pose = start
+    world.layout_seed = layout_seed
+    return world
+
+
 class NativeActions(gym.ActionWrapper):
     """The first ``n`` actions of a ``Discrete`` env (MiniGrid: left, right, forward)."""
 
@@ -143,13 +252,10 @@ class GymWorld:
         self.family = check_env_id(env_id)
         self.env_id = env_id
         self.name = f"gym:{env_id}"
-        if not isinstance(layout_seed, int) or layout_seed < 0:
-            raise _error(f"gym:{env_id}: layout_seed must be an integer >= 0, "
-                         f"got {layout_seed!r}")
-        self.layout_seed = layout_seed
+        self.layout_seed = check_layout_seed(env_id, layout_seed)
         self.max_episode_steps = max_episode_steps
-        if self.family != "minigrid":     # pointmaze: check_env_id refused it without
-            raise _error(f"gym:{env_id}: family {self.family!r} has no world here yet")
+        if self.family != "minigrid":
+            raise _error(f"gym:{env_id}: family {self.family!r} is built by make_gym_world")
         try:
             base = gym.make(env_id, max_steps=10**9, **kwargs)
         except TypeError as exc:

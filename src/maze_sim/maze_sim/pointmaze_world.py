@@ -223,6 +223,20 @@ class PointMazeWorld:
         self._build(self.grid.walls)
         self._place(self.grid.cell)
 
+    @classmethod
+    def from_layout(cls, walls: np.ndarray, start: Cell, goal: Cell, source: str,
+                    max_episode_steps: int | None = None, seed: int | None = None,
+                    velocity: bool = False) -> "PointMazeWorld":
+        """The world of a wall layout (an env's ``maze_map``: truthy = wall) with one start
+        and one goal cell ``G`` and no events; ``source`` names it in errors."""
+        walls = np.asarray(walls, dtype=bool)
+        maze = Maze(walls=walls, start=tuple(start), goals={"G": tuple(goal)},
+                    source=source)
+        maze.check_free(*maze.start)
+        maze.check_free(*maze.goals["G"])
+        maze._check_reachable()
+        return cls(maze, "G", max_episode_steps, seed, velocity)
+
     # ------------------------------------------------------------------ the env
     def _build(self, walls: np.ndarray) -> None:
         """(Re)build the env's MuJoCo model from ``walls``; the point keeps its state."""

@@ -122,10 +122,10 @@ def make_world(name: str, maze: Maze, goal: str | Cell = "G",
     spec = name if isinstance(name, WorldSpec) else parse_world(name, kwargs)
     kwargs = {**spec.kwargs, **kwargs}
     if not spec.from_maze:
-        from maze_sim.gym_adapter import AdapterError, GymWorld
+        from maze_sim.gym_adapter import AdapterError, make_gym_world
         try:
-            return GymWorld(spec.env_id, max_episode_steps=max_episode_steps, seed=seed,
-                            **kwargs)
+            return make_gym_world(spec.env_id, max_episode_steps=max_episode_steps,
+                                  seed=seed, **kwargs)
         except AdapterError as exc:
             raise WorldError(str(exc)) from None
     cls = world_class(spec.name)

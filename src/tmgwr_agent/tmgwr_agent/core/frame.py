@@ -38,9 +38,9 @@ predicts. A primitive never moved with counts as consistent (nothing contradicts
 An inconsistent primitive (a move that depends on where it is taken: a forward step that
 follows a heading, a turn that rotates it) joins no basis, and no rule that places its
 successor is used for it: a pair of it never tried is unknown space at a distance bounded
-without a lattice (``MotivationEstimator._unplaced_options``), a tried one has no option.
+without a lattice (``OptionRules._unplaced_options`` in unknown.py), a tried one has no option.
 When no primitive is consistent, the goal is represented by the nodes where the agent
-sensed it (``MotivationEstimator._sensed_goal``). With :class:`SensorFrame` (``grid``)
+sensed it (``OptionRules.sensed_goal``, unknown.py). With :class:`SensorFrame` (``grid``)
 the lattice is declared, not checked.
 """
 

@@ -1,0 +1,701 @@
+"""The value of the unknown (Eq. 5', our addition): a model of what the map does not know,
+the plug-in of the motivation estimator (:mod:`tmgwr_agent.core.motivation`).
+
+The estimator solves Eq. 4-5 on the map; what it asks of a model of the unknown is small
+(:class:`ModelOfUnknown`, as nav2's planner plug-ins implement one interface): note what
+each action did (:meth:`~OutcomeMemory.record`), follow a merge of nodes
+(:meth:`~OutcomeMemory.merge`), plan an episode at its first solve
+(:meth:`~OptionRules.plan_episode`), give the options of the rows that changed
+(:meth:`~OptionRules.refresh_options`: ``U``, ``rho`` and the successor arrays ``osucc``,
+``onb``, ``ong`` that the solve and Eq. 6 read), the cells that closed
+(:meth:`~OptionRules.closed_cells`, absorbing in Eq. 5) and the goal without a lattice
+(:meth:`~OptionRules.sensed_goal`), and save and load its memory
+(:meth:`~OutcomeMemory.state_dict`, :meth:`~OutcomeMemory.load_state_dict`). The models,
+by the estimator's ``unknown`` parameter, are listed once, in :data:`UNKNOWN`:
+
+* ``none``: the paper's Eq. 5, no options (the outcome memory is still kept, so a
+  checkpoint has the same keys whatever the model).
+* ``grid``: the rules below in the sensor's own frame (:class:`~tmgwr_agent.core.frame.
+  SensorFrame`). The assumptions it makes, every one of them: the primitives move along
+  the sensor's axes, each by the same length ``L`` (the median link length) on every axis,
+  wherever they are taken (a lattice, declared, not checked); hence the L1 distance over
+  ``L`` counts the steps to the goal, an axis-aligned cell of side ``L`` holds one place
+  (the node lookup of a predicted successor, the closed-cell test, a wall's run), and the
+  primitives come in opposite pairs. True of the grid world sensed as (row, col) in one
+  unit; false as soon as the axes are scaled differently, rotated or noisy.
+* ``learnt`` (the default): the same rules in the frame of the agent's own forward model
+  (:class:`~tmgwr_agent.core.frame.LearntFrame`), which checks the lattice from the
+  forward model's spread and uses no rule that places a successor for a primitive that
+  fails it (:meth:`~OptionRules.sensed_goal`, :meth:`~OptionRules._unplaced_options`).
+
+Today the two rule sets share their code, :class:`OutcomeMemory` and :class:`OptionRules`,
+mixins of :class:`~tmgwr_agent.core.motivation.MotivationEstimator` that read the
+estimator's state (the potentials ``V``, rewards ``R``, goal node, frame coordinates);
+only the frame tells them apart.
+
+**The value of the unknown** (``unknown``, our addition: ``learnt`` by default, ``grid``,
+or ``none`` = the paper's Eq. 5). Every place, distance and length below (``w``,
+``delta``, ``x_g``, ``L``) is measured in the frame of :mod:`tmgwr_agent.core.frame`:
+the sensor's own axes for ``grid``, the learnt forward model's primitive steps for
+``learnt`` (then ``L`` = 1). Every rule below that looks a place up assumes the
+primitives make lattice steps; ``learnt`` checks it from the forward model's spread
+(frame.py, "Is the forward model a lattice?") and where it fails uses none of them for
+that primitive (:meth:`OptionRules._unplaced_options`,
+:meth:`OptionRules.sensed_goal`).
+
+Eq. 5 only knows the links the agent has made: where the map knows no way
+to the goal every potential is 0 and the agent can only random-walk; a side corridor never
+entered, or a wall that has since opened, never enters the plan. R-max style, every
+(node i, motor primitive a) pair whose outcome the map does not know gets a virtual
+successor, an *option*, in the max of Eq. 5::
+
+    Delta_V(i) = R_i + gamma max( max_k E[i, k] V(k), max_a O(i, a) ) - V(i)     (Eq. 5')
+    O(i, a)    = rho(i, a) S(i, a) + (1 - rho(i, a)) (R_i + gamma max_k E[i, k] V(k))
+
+* ``rho`` is the probability that the option leads on. For a primitive never taken from i
+  it is the chance the agent's own experience gives that a move opens: of its tried
+  (node, primitive) pairs of live nodes, the share ``k / t`` whose last try moved it,
+  smoothed by Laplace's rule, ``(k + 1) / (t + 2)`` (1/2 before any try; re-estimated
+  with the options, at least once an episode; ``untried_rho``, negative by default, fixes
+  it instead: 1 is R-max's optimistic bound). In a maze of corridors about half the moves
+  bump, in an open field few do, and the agent learns which world it is in: an untried
+  move beside a good route is tried only when ``rho`` times its saving beats the bump's
+  step. The *untried chain* of an episode (``chain``) is the exception: at its first
+  solve, a breadth-first search from its start over the links and the untried moves
+  between known places (a primitive never taken from i whose predicted cell holds a known
+  node) finds the shortest way to the goal; when it is shorter than the known route (or
+  no route is known), its untried moves have ``rho = 1`` this episode, planned as open as
+  the re-tests below are (:func:`kernels.untried_chain`). Each hop's odds alone make a
+  way of ``k`` untried moves worth about ``rho^k`` of its saving, and a short cut along
+  cells known but never walked in that direction was never taken (a generated large
+  maze kept a greedy path two steps longer than its shortest for good). With a route as
+  short as any such way (a converged agent) there is no chain. With the bound (``rho =
+  1``) for every untried move the agent tried almost every untried pair whose L1
+  heuristic beat the route, and detours after blocks grew. 1 also
+  for a move whose link the map has since deleted (GWR ageing: a forgotten piece of a
+  route is walked again when it may be worth it); when the node it led to is gone, or no
+  longer within ``L / 2`` of the predicted cell (its slot reused), the cell is looked up
+  as for any move. A pair whose last outcome was a bump is a remembered wall, *trusted*
+  for ``T = stale_horizon`` episodes after the bump (``rho = 0``: no option) and *stale*
+  after that (R-max's known threshold with forgetting). A wall can only be seen to have
+  opened by re-testing it (the agent senses its position and its touch sensor, nothing at
+  a distance), and a shortcut is news only if the agent goes and looks; the clock is the
+  episode, the unit of the task. Which stale walls an episode re-tests is decided once,
+  at its start (the *re-tests*, below); those have ``rho = stale_prior`` = 1, planned as
+  open: a test is worth its cost over all the episodes a shortcut would serve, not over
+  this one, so the one-episode odds of Eq. 5' are not what decides it (with ``rho`` =
+  1/2, as before the re-tests were chosen, an opening that saves two steps a cell off the
+  route never paid for its way there and back within the episode, and such openings were
+  never found). The others have
+  no option. A failed test leaves the agent where it was after one step, hence the ``(1 -
+  rho)`` term.
+* *A cell that closed*: when a move made before bumps now, the cell it led to has
+  closed, from every side: the node it led to (while still at the predicted cell) is
+  terminal in Eq. 5, worth its own R (no successor), for the ``T`` episodes the bump
+  is trusted, or until the agent stands on it. Without it the agent, having bumped into
+  a block, walked round to bump into it again from its other sides along the links it
+  knew into it (held-out open fields: one block cell bumped from three sides). The stuck
+  test (below) ignores it: those links never bumped.
+* The *re-tests* of an episode (``stale_rank``): a re-test costs a step and often a
+  detour, so an episode re-tests at most ``B = stale_budget`` times ``d`` stale walls,
+  rounded up (at least one; ``stale_budget`` 0.1, the share of steps the paper's agent
+  spends on its random walk at Eq. 7's floor), ``d`` the steps of the known route from
+  the episode's start, read off the potentials of Eq. 5 without options there
+  (``V0(start) = gamma^d V0(g)``; before a route is known, the number of nodes). At the
+  episode's first solve every stale wall gets what it would save if it opened, ``s = d -
+  (d_S(i) + 1 + k + 1 + d_G(q))`` steps on the known route (``d_S``, ``d_G``: link steps
+  from the start and to the goal over the links the outcome memory does not contradict;
+  ``q`` its best exit, ``k`` cells along its run, :func:`kernels.stale_savings`), and
+  what a failed test would cost, ``c = d_S(i) + 1 + d_G(i) - d`` (at least 1); the ``B``
+  walls with ``s > 0`` and the most ``t s / c``, ``t`` the episodes since the wall was
+  last bumped, are this episode's re-tests (ties: the nearest first). Walls change, if at
+  all, at some rate, so the chance a wall has opened grows with ``t``, and the gain of
+  finding it is that chance times ``s`` (each episode after), against ``c``. A wall just
+  re-tested waits, a long-unchecked one rises, so no wall waits for ever behind others
+  (with the re-tests chosen as Eq. 5' ranked them from where the agent stood, more than
+  ``T`` times ``B`` walls near the route starved one further off: a generated braided
+  maze never found its opening); the cost keeps a far wall from sending the agent on a
+  long excursion in an episode that meets a block. An episode in which a move made
+  before has bumped (the known route broke) re-tests none from then on: the agent is
+  finding its way round, and an old wall re-tested on the way costs steps the detour
+  needs. A re-test is an action
+  at a pair known closed while not *stuck* (below). ``stale_rank`` off: every stale wall
+  has ``rho = stale_prior`` until ``B`` re-tests are used up, Eq. 5' ranking them from
+  where the agent stands.
+* ``S`` is what the successor is worth. A known node when there is one: where the move
+  once led, else the node at the predicted position ``w_i + delta_a`` (``delta_a``: the
+  mean sensed displacement of primitive a over the agent's moves, its own forward model;
+  a node lookup by position, :func:`kernels.cell_grid`); so an untried move between two
+  known places is worth what the place is, not more. A remembered wall cell: ``gamma``
+  times the best ``gamma^k V(q)`` of its exits, the known nodes ``q`` next to it or
+  next to a run of unknown cells from it, ``k`` cells along (a wall that opens opens
+  along its run: straight on, a corridor cut through a block, or sideways, a strip of
+  an obstacle entered at one end; :func:`kernels.wall_exits`). A run stops after its
+  first cell next to known space and at the known extent of the world (the maze's outer
+  wall never leads round). It pays to re-test only a wall whose far side is known and
+  nearer the goal; with no exit, no option. (With the exits next to the cell and
+  straight on only, an opened strip entered from its end was worth nothing, and such
+  openings in open fields were rarely found.)
+  Unknown space:
+  ``U = V* gamma^h``, ``h = |w_i + delta_a - x_g|_1 / L``, the fewest steps of length L
+  from the predicted successor to the goal sensation ``x_g`` (the four primitives move
+  along the axes, hence L1: it never overestimates, so no shorter route is missed, the
+  A* argument), and ``V* = 1 / (1 - gamma^2)``, the potential of a represented goal node
+  (R_g = 1, and Eq. 5 returns to it every second step), so an option at h steps is worth
+  exactly a known route of h steps. The agent leaves a known route of length d for an
+  unknown only if the way there plus ``1 + h`` is shorter than d: it explores where a
+  shorter route may exist and nowhere else; the horizon is the goal's distance in the
+  map, no constant.
+* *Stuck*: the goal is represented but no link path leads from the agent's node to it
+  over the links its outcome memory does not contradict (a link whose primitive bumped
+  last time counts as gone). The agent's knowledge says the task is impossible, so every
+  remembered wall is doubted evenly, ``T = N``, up to ``rho``'s limit ``p``: the chance
+  that a wall known closed has opened, from the agent's own re-tests, the share of its
+  actions at a pair known closed that moved it, ``(k + 1) / (t + 2)`` (Laplace's rule,
+  as the open prior of untried moves: 1/2 before any re-test,
+  :meth:`MotivationEstimator.wall_prior`); walls without a known other side get the
+  optimistic U. With ``p`` fixed at 1/2 a wall known closed was as likely open as a move
+  never tried, and the L1 distance ranked them: on the default maze (a, with
+  ``config/tuned/tmgwr.yaml``, trial 1, one training episode) the agent walked back
+  along its route to the start bumping every side wall nearer the goal than the untried
+  way round (117 steps against an oracle of 61; now 62); each failed test now lowers
+  ``p`` for all walls. A wall re-tested
+  in vain is doubted over ``T + e`` instead, ``e`` the steps it had been known closed at
+  its last bump (from the first bump of its current run of bumps): each failed re-test
+  is evidence the wall stays, so the re-tests back off and the agent goes farther afield.
+  Without it the nearest wall on the lost route (the block itself) was re-tested every
+  few dozen steps and the agent never got far from it (one held-out suite trial took
+  over a hundred times the oracle's steps). While stuck the clock is the step (the task
+  is impossible now, not in a few episodes) and the re-test budget does not apply.
+* *The goal when the route broke*: an episode ends at the goal, so the agent never moves
+  from a goal node, and its potential in Eq. 5' is ``R_g`` plus what its own untried
+  moves promise (about 10 here, against the ``V* = 17`` the unknown is scaled to: a goal
+  that Eq. 5 can step off and back onto). Known ways near the goal are then worth less
+  than unknown space at the same distance, and a neighbour's untried move can outrank
+  the step into the goal. In a training episode that look round pays, since the map
+  learns the goal's surroundings (with the goal a terminal state worth ``V*`` in every
+  episode, both blocks and openings were handled worse). In an episode whose known route
+  broke (a move made before bumped: ``broken``) the agent is finding its way round and
+  the look only delays it: there the goal nodes are what the task makes them, terminal
+  states worth ``V*`` (:meth:`MotivationEstimator._goal_terminal`): without it a
+  generated large maze's agent stood beside the goal after the block and then searched
+  the unknown for many times the route's length.
+* The goal node exists only once the map represents the goal (a node within ``L / 2`` of
+  the goal region, i.e. the goal has been sensed): before that ``R = 0`` everywhere and
+  the options alone lead the agent, by the nearest plausible unknown, towards the goal
+  sensation. (The paper's ``g = SM.Map(x_g)`` is otherwise the node *most like* a goal in
+  unvisited space, often a dead end behind a wall, where Eq. 6 then oscillated; this
+  replaces ``goal_search``.) The goal region is what the world declares
+  (``Senses.goal_tolerance``): the sensations within that distance of the goal sensation,
+  any of which ends the episode at the goal; the goal sensation alone when it is 0 (a grid
+  cell). Why half a step beyond it: the agent senses only where its primitives stop, places
+  one step ``L`` apart, so the sensation at which it first meets the region, and the node
+  that matched it, may lie up to half a step off any given point of it; a region the
+  primitives end *inside* is met at its edge (an episode stops there), never nearer its
+  centre, so without the tolerance a goal wider than a step is never represented.
+* The options are part of the potentials the action selector climbs (Eq. 6 ranks them
+  with the links: :meth:`MotivationEstimator.options_of`), which replaces the former
+  ``try_untried`` rule. The experimenter's greedy probe (``explore`` False) is the learnt
+  policy: it climbs the potentials of Eq. 5 without options (:meth:`~tmgwr_agent.core.motivation.
+  MotivationEstimator.exploit`), as
+  Dyna-Q+'s probe reads its bonus-free twin.
+
+Costs: the options are recomputed in full when the map's structure, the episode (when
+stuck, a tick of the step clock), the stuck state or the re-test budget changes, else only
+on the rows whose outcome memory changed; the reachability pass and the option loop are a
+few linear passes over the map. Reading the route costs one solve of Eq. 5 without
+options per episode, choosing its re-tests two breadth-first searches over the links and
+the exits of every stale wall (it raises the mean step, not the median), its untried
+chain one more (over the links and the untried moves).
+
+The outcome memory (primitives tried per node, step and episode of the last bump and since
+when a pair is known closed, where each move led, the step and episode clocks, the known
+route, this episode's re-tests and untried chain, the forward model ``delta`` and its
+spread, the nodes where the goal was sensed) is plain data:
+:meth:`OutcomeMemory.state_dict` / :meth:`OutcomeMemory.load_state_dict`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from tmgwr_agent.core import kernels
+from tmgwr_agent.core.frame import LearntFrame, SensorFrame
+from tmgwr_agent.core.outcome import Outcome
+from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
+
+#: A node with R_i = sim(i, g) at least this represents the goal (a source of the
+#: reachability test; never absorbing).
+GOAL_R = 0.5
+
+
+def laplace(k: int, t: int) -> float:
+    """Laplace's rule of succession: the chance of a success after k in t trials,
+    (k + 1) / (t + 2) (1/2 before any trial)."""
+    return (k + 1.0) / (t + 2.0)
+
+
+def grown(a: np.ndarray, n: int, fill) -> np.ndarray:
+    """``a`` with at least n rows (doubling), new rows set to ``fill``."""
+    if len(a) >= n:
+        return a
+    b = np.full((max(n, 2 * len(a)),) + a.shape[1:], fill, dtype=a.dtype)
+    b[: len(a)] = a
+    return b
+
+
+@dataclass(frozen=True)
+class Model:
+    """A model of the unknown: the frame its rules measure places in (frame.py; the
+    estimator measures Eq. 10's width in it too) and whether it gives options (Eq. 5')."""
+
+    name: str
+    frame: type
+    options: bool
+
+
+#: The models of the unknown, by the estimator's ``unknown`` parameter (its choices).
+UNKNOWN = {m.name: m for m in (Model("none", SensorFrame, False),
+                               Model("grid", SensorFrame, True),
+                               Model("learnt", LearntFrame, True))}
+
+
+@runtime_checkable
+class ModelOfUnknown(Protocol):
+    """What the motivation estimator asks of a model of the unknown."""
+
+    #: the options of Eq. 5' per (node, primitive), which the solve and Eq. 6 read
+    U: np.ndarray
+    rho: np.ndarray
+    osucc: np.ndarray
+    onb: np.ndarray
+    ong: np.ndarray
+
+    def record(self, node: int, winner: int, inserted: bool, outcome: Outcome,
+               w: np.ndarray) -> None:
+        """What the last learning step did."""
+
+    def merge(self, merges) -> None:
+        """The map merged node ``gone`` into ``keep`` for each pair of ``merges``."""
+
+    def state_dict(self) -> dict: ...
+
+    def load_state_dict(self, d: dict) -> None: ...
+
+    def sensed_goal(self, m: SensorimotorMap, n: int) -> int:
+        """Goal node and rewards without a lattice; returns n."""
+
+    def closed_cells(self, n: int) -> np.ndarray:
+        """The nodes of cells that closed, as a mask of n (absorbing in Eq. 5)."""
+
+    def plan_episode(self, m: SensorimotorMap, n: int) -> None:
+        """At an episode's first solve: what the episode may try."""
+
+    def refresh_options(self, m: SensorimotorMap, n: int) -> None:
+        """U, rho and the successor arrays of the rows that changed."""
+
+
+class OutcomeMemory:
+    """The outcome memory of Eq. 5' (a mixin of the estimator): what each (node, primitive)
+    pair did, the episode and step clocks, the forward model ``delta`` and its spread."""
+
+    def record(self, node: int, winner: int, inserted: bool, outcome: Outcome,
+               w: np.ndarray) -> None:
+        """What the last learning step did: primitive ``outcome.action`` taken from
+        ``node`` led to ``winner`` (``inserted``: a new node) or bumped. The pair becomes
+        known (a bump remembers its step, for staleness), a new node starts with every
+        primitive untried, and a move updates the forward model ``delta`` (the mean of
+        ``w[winner] - w[node]`` over the moves made with the primitive; ``w``: the map's
+        weights). An episode start starts the episode clock and its budget for stale
+        walls; an action at a pair known closed is a test of a wall (counted for
+        :meth:`wall_prior`), and when the agent was not stuck a re-test of a stale wall
+        (counted against the episode's budget)."""
+        self._winner = winner
+        if outcome.episode_start:
+            self._route_due = True
+            self.episode += 1
+            self.retests = 0
+            self.broken = False
+            self.sel[:] = True                # until the route is read (plan_episode)
+            self.chain[:] = False
+            self._closed = None               # marks expire by the episode
+            return
+        self.clock += 1
+        top = max(node, winner) + 1
+        if top > len(self.tried):
+            self._grow_memory(top)
+        self._size_forward_model(w.shape[1])
+        if inserted and winner >= 0:
+            self._dirty.add(winner)
+        if (outcome.goal_reached or inserted) and winner >= 0 \
+                and self.goal_seen[winner] != outcome.goal_reached:
+            self.goal_seen[winner] = outcome.goal_reached   # a goal node, or a new slot
+            self._R_key = None
+        if 0 <= node and self.bump_t[node, outcome.action] >= 0:
+            self.wall_tests += 1
+            self.wall_opened += not outcome.bumped
+            self.retests += not self._stuck
+        a = outcome.action
+        # a move made before bumps now: the known route broke, the cell it led to closed
+        broke = bool(outcome.bumped and 0 <= node and self.bump_t[node, a] < 0
+                     and self.succ[node, a] >= 0)
+        self.broken |= broke
+        if broke:
+            self._close_cell(node, a, w)
+        elif winner >= 0 and (inserted or not outcome.bumped):
+            self._mark_closed(winner, -1)     # a node stood on (or a new one) is open
+        moved = self.moves[a]
+        if kernels.record_outcome(self.tried, self.bump_t, self.closed_t, self.bump_e,
+                                  self.succ, self.delta, self.moves, w, node, winner,
+                                  inserted, outcome.action, outcome.bumped, self.clock,
+                                  self.episode):
+            self._dirty.add(node)
+            self._bumps += 1
+        if self.moves[a] != moved:            # a move: the forward model's spread too
+            d = w[winner] - w[node]
+            self.delta_sq[a] += (float(d @ d) - self.delta_sq[a]) / self.moves[a]
+
+    #: The outcome memory's per-node arrays and the value of a new node's row.
+    _MEMORY = (("tried", False), ("bump_t", -1), ("closed_t", -1), ("bump_e", -1),
+               ("succ", -1), ("closed_e", -1), ("sel", True), ("chain", False),
+               ("goal_seen", False))
+
+    def _grow_memory(self, n: int) -> None:
+        """The outcome memory with at least n node rows (:func:`grown`)."""
+        for name, fill in self._MEMORY:
+            setattr(self, name, grown(getattr(self, name), n, fill))
+
+    def merge(self, merges) -> None:
+        """The map merged node ``gone`` into node ``keep`` for each pair of ``merges``
+        (:attr:`~tmgwr_agent.core.sensorimotor_map.SensorimotorMap.merges`, in order):
+        ``keep`` takes ``gone``'s outcome memory of each primitive it has not tried itself,
+        every move remembered to lead to ``gone`` leads to ``keep``, ``gone``'s row is a
+        new node's, and the options are recomputed in full at the next update."""
+        for keep, gone in merges:
+            keep, gone = int(keep), int(gone)
+            if max(keep, gone) >= len(self.tried):
+                self._grow_memory(max(keep, gone) + 1)
+            take = ~self.tried[keep] & self.tried[gone]
+            for name, fill in self._MEMORY:
+                a = getattr(self, name)
+                if name in ("sel", "chain"):        # this episode's re-tests, its chain
+                    a[keep] |= a[gone]
+                elif a.ndim == 2:
+                    a[keep, take] = a[gone, take]
+                else:                               # closed_e: the later closing
+                    a[keep] = max(a[keep], a[gone])
+                a[gone] = fill
+            self.succ[self.succ == gone] = keep
+            for V in (self.V, self.V0):
+                if gone < len(V) - 1 and keep < len(V) - 1:
+                    V[keep], V[gone] = max(V[keep], V[gone]), 0.0
+            if self._winner == gone:
+                self._winner = keep
+        if len(merges):
+            self._closed = None
+            self._options_key = ()
+
+    def _close_cell(self, node: int, a: int, w: np.ndarray) -> None:
+        """Primitive a, a move made before from ``node``, bumps now: the cell it led to has
+        closed, from every side (the node it led to, while that node is still at the
+        predicted cell; a map loaded or rebuilt since may hold fewer nodes than ``succ``
+        remembers)."""
+        j = self.succ[node, a]
+        if j == node or j >= len(w) or not self.lattice[a]:   # no cell it predicts
+            return
+        F = self.frame.of(w[[node, j]], np.zeros(w.shape[1]), self.delta[[a]], self._scale,
+                          cache=False)
+        if np.abs(F.w[1] - F.w[0] - F.delta[0]).max() < 0.5 * F.L:
+            self._mark_closed(j, self.episode)
+
+    def _mark_closed(self, j: int, episode: int) -> None:
+        """Node j's cell closed in ``episode`` (-1: open)."""
+        if self.closed_e[j] != episode:
+            self.closed_e[j] = episode
+            self._closed = None
+
+    def state_dict(self) -> dict[str, np.ndarray | float | int]:
+        """The outcome memory, as plain arrays and numbers (node rows ``[0, n)`` of the
+        map it belongs to)."""
+        return {"tried": self.tried.copy(), "bump_t": self.bump_t.copy(),
+                "closed_t": self.closed_t.copy(), "bump_e": self.bump_e.copy(),
+                "succ": self.succ.copy(), "closed_e": self.closed_e.copy(),
+                "goal_seen": self.goal_seen.copy(),
+                "clock": int(self.clock), "delta": self.delta.copy(),
+                "delta_sq": self.delta_sq.copy(),
+                "moves": self.moves.copy(), "episode": int(self.episode),
+                "route": float(self.route), "retests": int(self.retests),
+                "wall_tests": int(self.wall_tests), "wall_opened": int(self.wall_opened),
+                "route_due": int(self._route_due), "sel": self.sel.copy(),
+                "chain": self.chain.copy()}
+
+    def load_state_dict(self, d: dict) -> None:
+        self.tried = np.array(d["tried"], dtype=bool)
+        self.bump_t = np.array(d["bump_t"], dtype=np.int64)
+        # closed_t is absent from older checkpoints: each bump then counts as the first
+        self.closed_t = np.array(d.get("closed_t", d["bump_t"]), dtype=np.int64)
+        self.succ = np.array(d["succ"], dtype=np.int64)
+        self.closed_e = grown(np.array(d.get("closed_e", ()), dtype=np.int64),
+                              len(self.succ), -1)            # older checkpoints: none
+        self._closed = None
+        self.goal_seen = grown(np.array(d.get("goal_seen", ()), dtype=bool), len(self.succ),
+                               False)                        # older checkpoints: none
+        self.clock = int(d["clock"])
+        # absent from older checkpoints: the episode counters start afresh and every
+        # remembered wall is trusted from now on
+        self.episode = int(d.get("episode", 0))
+        self.bump_e = np.array(d["bump_e"], dtype=np.int64) if "bump_e" in d else \
+            np.where(self.bump_t >= 0, self.episode, -1)
+        self.route = float(d.get("route", 0.0))
+        self.retests = int(d.get("retests", 0))
+        self.wall_tests = int(d.get("wall_tests", 0))      # older checkpoints: no re-test
+        self.wall_opened = int(d.get("wall_opened", 0))
+        self._route_due = bool(d.get("route_due", 0))
+        self.sel = grown(np.array(d["sel"], dtype=bool), len(self.succ), True) \
+            if "sel" in d else np.ones(self.succ.shape, dtype=bool)   # older: every one
+        self.chain = grown(np.array(d.get("chain", np.zeros((0, self.n_primitives))), dtype=bool),
+                           len(self.succ), False)                      # older: none
+        self.delta = np.array(d["delta"], dtype=float)
+        # absent from older checkpoints: no spread (every displacement its mean)
+        self.delta_sq = np.array(d["delta_sq"], dtype=float) if "delta_sq" in d else \
+            np.einsum("ij,ij->i", self.delta, self.delta) if self.delta.size else \
+            np.zeros(self.n_primitives)
+        self.moves = np.array(d["moves"], dtype=np.int64)
+        self._options_key = ()
+        self._inc = None                  # the next solve is a full one
+
+    def _size_forward_model(self, dim: int) -> None:
+        """The forward model ``delta`` for sensations of ``dim`` values (zero: unknown)."""
+        if self.delta.shape != (self.n_primitives, dim):
+            self.delta = np.zeros((self.n_primitives, dim))
+            self.delta_sq = np.zeros(self.n_primitives)
+
+    def spread(self) -> np.ndarray:
+        """Per primitive, the spread of its sensed displacements about their mean
+        ``delta``: the root mean square of ``|d - delta_a|`` over its moves (0 before
+        any)."""
+        if not self.delta.size:
+            return np.zeros(self.n_primitives)
+        var = self.delta_sq - np.einsum("ij,ij->i", self.delta, self.delta)
+        return np.sqrt(np.maximum(var, 0.0))
+
+
+class OptionRules:
+    """The rules of Eq. 5' (a mixin of the estimator, shared by ``grid`` and ``learnt``):
+    this episode's re-tests and untried chain, the closed cells, the stuck test and the
+    options U, rho of every (node, primitive) pair."""
+
+    def sensed_goal(self, m: SensorimotorMap, n: int) -> int:
+        """Goal node and rewards without a lattice (no primitive consistent, frame.py):
+        the test "a node within half a step of the goal sensation" and Eq. 10's width in
+        link lengths both measure steps by a lattice, so the goal is represented by the
+        nodes where the agent sensed it (``goal_seen``, the outcome's goal sensing): R = 1
+        there, 0 elsewhere, the goal node the one of them nearest the goal sensation (-1
+        before any: the options lead). Returns n."""
+        seen = self.goal_seen[:n] & m.alive[:n]
+        R = seen.astype(float)
+        if len(self.R) != n or not np.array_equal(R, self.R):
+            self.R = R
+            self._R_key = None
+            self._epoch += 1
+        idx = np.flatnonzero(seen)
+        if not len(idx) or self.goal_x is None:
+            self.goal_node = -1
+            return n
+        d = m.w[idx] - self.goal_x
+        self.goal_node = int(idx[np.argmin(np.einsum("ij,ij->i", d, d))])
+        return n
+
+    def closed_cells(self, n: int) -> np.ndarray:
+        """The nodes of cells that closed, while trusted (``stale_horizon`` episodes since),
+        as a mask of n; recomputed only when a mark, the episode or n changed (it is read
+        at every solve)."""
+        if self._closed is None or len(self._closed) != n:
+            k = min(n, len(self.closed_e))
+            e = self.closed_e[:k]
+            self._closed = np.zeros(n, dtype=bool)
+            self._closed[:k] = (e >= 0) & (self.episode - e < self.stale_horizon)
+            self._epoch += 1                # absorbing flags off the map's log
+        return self._closed
+
+    def stuck_clock(self, nodes: int) -> tuple[int, float]:
+        """(clock, T) for the doubt of walls while stuck: ``T = nodes`` steps (a bump older
+        than a walk over the map is as doubtful as any); the clock advances in steps of
+        T / 8 (rho changes at those ticks only, so the warm-started value iteration is not
+        re-solved for a drift of every option each step)."""
+        tick = max(1, nodes // 8)
+        return self.clock - self.clock % tick, float(nodes)
+
+    def budget_spent(self, n: int) -> bool:
+        """This episode's re-tests of stale walls are used up: at most ``stale_budget``
+        times the steps of the known route from the episode's start (the number of nodes
+        before a route is known), rounded up, and at least one, unless ``stale_budget`` is
+        0. (Rounded down instead, fewer openings were found within 10 episodes and no
+        block was won more.)"""
+        return self.stale_budget <= 0.0 or self.broken or \
+            self.retests >= max(1.0, self.stale_budget * (self.route or n))
+
+    def _read_route(self, m: SensorimotorMap, n: int) -> None:
+        """At an episode's first solve: the steps ``d`` of the known route from where it
+        starts, read off the potentials of Eq. 5 without options, ``V0(start) = gamma^d
+        V0(g)``."""
+        self._route_due = False
+        V0 = self.exploit(m)
+        v, vg = (V0[self._winner] if 0 <= self._winner < n else 0.0), V0[self.goal_node]
+        if 0.0 < v <= vg:
+            self.route = max(1.0, math.log(v / vg) / math.log(self.gamma))
+
+    def plan_episode(self, m: SensorimotorMap, n: int) -> None:
+        """At an episode's first solve: its re-tests (:meth:`_select_retests`) and its
+        untried chain (``chain``: the untried moves between known places on the shortest
+        way from its start to the goal over the links and such moves, when it is shorter
+        than the known route or no route is known, :func:`kernels.untried_chain`), from
+        the link steps from the start and to the goal over the links the outcome memory
+        does not contradict. Every stale wall stays a re-test when ``stale_rank`` is off
+        or no route is known."""
+        self.sel[:] = True
+        self.chain[:] = False
+        start = self._winner
+        if not 0 <= start < n:
+            return
+        absorbing = self._absorbing(m, n)
+        Eb = kernels.contradicted(m.out, m.E, n, self.bump_t, self.succ)
+        ds, dg = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+        kernels.link_steps(m.out, Eb, n, m.alive, absorbing, start, False, ds)
+        kernels.link_steps(m.out, Eb, n, m.alive, absorbing, self.goal_node, True, dg)
+        F = self._F
+        grid, origin = kernels.cell_grid(F.w, m.alive, n, F.L)
+        route = int(dg[start])
+        if route >= 0 and self.stale_rank and self.stale_budget > 0.0 \
+                and self.stale_horizon > 0.0:
+            self._select_retests(m, n, ds, dg, route, grid, origin)
+        kernels.untried_chain(m.out, Eb, n, m.alive, absorbing, F.w, F.delta, F.L,
+                              grid, origin, self.tried, start, self.goal_node,
+                              route if route >= 0 else n + 1, self.chain)
+
+    def _select_retests(self, m: SensorimotorMap, n: int, ds: np.ndarray, dg: np.ndarray,
+                        route: int, grid: np.ndarray, origin: np.ndarray) -> None:
+        """The stale walls this episode may re-test (``sel``), the budget's worth
+        (:meth:`budget_spent`) of those that would save the most steps on the known route
+        (``route`` link steps; ``ds``, ``dg``: link steps from the start and to the goal)
+        if they opened (:func:`kernels.stale_savings`; ties: the nearest first)."""
+        ri, ra, rs = (np.empty(n * self.n_primitives, dtype=np.int64) for _ in range(3))
+        F = self._F
+        c = kernels.stale_savings(F.w, m.alive, n, F.delta, F.L, self.gamma, grid,
+                                  origin, self.tried, self.bump_e, self.succ, self.episode,
+                                  self.stale_horizon, ds, dg, route,
+                                  np.full((n, self.n_primitives, self.n_primitives), -1, np.int64),
+                                  np.zeros((n, self.n_primitives, self.n_primitives)), ri, ra, rs)
+        budget = math.ceil(max(1.0, self.stale_budget * (self.route or n)))
+        ri, ra, rs = ri[:c], ra[:c], rs[:c]
+        cost = np.maximum(ds[ri] + 1 + dg[ri] - route, 1)   # steps lost if it stays shut
+        key = (self.episode - self.bump_e[ri, ra]) * rs / cost
+        order = np.lexsort((ds[ri], -key))[:budget]        # the most first, then nearest
+        self.sel[:] = False
+        self.sel[ri[order], ra[order]] = True
+
+    def refresh_options(self, m: SensorimotorMap, n: int) -> None:
+        """U and rho of every option (:func:`kernels.option_values`), recomputed in full
+        when the map's structure, the goal, the node count, the stuck state, the stale
+        clock (episodes; when stuck, ticks of the step clock) or the re-test budget
+        changed, else only on the rows whose outcome memory :meth:`record` changed
+        (weights drift a little between full passes; a pow per pair and step would
+        dominate the step time). Absorbing nodes keep theirs unused (Eq. 5' gives them
+        no successor)."""
+        stuck = self._stuck = self.stuck(m, n)
+        nodes = self.nodes_alive(m, n)
+        clock, T = self.stuck_clock(nodes)
+        spent = not stuck and self.budget_spent(nodes)
+        rho_max = self.wall_prior() if stuck else 0.0 if spent else self.stale_prior
+        F = self._F
+        key = ((m.version, self.frame.version), clock if stuck else self.episode, n, stuck,
+               spent, rho_max)
+        if key != self._options_key:
+            if self._options_key[:1] != key[:1]:
+                self._grid, self._origin = kernels.cell_grid(F.w, m.alive, n, F.L)
+            self._options_key = key
+            self.rho_new = self.open_prior(m, n)
+            rows = np.arange(n)
+        elif self._dirty:
+            rows = np.fromiter(self._dirty, dtype=np.int64)
+        else:
+            return
+        self._dirty.clear()
+        self._opt_rows = rows if self._opt_rows is None or len(rows) == n else \
+            np.union1d(self._opt_rows, rows)
+        kernels.option_values(F.w, m.out, m.alive, n, rows, F.goal, F.delta,
+                              F.L, self.v_star, self.gamma, self.tried, self.bump_t,
+                              self.closed_t, self.bump_e, self.succ, clock, T, self.episode,
+                              self.stale_horizon, rho_max, self.rho_new, stuck, self._grid,
+                              self._origin, self.V, self.sel, self.chain,
+                              self.U, self.rho, self.osucc, self.onb, self.ong)
+        if not self.lattice.all():
+            self._unplaced_options(m, rows[rows < n], np.flatnonzero(~self.lattice))
+
+    def _unplaced_options(self, m: SensorimotorMap, rows: np.ndarray,
+                          prims: np.ndarray) -> None:
+        """The options of the primitives ``prims`` that make no lattice step (frame.py),
+        on the nodes ``rows``. The forward model cannot place their successor, so no rule
+        that looks a place up applies (a known node there, a wall's exits, the untried
+        chain, a closed cell): only a primitive never taken from i has an option, into
+        unknown space, ``rho = rho_new`` and ``U = V* gamma^h``, ``h = max(0, |w_i - x_g|
+        / l - 1)`` with ``l`` the root mean square step of the longest-moving primitive:
+        a path of k moves covers about k l at most (the triangle inequality, in the
+        sensation's own norm), so h does not overestimate the steps from the successor to
+        the goal (the A* argument of the module docstring holds without a lattice)."""
+        r, a = rows[:, None], prims[None, :]
+        untried = ~self.tried[r, a] & m.alive[rows][:, None]
+        step = math.sqrt(max(float(self.delta_sq.max()), 0.0))
+        gap = np.sqrt(np.einsum("ij,ij->i", m.w[rows] - self.goal_x, m.w[rows] - self.goal_x))
+        h = np.maximum(gap / step - 1.0, 0.0) if step > 0.0 else np.zeros(len(rows))
+        self.rho[r, a] = np.where(untried, self.rho_new, 0.0)
+        self.U[r, a] = np.where(untried, (self.v_star * self.gamma ** h)[:, None], 0.0)
+        self.osucc[r, a] = -1
+
+    def open_prior(self, m: SensorimotorMap, n: int) -> float:
+        """rho of a primitive never tried (Eq. 5'): ``untried_rho``, or when that is
+        negative the chance that a move opens, estimated from the agent's own outcomes as
+        the share of its tried pairs (of live nodes) whose last try moved it, (k + 1) /
+        (t + 2) (Laplace's rule: 1/2 before any try)."""
+        if self.untried_rho >= 0.0:
+            return self.untried_rho
+        k = min(n, len(self.tried))
+        tried = self.tried[:k] & m.alive[:k, None]
+        t = int(np.count_nonzero(tried))
+        opened = int(np.count_nonzero(tried & (self.bump_t[:k] < 0)))
+        return laplace(opened, t)
+
+    def wall_prior(self) -> float:
+        """rho's limit for a remembered wall while stuck: the chance that a wall known
+        closed has opened, estimated from the agent's own re-tests as the share that
+        moved it, (k + 1) / (t + 2) (Laplace's rule: 1/2 before any re-test)."""
+        return laplace(self.wall_opened, self.wall_tests)
+
+    def stuck(self, m: SensorimotorMap, n: int) -> bool:
+        """The goal is represented but no link path leads from the agent's node to it
+        over the links the outcome memory does not contradict (a link whose primitive
+        bumped last time counts as gone): the agent's knowledge says the task is
+        impossible, so all its remembered walls are doubted (``rho``'s limit
+        :meth:`wall_prior` instead of ``stale_prior``; older bumps first). Cached per
+        map version, goal node, terminal flags and bump count."""
+        if self.goal_node < 0 or not 0 <= self._winner < n:
+            return False
+        absorbing = self._absorbing(m, n, closed=False)
+        key = (m.version, self.goal_node, self._abs_count, self._bumps)
+        if key != self._reach_key:
+            self._reach_key = key
+            self._reach = np.zeros(n, dtype=bool)
+            Eb = kernels.contradicted(m.out, m.E, n, self.bump_t, self.succ)
+            kernels.reaches_source(m.out, Eb, n, absorbing, m.alive, self.R >= GOAL_R,
+                                   self._reach)
+        return not self._reach[self._winner]
+
+    def nodes_alive(self, m: SensorimotorMap, n: int) -> int:
+        if self._alive_version != m.version:
+            self._alive_version = m.version
+            self._alive = int(m.alive[:n].sum())
+        return self._alive
