@@ -61,7 +61,12 @@ def one_stop(domain: int, seed: int, wait: float, args: list[str],
         except subprocess.TimeoutExpired:
             os.killpg(proc.pid, signal.SIGKILL)
             code = proc.wait()
-    text = out_path.read_text(errors="replace")
+    clean, why = verdict(out_path.read_text(errors="replace"), stepping, code)
+    return clean, why, code
+
+
+def verdict(text: str, stepping: bool, code: int | None) -> tuple[bool, str]:
+    """Was a stop clean, from its launch log: (clean, why not)."""
     why = []
     if not stepping:
         why.append("the launch had ended before the Ctrl-C")
@@ -72,7 +77,7 @@ def one_stop(domain: int, seed: int, wait: float, args: list[str],
     if missing:
         why.append("not finished cleanly: " + ", ".join(missing))
     why += [f"line: {ln.strip()[:160]}" for ln in text.splitlines() if BAD.search(ln)][:3]
-    return not why, "; ".join(why), code
+    return not why, "; ".join(why)
 
 
 def main(argv=None) -> int:

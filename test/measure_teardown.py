@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from measure_ctrl_c import BAD, NODES, STEPPING  # noqa: E402
+from measure_ctrl_c import STEPPING, verdict  # noqa: E402
 from ros_helpers import allocate_domain, release_domain, require_ros2, ros_env  # noqa: E402
 
 PID = re.compile(r"\[(\w+)-\d+\]: process started with pid \[(\d+)\]")
@@ -102,18 +102,8 @@ def one_stop(i: int, domain: int, wait: float, env: dict, tmp: Path,
             os.killpg(proc.pid, signal.SIGKILL)
             raise
         code = proc.wait()
-    text = log.read_text(errors="replace")
-    why = []
-    if not stepping:
-        why.append("the launch had ended before the Ctrl-C")
-    if code != 0:
-        why.append(f"launch exit code {code}")
-    clean = re.findall(r"\[(\w+)-\d+\]: process has finished cleanly", text)
-    missing = [n for n in NODES if n not in clean]
-    if missing:
-        why.append("not finished cleanly: " + ", ".join(missing))
-    why += [f"line: {ln.strip()[:160]}" for ln in text.splitlines() if BAD.search(ln)][:3]
-    return not why, "; ".join(why), took
+    clean, why = verdict(log.read_text(errors="replace"), stepping, code)
+    return clean, why, took
 
 
 def main(argv=None) -> int:
