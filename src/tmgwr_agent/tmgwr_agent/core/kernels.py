@@ -1243,6 +1243,19 @@ def record_outcome(tried, bump_t, closed_t, bump_e, succ, delta, moves, w, node,
 
 
 @njit(cache=True)
+def best_link_value(out_i, E_i, V):
+    """max_k E[i, k] V(k) over node i's links (Eq. 5-6), 0 without any."""
+    best = 0.0
+    for s in range(out_i.shape[0]):
+        j = out_i[s]
+        if j >= 0:
+            ev = E_i[s] * V[j]
+            if ev > best:
+                best = ev
+    return best
+
+
+@njit(cache=True)
 def option_links(out_i, E_i, A_i, V, i, U, rho, osucc, onb, ong, R_i, gamma, primitives):
     """Node i's links followed by one virtual link per option (motivation.py): targets,
     reliabilities and action vectors, where an option's target is i itself and its
@@ -1250,14 +1263,7 @@ def option_links(out_i, E_i, A_i, V, i, U, rho, osucc, onb, ong, R_i, gamma, pri
     options alike."""
     K = out_i.shape[0]
     P = primitives.shape[0]
-    best = 0.0
-    for s in range(K):
-        j = out_i[s]
-        if j >= 0:
-            ev = E_i[s] * V[j]
-            if ev > best:
-                best = ev
-    stay = R_i + gamma * best
+    stay = R_i + gamma * best_link_value(out_i, E_i, V)
     targets = np.full(K + P, -1, dtype=np.int64)
     E = np.zeros(K + P)
     A = np.empty((K + P, A_i.shape[1]))
@@ -1292,13 +1298,7 @@ def nearest_row(table, a):
 @njit(cache=True)
 def best_links(out_i, E_i, V):
     """Slots of node i's links attaining max_k E[i, k] V(k) > 0 (Eq. 6); empty if none."""
-    top = 0.0
-    for s in range(out_i.shape[0]):
-        j = out_i[s]
-        if j >= 0:
-            ev = E_i[s] * V[j]
-            if ev > top:
-                top = ev
+    top = best_link_value(out_i, E_i, V)
     if top <= 0.0:
         return np.empty(0, dtype=np.int64)
     res = []
@@ -1321,15 +1321,7 @@ def eq6_choices(out_i, E_i, A_i, V, i, exclude_self, R_i, gamma, U, rho, osucc, 
     (:func:`nearest_row`) and whether it is an option (target i); returns their count."""
     K = out_i.shape[0]
     P = rho.shape[1] if U.shape[0] > i else 0
-    stay = 0.0
-    if P:
-        for s in range(K):
-            j = out_i[s]
-            if j >= 0:
-                ev = E_i[s] * V[j]
-                if ev > stay:
-                    stay = ev
-        stay = R_i + gamma * stay
+    stay = R_i + gamma * best_link_value(out_i, E_i, V) if P else 0.0
     with_options = P > 0 and V[i] > 0.0 and not exclude_self
     top = 0.0
     for s in range(K + (P if with_options else 0)):
