@@ -11,12 +11,10 @@ and ``./tmgwr report`` rebuilds the map from the recording.
 
 from __future__ import annotations
 
-import re
-
 import numpy as np
 import pytest
-from ros_helpers import ROOT, RosProcess, ros_env
-from test_recorder import mcap_files, tmgwr_cli
+from test_recorder import tmgwr_cli
+from world_graph import GOAL, ctrl_c, fire_event, read_bag, up_world
 
 pytest.importorskip("gymnasium_robotics")
 pytest.importorskip("mujoco")
@@ -31,22 +29,10 @@ MAZE = """\
 #.1...#
 #######
 """
-GOAL = re.compile(r"\[maze_sim\].*episode (\d+): goal \((\d+), (\d+)\) reached in (\d+) steps")
-PER_STEP = ("/observation", "/features", "/sensorimotor_state", "/motivation", "/action")
-
-
-def goals_reached(up: RosProcess) -> int:
-    return sum(1 for line in up.lines if GOAL.search(line))
 
 
 def test_the_graph_runs_on_pointmaze_and_the_bag_reads_back(ros_domain, tmp_path):
-    maze = tmp_path / "small.txt"
-    maze.write_text(MAZE)
-    bag = tmp_path / "run"
-    up = RosProcess([str(ROOT / ".venv/bin/python"), "-m", "tmgwr_agent.cli", "up",
-                     "--world", "pointmaze", "--maze", str(maze), "--seed", "3",
-                     "--record-dir", str(bag), "--domain-id", str(ros_domain)],
-                    ros_env(ros_domain), name="up")
+    up, bag = up_world("pointmaze", MAZE, tmp_path, ros_domain)
     with up:
         up.wait_for_line(r"world pointmaze", timeout=90)
         up.wait_for_line(r"^recording to ", timeout=90)
@@ -59,37 +45,14 @@ def test_the_graph_runs_on_pointmaze_and_the_bag_reads_back(ros_domain, tmp_path
         refused = tmgwr_cli("goal", "40", "0", "--domain-id", str(ros_domain),
                             domain=ros_domain)
         assert refused.returncode == 1 and "outside" in refused.stdout, refused.stdout
-        for _ in range(20):                 # refused while the point stands on the cell
-            event = tmgwr_cli("event", "a", "--domain-id", str(ros_domain), domain=ros_domain)
-            if "would wall in the agent" not in event.stdout:
-                break
-        assert event.returncode == 0 and "accepted" in event.stdout, \
-            event.stdout + event.stderr
-        up.wait_for_line(r"event 'a' fired", timeout=30)
-        up.proc.send_signal(2)              # Ctrl-C: the nodes stop, the recorder last
-        up.wait_for_line(r"^recording: ", timeout=60)
-        up.wait(timeout=60, check=False)
+        fire_event(up, ros_domain)
+        ctrl_c(up)
     assert up.proc.returncode == 0, up.describe("./tmgwr up failed")
 
-    from rosbags.highlevel import AnyReader
-    steps: dict[str, list[int]] = {}
-    sensed, poses, grids, markers = [], [], [], []
-    with AnyReader(mcap_files(bag)) as reader:
-        for conn, _t, raw in reader.messages():
-            msg = reader.deserialize(raw, conn.msgtype)
-            if conn.topic in PER_STEP:
-                steps.setdefault(conn.topic, []).append(int(msg.step_id))
-            if conn.topic == "/observation":
-                sensed.append(np.array(msg.sensors, dtype=float))
-            elif conn.topic == "/agent_pose":
-                poses.append((msg.pose.position.x, msg.pose.position.y))
-            elif conn.topic == "/maze_grid":
-                grids.append(msg)
-            elif conn.topic == "/map_markers":
-                markers.append(msg)
-    for topic in PER_STEP:
-        ids = sorted(set(steps[topic]))
-        assert ids[0] == 0 and ids == list(range(ids[-1] + 1)), topic
+    msgs = read_bag(bag, ("/observation", "/agent_pose", "/maze_grid", "/map_markers"))
+    sensed = [np.array(m.sensors, dtype=float) for m in msgs["/observation"]]
+    poses = [(m.pose.position.x, m.pose.position.y) for m in msgs["/agent_pose"]]
+    grids, markers = msgs["/maze_grid"], msgs["/map_markers"]
     xy = np.array(sensed)
     assert xy.shape[1] == 2
     # inside the free cells of the maze (x in [-2.5, 2.5], y in [-1.5, 1.5]), and off the
