@@ -399,6 +399,38 @@ def table_worlds(root: Path) -> str:
             f"({oracles}). " + _source(*(d for _, d in docs)))
 
 
+#: The registered Gymnasium ids (issue 26) and their results files (sample-complexity).
+GYM_RESULTS = (("MiniGrid-FourRooms-v0", "gym_fourrooms"),
+               ("MiniGrid-SimpleCrossingS9N1-v0", "gym_simplecrossing"),
+               ("PointMaze_UMaze-v3", "gym_umaze"), ("PointMaze_Medium-v3", "gym_medium"))
+
+
+def table_gym(root: Path) -> str:
+    """Registered Gymnasium envs (``--world gym:ID``), trained from scratch to the goal of
+    the env's own draw: per agent, the trials that converged (ten consecutive optimal
+    greedy rollouts) and the training episodes to that point (each trial; ``-``: the caps
+    ran out first), and the steps of the last recorded training episode, mean over trials."""
+    rows = []
+    docs = []
+    for env, name in GYM_RESULTS:
+        if not (root / "results" / f"{name}.json").exists():
+            continue
+        d = load(name, root)
+        docs.append(d)
+        r = d["result"]
+        seed = r.get("world_kwargs", {}).get("layout_seed", 0)
+        for a, v in r["agents"].items():
+            g = v["goals"][r["goals"][0]]
+            values = g["episodes_to_converge"]["values"]
+            conv = sum(x is not None for x in values)
+            eps = " / ".join("-" if x is None else str(x) for x in values)
+            rows.append([f"`{env}` (layout {seed}, oracle {g['shortest_steps']})", f"`{a}`",
+                         f"{conv} of {len(values)}", eps, f"{g['curve'][-1]:.1f}"])
+    header = ["env", "agent", "converged", "episodes to converge (each trial)",
+              "steps of the last training episode"]
+    return _md(header, rows) + "\n\n" + _source(*docs)
+
+
 #: Marked table name -> the function that generates it from results/.
 TABLES: dict[str, Callable[[Path], str]] = {
     "headline": table_headline,
@@ -413,6 +445,7 @@ TABLES: dict[str, Callable[[Path], str]] = {
     "sensing": table_sensing,
     "sensing-view": table_view,
     "worlds": table_worlds,
+    "gym": table_gym,
     "rivals-blocks": lambda root: table_suite(root, "rivals_blocks"),
     "rivals-openings": lambda root: table_suite_openings(root, "rivals_openings"),
 }
