@@ -96,6 +96,26 @@ def record(name: str, argv: list[str], root: Path = ROOT) -> Path:
     return out
 
 
+def again(names: list[str], root: Path = ROOT, skip: tuple[str, ...] = ()) -> list[Path]:
+    """Record each ``results/NAME.json`` again by its own recorded command (every file when
+    ``names`` is empty; ``skip``: names left as they are), in name order."""
+    names = names or sorted(p.stem for p in (root / "results").glob("*.json"))
+    unknown = [n for n in (*names, *skip) if not (root / "results" / f"{n}.json").is_file()]
+    if unknown:
+        raise ResultsError(f"no results/{unknown[0]}.json to record again")
+    out = []
+    for name in names:
+        if name in skip:
+            continue
+        command = shlex.split(load(name, root)["command"])
+        if command[:1] != ["./tmgwr"]:
+            raise ResultsError(f"results/{name}.json: its command {shlex.join(command)!r} "
+                               "is not a ./tmgwr command")
+        print(f"tmgwr results: recording {name} again: {shlex.join(command)}", flush=True)
+        out.append(record(name, command[1:], root))
+    return out
+
+
 def load(name: str, root: Path = ROOT) -> dict:
     path = root / "results" / f"{name}.json"
     if not path.is_file():
@@ -527,6 +547,13 @@ def register(subparsers) -> None:
     r.add_argument("argv", nargs=argparse.REMAINDER, metavar="-- COMMAND ...",
                    help="the ./tmgwr command to run, without --json")
     r.set_defaults(func=cmd_record)
+    a = sub.add_parser("again", help="record results/NAME.json again by its own command",
+                       description="Re-run the command each results file records (all of "
+                                   "them without NAME) and keep the new JSON; then run "
+                                   "./tmgwr results.")
+    a.add_argument("names", nargs="*", metavar="NAME", help="results/NAME.json (default: all)")
+    a.add_argument("--skip", default="", metavar="NAME,...", help="files left as they are")
+    a.set_defaults(func=cmd_again)
 
 
 def cmd_results(args: argparse.Namespace) -> int:
@@ -552,4 +579,15 @@ def cmd_record(args: argparse.Namespace) -> int:
         print(f"tmgwr: error: {exc}", file=sys.stderr)
         return 2
     print(f"wrote {out.relative_to(ROOT)}")
+    return 0
+
+
+def cmd_again(args: argparse.Namespace) -> int:
+    skip = tuple(n for n in args.skip.split(",") if n)
+    try:
+        for out in again(args.names, skip=skip):
+            print(f"wrote {out.relative_to(ROOT)}")
+    except ResultsError as exc:
+        print(f"tmgwr: error: {exc}", file=sys.stderr)
+        return 2
     return 0
