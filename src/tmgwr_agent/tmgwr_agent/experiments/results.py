@@ -468,6 +468,7 @@ TABLES: dict[str, Callable[[Path], str]] = {
     "gym": table_gym,
     "rivals-blocks": lambda root: table_suite(root, "rivals_blocks"),
     "rivals-openings": lambda root: table_suite_openings(root, "rivals_openings"),
+    "minigrid-suite": lambda root: table_suite(root, "world_minigrid_suite"),
 }
 
 
