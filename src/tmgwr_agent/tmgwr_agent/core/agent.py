@@ -83,7 +83,7 @@ class TMGWRAgent:
             config = tmgwr_config(config)
         self.config = config
         self.senses = senses
-        self.preprocessor = SensoryPreprocessor(config.preprocessor)
+        self.preprocessor = SensoryPreprocessor(config.preprocessor, senses.resolution)
         self.map = SensorimotorMap(dim=senses.dim, action_dim=senses.action_dim,
                                    config=config.map, primitives=senses.primitives)
         self.motivation = MotivationEstimator(
