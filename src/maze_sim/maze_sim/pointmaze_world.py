@@ -126,7 +126,7 @@ REST_SPEED = 1e-3
 #: and the physics steps it may take at most.
 RETURN_TAU = 0.05
 RETURN_SPEED = 2.0
-RETURN_TOL = 1e-4
+RETURN_TOL = 1e-6
 RETURN_STEPS = 400
 #: The share of the oracle's primitive steps by which a greedy probe's route may exceed
 #: them and still count as converged (``probe_tolerance``, experiments/runner.py). 0: no
