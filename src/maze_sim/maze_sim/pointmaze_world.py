@@ -32,7 +32,11 @@ and a position would not tell what a force does next).
 The move's length is the largest ``S / n`` not longer than ``sqrt 2`` times the success
 radius (half a cell here): with this length some point of the move lattice (the cells'
 centres, the midpoints of their edges and their corners) always lies within the success
-radius of the goal's centre. ``K_push``, the force and ``K_brake`` are derived from the
+radius of the goal's centre. (Now that a move is exact and a bump returns, the point rests
+only on the lattice through the cells' centres, the goal's centre among them, so a whole
+cell would reach the goal too: the rule is kept, and with it four places a cell in the
+open, places between the centres that a one-cell discretisation does not tell apart.)
+``K_push``, the force and ``K_brake`` are derived from the
 world by :func:`primitive_steps`, measured once per process on the env's point model in
 free space (no walls, the same XML): the point at rest pushed at full force for ``n``
 steps and braked to rest travels ``d(n)``; ``K_push`` is the fewest ``n`` with ``d(n)`` at
