@@ -44,6 +44,7 @@ import sys
 import tempfile
 import threading
 import time
+import warnings
 import zlib
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
@@ -136,6 +137,10 @@ def release_domain(domain: int) -> None:
 
 
 # --------------------------------------------------------------------------- processes
+# what ``ros2 service call`` prints once it has the response
+SERVICE_ANSWERED = r"^response:\n.+"
+
+
 class RosProcess:
     """A child process whose merged output is collected in the background."""
 
@@ -202,14 +207,35 @@ class RosProcess:
                         self.describe(f"no /{pattern}/ from {self.name} within {timeout} s"))
                 self._cond.wait(min(left, 0.5))
 
-    def wait(self, timeout: float = 30.0, check: bool = True) -> str:
-        """Wait for exit; returns the output. With check, a non-zero exit or timeout raises."""
-        try:
-            self.proc.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            self.stop()
-            raise AssertionError(
-                self.describe(f"{self.name} did not exit within {timeout} s")) from None
+    def wait(self, timeout: float = 30.0, check: bool = True, done: str | None = None,
+             teardown: float = 20.0) -> str:
+        """Wait for exit; returns the output. With check, a non-zero exit or timeout raises.
+
+        ``done``: a regex of the command's verdict (``ros2 lifecycle set`` prints
+        "Transitioning successful"). A command that printed its verdict and then has not
+        exited ``teardown`` s later hangs in its own DDS teardown (Fast DDS destruction,
+        eProsima/Fast-DDS#6193; the ``ros2`` CLI is upstream code, our nodes bound theirs
+        with tmgwr_common.native_exit). It is stopped, :attr:`hung_after_verdict` is set,
+        a warning names it, and the output counts as its answer."""
+        self.hung_after_verdict = False
+        regex = re.compile(done, re.M) if done else None
+        deadline = time.monotonic() + timeout
+        verdict_at = None
+        while self.proc.poll() is None:
+            now = time.monotonic()
+            if regex is not None and regex.search(self.output):
+                verdict_at = verdict_at or now
+                if now - verdict_at > teardown:
+                    self.stop()
+                    self.hung_after_verdict = True
+                    warnings.warn(f"{self.name} printed its verdict, then hung over "
+                                  f"{teardown} s in its teardown; stopped", stacklevel=2)
+                    return self.output
+            if now > deadline:
+                self.stop()
+                raise AssertionError(
+                    self.describe(f"{self.name} did not exit within {timeout} s"))
+            time.sleep(0.1)
         self._reader.join(timeout=5)
         if check and self.proc.returncode != 0:
             raise AssertionError(self.describe(f"{self.name} exited with {self.proc.returncode}"))

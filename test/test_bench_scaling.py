@@ -34,8 +34,21 @@ def test_scaling_by_cpu_time(tmp_path):
     assert result["scaling"][0]["goal_change_first_ms"] > 0
 
 
+def test_default_maze_alone_by_cpu_time(tmp_path):
+    """--default N with no scaling rows: the default maze's converged core step alone,
+    timed by --clock (the before/after figure of a change to the step)."""
+    out = tmp_path / "default.json"
+    assert scaling_main(["--cells", "", "--default", "40", "--clock", "cpu",
+                         "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert "scaling" not in result
+    d = result["step_default"]
+    assert d["clock"] == "cpu" and d["steps"] == 40 and d["median_us"] > 0
+
+
 @pytest.mark.parametrize("args", [["--families", "rooms"], ["--cells", "3x"],
-                                  ["--steps", "0"], ["--clock", "sundial"]])
+                                  ["--steps", "0"], ["--clock", "sundial"],
+                                  ["--default", "-1"], ["--cells", ""]])
 def test_bad_arguments_exit_2_naming_them(args):
     p = subprocess.run([sys.executable, "-m", "tmgwr_agent.experiments.bench", *args],
                        capture_output=True, text=True, timeout=120)

@@ -26,6 +26,7 @@ import pytest
 from measure_ctrl_c import NODES, one_stop
 from ros_helpers import (
     ROOT,
+    SERVICE_ANSWERED,
     RosProcess,
     require_ros2,
     ros2_cli,
@@ -107,7 +108,7 @@ def test_ros2_launch_with_a_namespace_then_ctrl_c(ros_domain, tmp_path):
         ok = ros2_cli("service", "call", "/a/maze_sim/reset", "std_srvs/srv/Trigger",
                       domain=ros_domain)
         with ok:
-            assert "success=True" in ok.wait(timeout=60)
+            assert "success=True" in ok.wait(timeout=60, done=SERVICE_ANSWERED)
         os.killpg(p.proc.pid, signal.SIGINT)           # a terminal's Ctrl-C
         out = p.wait(timeout=60)                        # exit code 0 or it raises
     for node in NODES:

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from crafted_npz import crafted_npz
-from ros_helpers import allocate_domain, release_domain, ros2_cli, ros2_run
+from ros_helpers import SERVICE_ANSWERED, allocate_domain, release_domain, ros2_cli, ros2_run
 from test_nodes import call
 
 from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
@@ -282,7 +282,7 @@ def service_call(domain: int, service: str, srv_type: str, request: str) -> tupl
     """What a user types: ``ros2 service call SERVICE TYPE REQUEST``; (success, message)."""
     p = ros2_cli("service", "call", service, srv_type, request, domain=domain)
     with p:
-        out = p.wait(timeout=60)
+        out = p.wait(timeout=60, done=SERVICE_ANSWERED)
     m = re.search(r"success=(True|False), message=(['\"])(.*)\2(, path=|\)$)", out, re.M)
     assert m, p.describe("no response")
     return m[1] == "True", m[3]

@@ -97,6 +97,22 @@ def test_record_runs_the_command_and_keeps_its_provenance(tmp_path):
     assert list(doc["result"]["agents"]) == ["tmgwr"]
 
 
+def test_again_records_a_file_by_its_own_command(tmp_path):
+    maze = tmp_path / "small.txt"
+    maze.write_text(SMALL)
+    argv = ["experiment", "env-change", "--maze", str(maze), "--agents", "tmgwr",
+            "--trials", "1", "--quiet"]
+    first = json.loads(results.record("small", argv, root=tmp_path).read_text())
+    (tmp_path / "results" / "small.json").write_text(json.dumps({**first, "started": "x"}))
+    with pytest.raises(results.ResultsError, match="no results/other.json"):
+        results.again(["small"], root=tmp_path, skip=("other",))
+    [out] = results.again([], root=tmp_path)
+    doc = json.loads(out.read_text())
+    assert doc["command"] == first["command"] and doc["started"] != "x"
+    assert doc["result"]["agents"] == first["result"]["agents"]     # same seed, same figures
+    assert results.again(["small"], root=tmp_path, skip=("small",)) == []
+
+
 def test_record_refuses_what_it_cannot_keep(tmp_path):
     r = _cli(ROOT, "results", "record", "x", "--", "experiment", "env-change", "--json",
              str(tmp_path / "x.json"))

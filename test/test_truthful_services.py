@@ -14,7 +14,7 @@ from __future__ import annotations
 import re
 
 import pytest
-from ros_helpers import graph_up_pids, ros2_cli, spawn_module
+from ros_helpers import SERVICE_ANSWERED, graph_up_pids, ros2_cli, spawn_module
 from test_graph import cli
 
 pytestmark = [pytest.mark.ros]
@@ -38,7 +38,7 @@ def test_set_goal_refuses_an_unreachable_cell_and_the_cli_says_so(ros_domain, tm
         p = ros2_cli("service", "call", "/set_goal", "tmgwr_interfaces/srv/SetGoal",
                      "{goal: {x: 5.0, y: 2.0}}", domain=ros_domain)
         with p:
-            answer = p.wait(timeout=60)
+            answer = p.wait(timeout=60, done=SERVICE_ANSWERED)
         assert re.search(r"accepted=False, message='goal \(x=5, y=2\) refused: .*cannot be "
                          r"reached", answer), answer
         # echoed input stays readable

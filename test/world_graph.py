@@ -10,8 +10,10 @@ from pathlib import Path
 from ros_helpers import ROOT, RosProcess, ros_env
 from test_recorder import mcap_files, tmgwr_cli
 
+from tmgwr_common.topics import STEP_TOPICS
+
 GOAL = re.compile(r"\[maze_sim\].*episode (\d+): goal \((\d+), (\d+)\) reached in (\d+) steps")
-PER_STEP = ("/observation", "/features", "/sensorimotor_state", "/motivation", "/action")
+PER_STEP = tuple("/" + name for name in STEP_TOPICS)      # the ring's topics, in its order
 
 
 def up_world(world: str, maze: str, tmp_path: Path, domain: int) -> tuple[RosProcess, Path]:
@@ -58,7 +60,15 @@ def read_bag(bag: Path, topics: tuple[str, ...]) -> dict[str, list]:
                 steps.setdefault(conn.topic, []).append(int(msg.step_id))
             if conn.topic in msgs:
                 msgs[conn.topic].append(msg)
+    assert_every_step_answered(steps)
+    return msgs
+
+
+def assert_every_step_answered(steps: dict[str, list[int]]) -> None:
+    """Each per-step topic's step ids (as recorded) run 0, 1, ... without a gap, up to the
+    newest observation but one: the newest step may still be in flight at the stop."""
+    last = max(steps["/observation"])
     for topic in PER_STEP:
         ids = sorted(set(steps[topic]))
         assert ids[0] == 0 and ids == list(range(ids[-1] + 1)), topic
-    return msgs
+        assert ids[-1] >= last - 1, (topic, ids[-1], last)

@@ -1206,14 +1206,15 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
 
 
 @njit(cache=True)
-def record_outcome(tried, bump_t, closed_t, bump_e, succ, delta, moves, w, node, winner,
-                   inserted, a, bumped, clock, episode):
-    """The outcome memory of Eq. 5' after primitive a taken from ``node`` (motivation.py):
+def record_outcome(tried, bump_t, closed_t, bump_e, succ, delta, delta_sq, moves, w, node,
+                   winner, inserted, a, bumped, clock, episode):
+    """The outcome memory of Eq. 5' after primitive a taken from ``node`` (unknown.py):
     a new winner starts untried; the pair (node, a) is tried, with the step and the
     episode of a bump or -1 after a move (``closed_t``: the step of the first bump of the
     current run of bumps, since when the pair is known closed), whose successor ``succ``
-    is remembered; a move updates the mean displacement ``delta[a]``. Returns whether the
-    pair's option changed."""
+    is remembered; a move updates the mean displacement ``delta[a]`` and the mean of its
+    squared length ``delta_sq[a]`` (the spread, frame.py). Returns whether the pair's
+    option changed."""
     if inserted and winner >= 0:
         for b in range(tried.shape[1]):
             tried[winner, b] = False
@@ -1237,8 +1238,12 @@ def record_outcome(tried, bump_t, closed_t, bump_e, succ, delta, moves, w, node,
     succ[node, a] = winner
     if winner >= 0 and winner != node:
         moves[a] += 1
+        dd = 0.0
         for k in range(delta.shape[1]):
-            delta[a, k] += (w[winner, k] - w[node, k] - delta[a, k]) / moves[a]
+            d = w[winner, k] - w[node, k]
+            delta[a, k] += (d - delta[a, k]) / moves[a]
+            dd += d * d
+        delta_sq[a] += (dd - delta_sq[a]) / moves[a]
     return changed
 
 
@@ -1573,6 +1578,57 @@ def link_step(out, E, A, age, inn, alive, terminal, n, i, j, a, alpha, sigma_a, 
             alive[k] = False
             changes += 1
     return changes, ends
+
+
+@njit(cache=True)
+def map_step(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T, learn, eps_b,
+             eps_n, tau_b, tau_n, kappa, E, A, age, terminal, a, has_action, alpha, sigma_a,
+             eta_a, E_init, E_min, max_age, credit, keep, r2):
+    """One learning step of the map in one call (sensorimotor_map.py) when nothing needs
+    Python: :func:`match`, then, reached by action ``a`` (``has_action``) from ``prev``,
+    :func:`link_step` on prev -> winner (``keep1`` prev, ``keep2`` ``keep``), then, with
+    ``r2`` >= 0, :func:`close_pair` over the nodes moved (the merge's first pair). Returns
+    ``(b, insert, moved, done, changes, ends, i, j, linked)``: ``done`` False when the
+    step needs the caller (not learning, a node to insert, a terminal ``prev``, link rows
+    to widen: then only the match was made, and the caller goes on from there), else
+    ``linked`` says whether the link stage ran (``changes``, ``ends`` its result) and
+    ``(i, j)`` is the close pair ((-1, -1): none, or ``r2`` < 0)."""
+    b, insert, moved = match(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T,
+                             h_T, learn, eps_b, eps_n, tau_b, tau_n, kappa)
+    changes, ends, linked = 0, np.empty(0, dtype=np.int64), False
+    if not learn or insert:
+        return b, insert, moved, False, changes, ends, -1, -1, linked
+    if prev >= 0 and has_action:
+        if terminal[prev]:
+            return b, insert, moved, False, changes, ends, -1, -1, linked
+        changes, ends = link_step(out, E, A, age, inn, alive, terminal, n, prev, b, a, alpha,
+                                  sigma_a, eta_a, E_init, E_min, max_age, credit, prev, keep)
+        if changes < 0:
+            return b, insert, moved, False, 0, ends, -1, -1, linked
+        linked = True
+    i, j = -1, -1
+    if r2 >= 0.0 and len(moved):
+        i, j = close_pair(w, c, alive, n, moved, alpha_c, r2)
+    return b, insert, moved, True, changes, ends, i, j, linked
+
+
+@njit(cache=True)
+def changed_rows_sweep(out, E, R, absorbing, out0, E0, R0, absorbing0, n, seeds, rows, k,
+                       sweep, V, gamma, tol, v_floor, alive, U, rho, osucc, onb, ong, first,
+                       pred, max_updates, heap, pos, key):
+    """:func:`changed_rows`, then, with ``sweep`` when they raise nothing that needs more
+    (no value may be lost, no link target changed) and some changed,
+    :func:`prioritized_sweep` from them, in one call (motivation.py's incremental solve).
+    Returns ``(c, lost, relinked, swept, done)``: ``swept`` says whether the sweep ran,
+    ``done`` its result."""
+    c, lost, relinked = changed_rows(out, E, R, absorbing, out0, E0, R0, absorbing0, n, seeds,
+                                     rows, k)
+    if not sweep or c == 0 or lost or relinked:
+        return c, lost, relinked, False, 0
+    done = prioritized_sweep(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho,
+                             osucc, onb, ong, first, pred, seeds, c, max_updates, heap, pos,
+                             key)
+    return c, lost, relinked, True, done
 
 
 # ---------------------------------------------------------------- the on-disk cache

@@ -604,10 +604,20 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         log = getattr(m, "log", None)
         logged = log.since(inc.log_pos) if log is not None and log is inc.log and \
             inc.epoch == self._epoch else None       # None: compare every row
-        c, lost, relinked = kernels.changed_rows(
+        tol = self.vi_tol * (1.0 - self.gamma)
+        # with no option rows to compare, a change that needs nothing more is swept at once
+        c, lost, relinked, swept, done = kernels.changed_rows_sweep(
             m.out, m.E, R, absorbing, inc.out0, inc.E0, inc.R0, inc.abs0, n, inc.seeds,
-            _NO_ROWS if logged is None else logged, -1 if logged is None else len(logged))
+            _NO_ROWS if logged is None else logged, -1 if logged is None else len(logged),
+            rows is None, self.V, self.gamma, tol, V_FLOOR, m.alive, self.U, self.rho,
+            self.osucc, self.onb, self.ong, inc.first, inc.pred, INCREMENTAL_BUDGET * n,
+            inc.heap, inc.pos, inc.key)
         inc.log, inc.log_pos, inc.epoch = log, (log.pos if log is not None else -1), self._epoch
+        if swept:
+            if done < 0:
+                return self._declined("budget")
+            self.solves["incremental"] += 1
+            return True
         relinked_o = False
         if rows is not None:
             c, lost_o, relinked_o = kernels.changed_options(
@@ -620,7 +630,6 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         if relinked or relinked_o:
             inc.first, inc.pred = kernels.predecessors(m.out, n, m.alive, self.osucc,
                                                        self.onb)
-        tol = self.vi_tol * (1.0 - self.gamma)
         args = (m.out, m.E, R, self.V, n, self.gamma, tol, V_FLOOR, absorbing, m.alive,
                 self.U, self.rho, self.osucc, self.onb, self.ong, inc.first, inc.pred)
         if lost:

@@ -409,14 +409,30 @@ class SensorimotorMap:
         self.merges = []
         C = self.C_t    # written by match: context(), x at an episode start (neutral)
         self.inserted = False
-        # winner, GWR test, adaptation of the winner and its neighbours
-        b, insert, moved = kernels.match(self.w, self.c, self.h, self.alive, self.out,
-                                         self.inn, self.n,
-                                  self.prev, x, C, self.alpha_c, self.beta_c, self.a_T,
-                                  self.h_T, learn, self.eps_b, self.eps_n, self.tau_b,
-                                  self.tau_n, self.kappa_h)
+        # winner, GWR test, adaptation of the winner and its neighbours; when nothing
+        # needs Python (no insertion, no terminal prev, no row to widen) the link stage
+        # and the merge's first close pair in the same call (kernels.map_step)
+        has_action = action is not None
+        a = np.asarray(action, dtype=float) if has_action else self.C_t[:0]
+        r2 = math.log(self.a_T) ** 2 if self.merge else -1.0
+        b, insert, moved, done, changes, ends, ci, cj, linked = kernels.map_step(
+            self.w, self.c, self.h, self.alive, self.out, self.inn, self.n, self.prev, x, C,
+            self.alpha_c, self.beta_c, self.a_T, self.h_T, learn, self.eps_b, self.eps_n,
+            self.tau_b, self.tau_n, self.kappa_h, self.E, self.a, self.age, self.terminal, a,
+            has_action, self.alpha, self.sigma_a, self.eta_a, self.E_init, self.E_min,
+            self.max_age, self.link_rule == "credit", self.winner, r2)
         if len(moved):
             self.log.touch(moved)
+        if done:
+            if linked:
+                self.version += changes
+                self.log.touch(self.prev)
+                if len(ends):
+                    self.log.touch(ends)
+            if ci >= 0:
+                b = self._merge_close(moved, b, (ci, cj))
+            self.prev = self.winner = b
+            return b
         if not learn or not insert:
             winner = b
         elif b < 0:
@@ -440,15 +456,17 @@ class SensorimotorMap:
         return winner
 
     # ------------------------------------------------------------------ one node a place
-    def _merge_close(self, moved: np.ndarray, winner: int) -> int:
+    def _merge_close(self, moved: np.ndarray, winner: int,
+                     pair: tuple[int, int] | None = None) -> int:
         """Merge every pair of live nodes within the matching radius of which one is in
         ``moved`` (the nodes this step adapted; the module docstring); returns the
-        winner's id after the merges."""
+        winner's id after the merges. ``pair``: the first close pair, already found."""
         r2 = math.log(self.a_T) ** 2
         rows = np.asarray(moved, dtype=np.int64)
         while True:
-            i, j = kernels.close_pair(self.w, self.c, self.alive, self.n, rows,
-                                      self.alpha_c, r2)
+            i, j = pair if pair is not None else kernels.close_pair(
+                self.w, self.c, self.alive, self.n, rows, self.alpha_c, r2)
+            pair = None
             if i < 0:
                 return winner
             keep, gone = (i, j) if self.h[i] <= self.h[j] else (j, i)

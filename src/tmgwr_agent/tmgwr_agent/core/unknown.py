@@ -348,16 +348,12 @@ class OutcomeMemory:
             self._close_cell(node, a, w)
         elif winner >= 0 and (inserted or not outcome.bumped):
             self._mark_closed(winner, -1)     # a node stood on (or a new one) is open
-        moved = self.moves[a]
         if kernels.record_outcome(self.tried, self.bump_t, self.closed_t, self.bump_e,
-                                  self.succ, self.delta, self.moves, w, node, winner,
-                                  inserted, outcome.action, outcome.bumped, self.clock,
-                                  self.episode):
+                                  self.succ, self.delta, self.delta_sq, self.moves, w, node,
+                                  winner, inserted, outcome.action, outcome.bumped,
+                                  self.clock, self.episode):
             self._dirty.add(node)
             self._bumps += 1
-        if self.moves[a] != moved:            # a move: the forward model's spread too
-            d = w[winner] - w[node]
-            self.delta_sq[a] += (float(d @ d) - self.delta_sq[a]) / self.moves[a]
 
     #: The outcome memory's per-node arrays and the value of a new node's row.
     _MEMORY = (("tried", False), ("bump_t", -1), ("closed_t", -1), ("bump_e", -1),

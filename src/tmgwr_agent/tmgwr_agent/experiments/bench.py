@@ -96,14 +96,15 @@ def step_stats(ns: np.ndarray, agent, maze: Maze, trained_episodes: int | None) 
             "p99_us": float(np.percentile(us, 99)), "max_us": float(us.max())}
 
 
-def bench_default(seed: int, steps: int) -> dict:
+def bench_default(seed: int, steps: int, clock=time.perf_counter_ns) -> dict:
+    """The default maze's converged core step, ``steps`` of them timed by ``clock``."""
     maze = Maze.from_file(DEFAULT_MAZE)
     caps = Caps.for_maze(maze)
     world = make_world(maze, "G", caps)
     agent = make_agent("tmgwr", maze, np.random.default_rng(seed))
     set_goal(world, agent, "G")
     conv = train_until_converged(world, agent, caps)
-    out = step_stats(time_steps(world, agent, steps), agent, maze, conv.episodes)
+    out = step_stats(timed_steps(world, agent, steps, clock)[0], agent, maze, conv.episodes)
     out["target_median_us"] = 50.0
     return out
 
@@ -679,7 +680,11 @@ def scaling_main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m tmgwr_agent.experiments.bench",
                                 description=scaling_main.__doc__)
     p.add_argument("--cells", default=",".join(map(str, SCALING_CELLS)),
-                   help="comma-separated free cells per map (default %(default)s)")
+                   help="comma-separated free cells per map (default %(default)s; empty: "
+                   "no scaling rows)")
+    p.add_argument("--default", type=int, default=0, metavar="STEPS",
+                   help="also time STEPS converged core steps on the default maze, by "
+                   "--clock (JSON step_default; default 0: not)")
     p.add_argument("--families", default=",".join(SCALING_FAMILIES),
                    help="comma-separated families (default %(default)s)")
     p.add_argument("--steps", type=int, default=SCALING_STEPS,
@@ -692,17 +697,27 @@ def scaling_main(argv: list[str] | None = None) -> int:
                    "machine")
     args = p.parse_args(argv)
     try:
-        cells = tuple(int(c) for c in args.cells.split(","))
+        cells = tuple(int(c) for c in args.cells.split(",") if c.strip())
     except ValueError:
         p.error(f"--cells: not a comma-separated list of integers: {args.cells!r}")
     families = tuple(args.families.split(","))
     bad = [f for f in families if f not in SCALING_FAMILIES]
-    if bad or args.steps < 1 or min(cells) < 1:
+    if bad or args.steps < 1 or min(cells, default=1) < 1 or args.default < 0:
         p.error(f"--families must be among {', '.join(SCALING_FAMILIES)} (got "
-                f"{args.families!r}), --steps and --cells >= 1")
+                f"{args.families!r}), --steps and --cells >= 1, --default >= 0")
+    if not cells and not args.default:
+        p.error("--cells is empty and --default 0: nothing to time")
     warm_up()
-    result = scaling(args.seed, args.steps, cells, families, args.clock)
-    print(scaling_table(result))
+    result: dict = {}
+    if args.default:
+        d = result["step_default"] = bench_default(args.seed, args.default,
+                                                   CLOCKS[args.clock])
+        d["clock"] = args.clock
+        print(f"default maze ({args.clock} clock, {d['steps']} converged steps): core step "
+              f"median {d['median_us']:.1f} us, p90 {d['p90_us']:.1f}, p99 {d['p99_us']:.1f}")
+    if cells:
+        result.update(scaling(args.seed, args.steps, cells, families, args.clock))
+        print(scaling_table(result))
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(result, indent=1) + "\n")

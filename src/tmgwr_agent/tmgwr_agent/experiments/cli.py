@@ -69,7 +69,9 @@ def register(subparsers) -> None:
                         "writes (config/tuned/*.yaml): tmgwr agents read '/**', a "
                         "baseline the section named after it; AGENT=FILE gives the file "
                         "to that agent (a spec of --agents, or a name for all its specs) "
-                        "only. Repeatable, later files win; recorded in the JSON")
+                        "only; AGENT=tuned: the committed tuned file of AGENT for the "
+                        "--world (config/tuned/[WORLD/]AGENT.yaml). Repeatable, later "
+                        "files win; recorded in the JSON")
     p.add_argument("--sensor", default=None, metavar="SPEC",
                    help="how the agents sense the maze (default identity: the (row, col) "
                         "of the cell): comma-joined noise=SIGMA (cells), scale=SX:SY, "
@@ -196,7 +198,8 @@ def register(subparsers) -> None:
     t.add_argument("--world", default=None, metavar="NAME",
                    help="tune in this world (experiment --world; default grid): the same "
                         "budget and objective, oracles in the world's primitive steps; "
-                        "the default study name gains -NAME")
+                        "the default study name gains -NAME, the default outputs go "
+                        "to results/tune/NAME/")
     t.add_argument("--world-kwargs", default=None, metavar="JSON",
                    help="keyword arguments of the world, a JSON object")
     t.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -239,8 +242,9 @@ def _overrides(args: argparse.Namespace) -> dict | None:
     if not args.params:
         return None
     from tmgwr_agent.experiments.scenarios import DEFAULTS, check_agents
-    from tmgwr_agent.experiments.tune import experiment_params
+    from tmgwr_agent.experiments.tune import experiment_params, resolve_tuned
     agents = check_agents(args.agents or DEFAULTS[args.scenario]["agents"])
+    args.params = resolve_tuned(args.params, args.world)   # recorded as the files used
     return experiment_params(agents, args.params)
 
 

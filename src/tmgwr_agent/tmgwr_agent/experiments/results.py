@@ -96,6 +96,26 @@ def record(name: str, argv: list[str], root: Path = ROOT) -> Path:
     return out
 
 
+def again(names: list[str], root: Path = ROOT, skip: tuple[str, ...] = ()) -> list[Path]:
+    """Record each ``results/NAME.json`` again by its own recorded command (every file when
+    ``names`` is empty; ``skip``: names left as they are), in name order."""
+    names = names or sorted(p.stem for p in (root / "results").glob("*.json"))
+    unknown = [n for n in (*names, *skip) if not (root / "results" / f"{n}.json").is_file()]
+    if unknown:
+        raise ResultsError(f"no results/{unknown[0]}.json to record again")
+    out = []
+    for name in names:
+        if name in skip:
+            continue
+        command = shlex.split(load(name, root)["command"])
+        if command[:1] != ["./tmgwr"]:
+            raise ResultsError(f"results/{name}.json: its command {shlex.join(command)!r} "
+                               "is not a ./tmgwr command")
+        print(f"tmgwr results: recording {name} again: {shlex.join(command)}", flush=True)
+        out.append(record(name, command[1:], root))
+    return out
+
+
 def load(name: str, root: Path = ROOT) -> dict:
     path = root / "results" / f"{name}.json"
     if not path.is_file():
@@ -399,6 +419,38 @@ def table_worlds(root: Path) -> str:
             f"({oracles}). " + _source(*(d for _, d in docs)))
 
 
+#: The registered Gymnasium ids (issue 26) and their results files (sample-complexity).
+GYM_RESULTS = (("MiniGrid-FourRooms-v0", "gym_fourrooms"),
+               ("MiniGrid-SimpleCrossingS9N1-v0", "gym_simplecrossing"),
+               ("PointMaze_UMaze-v3", "gym_umaze"), ("PointMaze_Medium-v3", "gym_medium"))
+
+
+def table_gym(root: Path) -> str:
+    """Registered Gymnasium envs (``--world gym:ID``), trained from scratch to the goal of
+    the env's own draw: per agent, the trials that converged (ten consecutive optimal
+    greedy rollouts) and the training episodes to that point (each trial; ``-``: the caps
+    ran out first), and the steps of the last recorded training episode, mean over trials."""
+    rows = []
+    docs = []
+    for env, name in GYM_RESULTS:
+        if not (root / "results" / f"{name}.json").exists():
+            continue
+        d = load(name, root)
+        docs.append(d)
+        r = d["result"]
+        seed = r.get("world_kwargs", {}).get("layout_seed", 0)
+        for a, v in r["agents"].items():
+            g = v["goals"][r["goals"][0]]
+            values = g["episodes_to_converge"]["values"]
+            conv = sum(x is not None for x in values)
+            eps = " / ".join("-" if x is None else str(x) for x in values)
+            rows.append([f"`{env}` (layout {seed}, oracle {g['shortest_steps']})", f"`{a}`",
+                         f"{conv} of {len(values)}", eps, f"{g['curve'][-1]:.1f}"])
+    header = ["env", "agent", "converged", "episodes to converge (each trial)",
+              "steps of the last training episode"]
+    return _md(header, rows) + "\n\n" + _source(*docs)
+
+
 #: Marked table name -> the function that generates it from results/.
 TABLES: dict[str, Callable[[Path], str]] = {
     "headline": table_headline,
@@ -413,6 +465,7 @@ TABLES: dict[str, Callable[[Path], str]] = {
     "sensing": table_sensing,
     "sensing-view": table_view,
     "worlds": table_worlds,
+    "gym": table_gym,
     "rivals-blocks": lambda root: table_suite(root, "rivals_blocks"),
     "rivals-openings": lambda root: table_suite_openings(root, "rivals_openings"),
 }
@@ -494,6 +547,13 @@ def register(subparsers) -> None:
     r.add_argument("argv", nargs=argparse.REMAINDER, metavar="-- COMMAND ...",
                    help="the ./tmgwr command to run, without --json")
     r.set_defaults(func=cmd_record)
+    a = sub.add_parser("again", help="record results/NAME.json again by its own command",
+                       description="Re-run the command each results file records (all of "
+                                   "them without NAME) and keep the new JSON; then run "
+                                   "./tmgwr results.")
+    a.add_argument("names", nargs="*", metavar="NAME", help="results/NAME.json (default: all)")
+    a.add_argument("--skip", default="", metavar="NAME,...", help="files left as they are")
+    a.set_defaults(func=cmd_again)
 
 
 def cmd_results(args: argparse.Namespace) -> int:
@@ -519,4 +579,15 @@ def cmd_record(args: argparse.Namespace) -> int:
         print(f"tmgwr: error: {exc}", file=sys.stderr)
         return 2
     print(f"wrote {out.relative_to(ROOT)}")
+    return 0
+
+
+def cmd_again(args: argparse.Namespace) -> int:
+    skip = tuple(n for n in args.skip.split(",") if n)
+    try:
+        for out in again(args.names, skip=skip):
+            print(f"wrote {out.relative_to(ROOT)}")
+    except ResultsError as exc:
+        print(f"tmgwr: error: {exc}", file=sys.stderr)
+        return 2
     return 0

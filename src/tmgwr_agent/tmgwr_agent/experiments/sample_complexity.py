@@ -9,7 +9,9 @@ on until convergence or the caps.
 * ``curve``: the steps of episodes 5, 10, 15, ... ``--episodes`` ("recorded at every 5th
   iteration"), mean over the trials; a truncated episode counts with the steps it took;
 * ``episodes_to_converge``: STAT of the training episodes to the start of ten consecutive
-  optimal greedy rollouts, ``null`` when the caps ran out first.
+  optimal greedy rollouts, ``null`` when the caps ran out first;
+* ``shortest_steps``: the world's oracle from S to the goal, in its own primitive steps
+  (the length a greedy rollout is held to).
 """
 
 from __future__ import annotations
@@ -52,7 +54,8 @@ def trial(spec: str, t: int, seed: np.random.SeedSequence, maze_path: str,
         set_goal(world, agent, g)
         conv = train_until_converged(world, agent, caps, min_episodes=episodes)
         out[g] = {"curve": conv.curve[EVERY - 1:episodes:EVERY],
-                  "episodes_to_converge": conv.episodes}
+                  "episodes_to_converge": conv.episodes,
+                  "shortest_steps": world.shortest_path_length()}
     return out
 
 
@@ -71,6 +74,7 @@ def run(maze_path: str, agents: list[str], trials: int, seed: int,
     for a, rs in res.items():
         out[a] = {"goals": {g: {"curve": mean_curve([r[g]["curve"] for r in rs]),
                                 "episodes_to_converge": stat(r[g]["episodes_to_converge"]
-                                                             for r in rs)}
+                                                             for r in rs),
+                                "shortest_steps": rs[0][g]["shortest_steps"]}
                             for g in goals}}
     return {"episodes": episodes, "every": EVERY, "goals": list(goals), "agents": out}

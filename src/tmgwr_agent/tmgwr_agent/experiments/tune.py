@@ -97,11 +97,12 @@ import yaml
 from maze_sim.maze import Maze
 from maze_sim.suite import SuiteError, suite
 from maze_sim.suite import parse_spec as suite_counts
-from maze_sim.worlds import WorldError, WorldSpec, parse_world
+from maze_sim.worlds import WORLDS, WorldError, WorldSpec, parse_world
 from tmgwr_agent.experiments import env_change
 from tmgwr_agent.experiments.agent_factory import AGENT_NAMES, baseline_class, make_agent
 from tmgwr_agent.experiments.agent_factory import parse_spec as parse_agent
 from tmgwr_agent.experiments.parallel import run_items, trial_seeds, warm_up
+from tmgwr_agent.experiments.results import ROOT
 from tmgwr_agent.experiments.runner import Caps
 from tmgwr_agent.experiments.scenarios import UsageError
 from tmgwr_agent.experiments.sensing import check_world
@@ -127,8 +128,12 @@ OPEN_WITHIN = 10
 PRUNE_STARTUP, PRUNE_WARMUP, PRUNE_EVERY = 10, 7, 4
 #: Weight of the fraction of failed runs in the objective (in oracle-ratio units).
 PENALTY = 10.0
-#: Where results go by default (``results/`` is not committed).
+#: Where results go by default (``results/`` is not committed; another world's in
+#: ``results/tune/WORLD/``).
 RESULTS = Path("results") / "tune"
+#: The committed tuned files (:func:`tuned_file`), and the ``--params AGENT=tuned`` word.
+TUNED = ROOT / "config" / "tuned"
+TUNED_WORD = "tuned"
 
 
 @dataclass(frozen=True)
@@ -606,6 +611,8 @@ def _create(storage: str, study_name: str, setup: Setup):
         defaults = {d.name: d.default for d in setup.dims() if d.contains(d.default)}
         study.enqueue_trial(defaults, user_attrs={"defaults": True})
     elif theirs != mine:
+        grid = {"world": "grid", "world_kwargs": ""}    # what a study without them means
+        theirs, mine = {**grid, **theirs}, {**grid, **mine}
         diff = ", ".join(f"{k} {theirs.get(k)!r} (now {mine[k]!r})" for k in mine
                          if theirs.get(k) != mine[k])
         raise UsageError(f"study {study_name!r} in {storage} was made with other options: "
@@ -745,6 +752,53 @@ def experiment_params(agents: Sequence[str],
     return out
 
 
+def tuned_file(agent: str, world: str = "grid") -> Path:
+    """The committed tuned file of ``agent`` (a spec; its agent name picks the file) for
+    ``world`` (a ``--world`` name): ``config/tuned/AGENT.yaml`` in the grid,
+    ``config/tuned/WORLD/AGENT.yaml`` in another world. A world's values are tuned in
+    that world, so there is no fallback to the grid's file: a missing file is refused,
+    naming it and the command that makes it."""
+    name, _ = parse_agent(agent)
+    world = world.partition(":")[0] or "grid"
+    path = TUNED / f"{name}.yaml" if world == "grid" else TUNED / world / f"{name}.yaml"
+    if world == "gym":
+        raise UsageError(f"no tuned file for {agent} in a registered env: tune runs on the "
+                         f"mazes of a maze world ({', '.join(WORLDS)})")
+    if not path.is_file():
+        how = "" if world == "grid" else f" --world {world}"
+        raise UsageError(f"no tuned file for {agent} in --world {world}: {_shown(path)} "
+                         f"does not exist (./tmgwr tune {name}{how} makes it, "
+                         "docs/tuning.md)")
+    return path
+
+
+def resolve_tuned(params: Sequence[str], world: str | None) -> list[str]:
+    """``experiment --params AGENT=tuned``: ``AGENT=`` the committed tuned file of that
+    agent for the ``--world`` (:func:`tuned_file`); other arguments as given. The JSON
+    then records the file used."""
+    out = []
+    for arg in params:
+        name, eq, value = arg.partition("=")
+        if arg == TUNED_WORD:
+            raise UsageError("--params tuned: name the agent, --params AGENT=tuned (e.g. "
+                             "q_learning=tuned): the tuned file is per agent and world")
+        if eq and value == TUNED_WORD and not Path(arg).exists():
+            try:
+                arg = f"{name}={_shown(tuned_file(name, world or 'grid'))}"
+            except ValueError as exc:
+                raise UsageError(f"--params {arg}: {exc}") from None
+        out.append(arg)
+    return out
+
+
+def _shown(path: Path) -> str:
+    """``path`` relative to the working directory when it is below it."""
+    try:
+        return str(path.relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)
+
+
 def _config_class(name: str):
     return baseline_class(name).Config
 
@@ -832,9 +886,9 @@ def run(args) -> int:
     why = check_world([args.agent], wspec)
     if why:
         raise UsageError(f"--world: {why}")
-    study_name = args.study or args.agent.replace(":", "-").replace("+", "-")
-    if wspec.name != "grid" and not args.study:
-        study_name += f"-{wspec.name}"
+    stem = args.study or args.agent.replace(":", "-").replace("+", "-")
+    study_name = stem if args.study or wspec.name == "grid" else f"{stem}-{wspec.name}"
+    out_dir = RESULTS if wspec.name == "grid" else RESULTS / wspec.name
     storage = args.storage or str(RESULTS / "optuna.journal")
     if args.open_weight < 0:
         raise UsageError("--open-weight must be >= 0")
@@ -862,13 +916,14 @@ def run(args) -> int:
                          "completed (see the failed trials in the journal)")
     default_trial = next((t for t in counted if t.user_attrs.get("defaults")), None)
     params = dict(best.params)
-    out_params = Path(args.params_out or RESULTS / f"{study_name}.yaml")
+    out_params = Path(args.params_out or out_dir / f"{stem}.yaml")
     d_value = None if default_trial is None else default_trial.value
     header = (f"tuned by ./tmgwr tune {args.agent} (docs/tuning.md): study {study_name}, "
               f"best of {len(counted)} trials\n"
               f"objective {best.value:.4f} (defaults "
               f"{'-' if d_value is None else format(d_value, '.4f')}) "
-              f"on --suite {args.suite} --open-suite {open_suite or '-'} --open-weight "
+              f"on {'' if wspec.name == 'grid' else f'--world {wspec.text} '}"
+              f"--suite {args.suite} --open-suite {open_suite or '-'} --open-weight "
               f"{setup.open_weight:g} --suite-seed {args.suite_seed} "
               f"--suite-first {args.suite_first}, {args.seeds} seeds\n"
               f"searched: {', '.join(sorted(d.name for d in dims))}; the rest at their "
@@ -915,7 +970,7 @@ def run(args) -> int:
                                        args.eval_trials, args.seed, args.workers,
                                        not args.quiet, open_spec, setup.open_weight,
                                        wspec)
-    out_json = Path(args.json or RESULTS / f"{study_name}.json")
+    out_json = Path(args.json or out_dir / f"{stem}.json")
     out_json.parent.mkdir(parents=True, exist_ok=True)
     out_json.write_text(json.dumps(summary, indent=1, default=_json_default) + "\n")
     d = summary["defaults"]
