@@ -145,6 +145,24 @@ def test_a_new_node_merged_into_a_known_place_is_not_new():
     assert not m.inserted and m.winner == 0
 
 
+@pytest.mark.parametrize("spread, mean, inserts", [
+    (0.0016, 0.1, False),   # noise of 0.2 cell: a sample 0.055 off is noise on the place
+    (0.0, 0.1, True),       # no noise: GWR's radius, 0.051
+    (1e-8, 0.05, True),     # PointMaze's physics: far below GWR's radius
+    (0.003, 0.1, True),     # moves hardly stand out of the scatter: no place radius
+])
+def test_a_place_is_as_wide_as_the_sensing_scatter(spread, mean, inserts):
+    m = bump_map(spread, mean)
+    m.motion[1] = m.motion[0]
+    m.motion[1, 1] *= -1                    # LEFT: the opposite move, the same scatter
+    m._place_radius()
+    assert m.a_place == (m.a_T if inserts else pytest.approx(math.exp(-math.sqrt(0.0032))))
+    m.begin_episode()
+    m.experience(np.array([0.0, 0.0]), EPISODE_START)
+    m.experience(np.array([0.0, 0.055]), Outcome(action=0))
+    assert m.inserted == inserts
+
+
 def test_the_bump_merge_keeps_the_map_near_one_node_a_cell_under_noise():
     """Sensor noise of 0.2 cell on a small maze: with the merge of a bump's winners the
     map holds fewer than 1.6 nodes a free cell after 3,000 steps (without it, on this seed,

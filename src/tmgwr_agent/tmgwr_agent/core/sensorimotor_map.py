@@ -78,14 +78,25 @@ by the step and merged into a known place is that place, not a new node
 (:attr:`inserted` False: the estimator keeps the place's outcome memory).
 
 Noise spreads a place's samples beyond the matching radius, so duplicates also arise that
-never come within the radius. The touch sensor tells of one case: a *bump* (the primitive
+never come within the radius. **The radius of a place** is therefore the wider of GWR's
+``-ln a_T`` and the sensing scatter, ``-ln a_place`` (:meth:`SensorimotorMap.
+_place_radius`), which the insertion test and the merges above use: the map keeps each
+primitive's sensed displacement ``x_t - x_{t-1}`` over its moves (not its bumps), their
+mean ``m`` and spread ``s`` (mean squared deviation from ``m``; :attr:`motion`). Where a
+primitive moves by the same vector wherever it is taken, ``s`` is the scatter of two
+samples, twice that of one sample about its place, and ``sqrt(2 s)`` is twice the root
+mean square scatter of a sample: a sample that near its winner is taken as noise on the
+winner's place, not as a new place. Only primitives whose moves stand out of their
+scatter, ``|m| > 2 sqrt(s)``, count (the radius then stays below a step, so neighbouring
+places are not taken for one), the least ``s`` among them. Without noise ``s`` is 0 (a
+grid) or far below the matching radius (PointMaze's physics): GWR's radius stands.
+
+The touch sensor tells of one more case: a *bump* (the primitive
 was blocked) leaves the agent where it was, so the two winners of a bumped step are one
 place, and they are merged as above (:meth:`SensorimotorMap._sensed_move`). A body that
 moves some way before it meets the wall (PointMaze) makes a bump that is not a stay, so
-the map checks the bump against what the primitive normally does, from the sensations
-alone: the map keeps each primitive's sensed displacement ``x_t - x_{t-1}`` over its moves
-(not its bumps), their mean ``m`` and spread ``s`` (:attr:`motion`), and a bump stayed
-when the primitive's moves stand out of the scatter, ``|m| > 2 sqrt(s)``, and this bump's
+the map checks the bump against what the primitive normally does: a bump stayed when the
+primitive's moves stand out of their scatter, ``|m| > 2 sqrt(s)``, and this bump's sensed
 displacement lies within it, ``0 < |d|^2 < s`` (:meth:`SensorimotorMap.stayed`).
 Without sensing noise a bump in a grid senses no change (``d = 0``) and a partial move in
 PointMaze lies far beyond the spread of its physics, so no bump is merged.
@@ -271,6 +282,7 @@ class SensorimotorMap:
         self.config = config
         c = config
         self.a_T, self.h_T = c.a_T, c.h_T
+        self.a_place = c.a_T       # the radius of one place, -ln a_place (_place_radius)
         self.tau_b, self.tau_n, self.kappa_h = c.tau_b, c.tau_n, c.kappa_h
         self.eps_b, self.eps_n = c.eps_b, c.eps_n
         self.insert_at = c.insert_at
@@ -396,11 +408,11 @@ class SensorimotorMap:
             self.log.touch(i)
 
     def nodes_at(self, i: int) -> np.ndarray:
-        """The live nodes whose weights lie within the GWR's own radius of node i's,
-        ``-ln a_T`` (a winner that near inserts no node): i's place."""
+        """The live nodes whose weights lie within the radius of a place of node i's,
+        ``-ln a_place`` (a winner that near inserts no node): i's place."""
         idx = np.flatnonzero(self.alive[: self.n])
         d = self.w[idx] - self.w[i]
-        return idx[np.einsum("ij,ij->i", d, d) < math.log(self.a_T) ** 2]
+        return idx[np.einsum("ij,ij->i", d, d) < math.log(self.a_place) ** 2]
 
     def experience(self, x: np.ndarray, outcome: Outcome, learn: bool = True) -> int:
         """The map stage of one agent step (Fig. 1a): input x, reached by the outcome's
@@ -436,7 +448,7 @@ class SensorimotorMap:
         # winner, GWR test, adaptation of the winner and its neighbours
         b, insert, moved = kernels.match(self.w, self.c, self.h, self.alive, self.out,
                                          self.inn, self.n,
-                                  self.prev, x, C, self.alpha_c, self.beta_c, self.a_T,
+                                  self.prev, x, C, self.alpha_c, self.beta_c, self.a_place,
                                   self.h_T, learn, self.eps_b, self.eps_n, self.tau_b,
                                   self.tau_n, self.kappa_h)
         if len(moved):
@@ -468,7 +480,7 @@ class SensorimotorMap:
         """Merge every pair of live nodes within the matching radius of which one is in
         ``moved`` (the nodes this step adapted; the module docstring); returns the
         winner's id after the merges."""
-        r2 = math.log(self.a_T) ** 2
+        r2 = math.log(self.a_place) ** 2
         rows = np.asarray(moved, dtype=np.int64)
         while True:
             i, j = kernels.close_pair(self.w, self.c, self.alive, self.n, rows,
@@ -499,6 +511,7 @@ class SensorimotorMap:
             dev = d - row[1:-1]
             row[1:-1] += dev / row[0]
             row[-1] += float(dev @ (d - row[1:-1]))
+            self._place_radius()
             return winner
         before = survivor(before, self.merges)
         if not self.merge or before < 0 or before == winner or not self.alive[before] \
@@ -510,6 +523,19 @@ class SensorimotorMap:
         winner = self._merge_close(np.array([keep], dtype=np.int64), keep)
         self.prev = self.winner = winner
         return winner
+
+    def _place_radius(self) -> None:
+        """``a_place``, the activity threshold of one place (the module docstring): GWR's
+        ``a_T``, or the sensing scatter ``sqrt(2 s)`` as the radius where it is wider, ``s``
+        the least spread of a primitive whose moves stand out of their scatter (as in
+        :meth:`stayed`)."""
+        count = self.motion[:, 0]
+        ok = count >= 2
+        s = self.motion[ok, -1] / count[ok]
+        m2 = (self.motion[ok, 1:-1] ** 2).sum(axis=1)
+        s = s[m2 > 4.0 * s]
+        self.a_place = min(self.a_T, math.exp(-math.sqrt(2.0 * float(s.min())))) \
+            if len(s) else self.a_T
 
     def stayed(self, a: int, d: np.ndarray) -> bool:
         """Whether a bump of primitive ``a`` that displaced the sensation by ``d`` left the
@@ -651,6 +677,7 @@ class SensorimotorMap:
             self.motion = np.array(s["motion"], dtype=float)
         last = s.get("x_prev")
         self.x_prev[:] = last if last is not None and last.shape == (self.dim,) else np.nan
+        self._place_radius()
         self.n = n
         self.version, self.prev, self.winner = (int(v) for v in s["meta"])
         self.log.invalidate()
