@@ -517,10 +517,8 @@ class SensorimotorMap:
         if not self.merge or before < 0 or before == winner or not self.alive[before] \
                 or not self.stayed(a, d):
             return winner
-        keep, gone = (before, winner) if self.h[before] <= self.h[winner] else \
-            (winner, before)
-        self._merge(keep, gone)
-        winner = self._merge_close(np.array([keep], dtype=np.int64), keep)
+        self._merge(before, winner)         # (the node acted from keeps its id)
+        winner = self._merge_close(np.array([before], dtype=np.int64), before)
         self.prev = self.winner = winner
         return winner
 
