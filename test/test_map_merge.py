@@ -163,15 +163,15 @@ def test_a_place_is_as_wide_as_the_sensing_scatter(spread, mean, inserts):
     assert m.inserted == inserts
 
 
-def test_the_bump_merge_keeps_the_map_near_one_node_a_cell_under_noise():
-    """Sensor noise of 0.2 cell on a small maze: with the merge of a bump's winners the
-    map holds fewer than 1.6 nodes a free cell after 3,000 steps (without it, on this seed,
-    more than 1.9)."""
+def test_the_map_stays_near_one_node_a_cell_under_noise():
+    """Sensor noise of 0.2 cell on a small maze: with the place radius and the merge of a
+    bump's winners the map holds fewer than 1.75 nodes a free cell after 3,000 steps
+    (without both, on this seed, more than two; each rule alone is tested above)."""
     maze = Maze.from_text(SMALL)
     for _, agent in evolve(maze, 3000, seed=0, noise=0.2):
         pass
     free = sum(ch not in "#\n" for ch in SMALL)
-    assert agent.map.size < 1.6 * free, (agent.map.size, free)
+    assert agent.map.size < 1.75 * free, (agent.map.size, free)
 
 
 def test_the_estimator_moves_its_memory_to_the_kept_node():
