@@ -2,7 +2,8 @@
 core/unknown.py re-values when only the map's structure changed) gives the same options as
 a full pass (kernels.option_values over every row) after random sequences of map edits:
 weights moved within and across cells, nodes removed and placed, links made and deleted,
-with the same forward model, outcome memory and potentials."""
+with the same forward model, outcome memory and potentials; a new open prior either
+re-values the rows of the untried pairs or is written on them (kernels.untried_rho)."""
 
 import numpy as np
 import pytest
@@ -119,6 +120,11 @@ def test_incremental_options_equal_a_full_pass_after_random_edits(seed, stuck):
         untried = rng.random() < 0.2                   # the open prior re-estimated
         if untried:
             rho_new = float(rng.uniform(0.1, 0.9))
+            if rng.random() < 0.5:                     # written on the untried pairs
+                k = kernels.untried_rho(world.alive, world.n, world.tried, world.chain,
+                                        np.ones(P, dtype=bool), rho_new, opts[1], rows)
+                assert k > 0
+                untried = False
         grid_was = grid
         grid, new_origin = kernels.cell_grid(world.w, world.alive, world.n, 1.0)
         assert grid.shape == grid_was.shape and np.array_equal(new_origin, origin)

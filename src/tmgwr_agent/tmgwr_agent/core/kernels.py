@@ -1250,6 +1250,28 @@ def option_rows_changed(w, alive, n, touched, delta, L, grid_was, grid, origin, 
 
 
 @njit(cache=True)
+def untried_rho(alive, n, tried, chain, lattice, rho_new, rho, rows):
+    """``rho_new`` (the open prior, unknown.py) on every pair of a live node never tried,
+    except a lattice primitive's move of this episode's untried chain (rho 1): while the
+    prior stays above 0 the only value of those options that follows it
+    (:func:`option_row`; a primitive off the lattice: ``OptionRules._unplaced_options``).
+    Writes the rows holding such a pair, ascending, to ``rows``; returns how many."""
+    count = 0
+    for i in range(n):
+        if not alive[i]:
+            continue
+        hit = False
+        for a in range(tried.shape[1]):
+            if not tried[i, a] and not (lattice[a] and chain[i, a]):
+                rho[i, a] = rho_new
+                hit = True
+        if hit:
+            rows[count] = i
+            count += 1
+    return count
+
+
+@njit(cache=True)
 def record_outcome(tried, bump_t, closed_t, bump_e, succ, delta, delta_sq, moves, w, node,
                    winner, inserted, a, bumped, clock, episode):
     """The outcome memory of Eq. 5' after primitive a taken from ``node`` (unknown.py):

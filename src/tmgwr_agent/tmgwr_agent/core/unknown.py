@@ -652,7 +652,9 @@ class OptionRules:
         rows whose options may read what changed (:func:`kernels.option_rows_changed`,
         from the rows the map's change log lists since then); None when a full refresh
         is due: the log cannot list them, the link length or the node lookup's extent
-        moved. Sets ``rho_new`` (a change re-values every untried pair)."""
+        moved. Sets ``rho_new``: a change writes it on every untried pair
+        (:func:`kernels.untried_rho`; those rows join the ones the solve compares), or
+        re-values their rows when it goes to or from 0."""
         log = getattr(m, "log", None)
         touched_rows = log.since(self._opt_pos) if log is not None and \
             log is self._opt_log else None
@@ -663,11 +665,17 @@ class OptionRules:
         touched[touched_rows[touched_rows < n]] = True
         rho_new, self.rho_new = self.rho_new, self.open_prior(m, n)
         rows = np.empty(n, dtype=np.int64)
+        untried = rho_new != self.rho_new
+        if untried and rho_new > 0.0 and self.rho_new > 0.0:   # rho alone follows it
+            c = kernels.untried_rho(m.alive, n, self.tried, self.chain, self.lattice,
+                                    self.rho_new, self.rho, rows)
+            self._opt_rows = rows[:c].copy() if self._opt_rows is None else \
+                np.union1d(self._opt_rows, rows[:c])            # for the solve to compare
+            untried = False
         c = kernels.option_rows_changed(F.w, m.alive, n, touched, F.delta, F.L, grid_was,
                                         self._grid, self._origin, self.tried, self.bump_e,
                                         self.succ, self.sel, self.episode,
-                                        self.stale_horizon, stuck, rho_new != self.rho_new,
-                                        rows)
+                                        self.stale_horizon, stuck, untried, rows)
         return rows[:c]
 
     def _unplaced_options(self, m: SensorimotorMap, rows: np.ndarray,
