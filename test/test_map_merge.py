@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 import pytest
+from small_mazes import SMALL
 from test_map_replica import as_message, evolve
 
 from maze_sim import GridWorld, Maze
@@ -95,6 +96,82 @@ def test_a_merge_joins_the_links_of_one_place():
     m.a[0, 1] = RIGHT
     m._merge(1, 2)
     assert {int(t): e for t, e in zip(m.out[0], m.E[0]) if t >= 0} == {1: 0.75}
+
+
+def bump_map(spread: float, mean: float = 0.1) -> SensorimotorMap:
+    """Nodes 0 at x=0 (the last winner, sensed at x=0.03) and 1 at x=0.07, beyond the
+    matching radius of each other; primitive 0 (RIGHT by a cell, 0.1) has made 10 moves of
+    mean displacement ``mean`` and spread ``spread`` (mean squared deviation)."""
+    m = SensorimotorMap(dim=2, config=MapConfig(alpha_c=0.0),
+                        primitives=np.array([[0.1, 0.0], [-0.1, 0.0]]))
+    for x in ((0.0, 0.0), (0.07, 0.0)):
+        m._insert(np.array(x), np.array(x))
+    m.h[:2] = (0.1, 0.2)
+    m.motion[0] = (10, mean, 0.0, 10 * spread)
+    m.prev = m.winner = 0
+    m.x_prev[:] = (0.03, 0.0)
+    return m
+
+
+@pytest.mark.parametrize("spread, mean, dx, merged", [
+    (0.0016, 0.1, 0.01, True),     # noise of 0.2 cell: a bump scattered within it stayed
+    (0.0016, 0.1, 0.045, False),   # displaced beyond the scatter: it may have moved
+    (1e-8, 0.05, 0.01, False),     # no noise (PointMaze's physics): a partial move
+    (0.0, 0.1, 0.01, False),       # no scatter at all: nothing tells a stay
+    (0.003, 0.1, 0.01, False),     # moves hardly stand out of the scatter
+])
+def test_the_winners_of_a_bump_that_stayed_are_one_node(spread, mean, dx, merged):
+    m = bump_map(spread, mean)
+    winner = m.experience(np.array([0.03 + dx, 0.0]), Outcome(action=0, bumped=True))
+    assert (m.merges == [(0, 1)]) == merged, m.merges
+    assert winner == (0 if merged else 1) and m.alive[1] != merged
+    if merged:
+        assert 0.0 < m.w[0, 0] < 0.07 and m.w[0, 1] == 0.0    # between the two
+        assert (m.out[0] < 0).all()                           # no link within the place
+    # a move adds to the primitive's statistics; a bump does not
+    assert m.motion[0, 0] == 10
+    m.experience(np.array([0.13, 0.0]), Outcome(action=0))
+    assert m.motion[0, 0] == 11
+
+
+def test_a_new_node_merged_into_a_known_place_is_not_new():
+    """A bump's sample beyond the radius inserts a node, which the bump's merge joins to
+    the place it stood on: the step's winner is that known place (``inserted`` False, so
+    the estimator keeps the place's outcome memory)."""
+    m = bump_map(0.0016)
+    m.x_prev[:] = (0.0, 0.04)
+    m.experience(np.array([0.0, 0.06]), Outcome(action=0, bumped=True))
+    assert len(m.merges) == 1 and m.merges[0][0] == 0
+    assert not m.inserted and m.winner == 0
+
+
+@pytest.mark.parametrize("spread, mean, inserts", [
+    (0.0016, 0.1, False),   # noise of 0.2 cell: a sample 0.055 off is noise on the place
+    (0.0, 0.1, True),       # no noise: GWR's radius, 0.051
+    (1e-8, 0.05, True),     # PointMaze's physics: far below GWR's radius
+    (0.003, 0.1, True),     # moves hardly stand out of the scatter: no place radius
+])
+def test_a_place_is_as_wide_as_the_sensing_scatter(spread, mean, inserts):
+    m = bump_map(spread, mean)
+    m.motion[1] = m.motion[0]
+    m.motion[1, 1] *= -1                    # LEFT: the opposite move, the same scatter
+    m._place_radius()
+    assert m.a_place == (m.a_T if inserts else pytest.approx(math.exp(-math.sqrt(0.0032))))
+    m.begin_episode()
+    m.experience(np.array([0.0, 0.0]), EPISODE_START)
+    m.experience(np.array([0.0, 0.055]), Outcome(action=0))
+    assert m.inserted == inserts
+
+
+def test_the_map_stays_near_one_node_a_cell_under_noise():
+    """Sensor noise of 0.2 cell on a small maze: with the place radius and the merge of a
+    bump's winners the map holds fewer than 1.75 nodes a free cell after 3,000 steps
+    (without both, on this seed, more than two; each rule alone is tested above)."""
+    maze = Maze.from_text(SMALL)
+    for _, agent in evolve(maze, 3000, seed=0, noise=0.2):
+        pass
+    free = sum(ch not in "#\n" for ch in SMALL)
+    assert agent.map.size < 1.75 * free, (agent.map.size, free)
 
 
 def test_the_estimator_moves_its_memory_to_the_kept_node():

@@ -16,6 +16,8 @@ import pytest
 from test_recorder import tmgwr_cli
 from world_graph import GOAL, ctrl_c, fire_event, read_bag, up_world
 
+from maze_sim.pointmaze_world import step_length
+
 pytest.importorskip("gymnasium_robotics")
 pytest.importorskip("mujoco")
 
@@ -49,17 +51,22 @@ def test_the_graph_runs_on_pointmaze_and_the_bag_reads_back(ros_domain, tmp_path
         ctrl_c(up)
     assert up.proc.returncode == 0, up.describe("./tmgwr up failed")
 
-    msgs = read_bag(bag, ("/observation", "/agent_pose", "/maze_grid", "/map_markers"))
+    msgs = read_bag(bag, ("/observation", "/features", "/agent_pose", "/maze_grid",
+                          "/map_markers"))
     sensed = [np.array(m.sensors, dtype=float) for m in msgs["/observation"]]
     poses = [(m.pose.position.x, m.pose.position.y) for m in msgs["/agent_pose"]]
     grids, markers = msgs["/maze_grid"], msgs["/map_markers"]
     xy = np.array(sensed)
     assert xy.shape[1] == 2
-    # inside the free cells of the maze (x in [-2.5, 2.5], y in [-1.5, 1.5]), and off the
-    # integer lattice of the grid world (the point stops against walls)
+    # inside the free cells of the maze (x in [-2.5, 2.5], y in [-1.5, 1.5]), off the
+    # integer lattice of the grid world but on PointMaze's move lattice (half a metre)
     assert (xy[:, 0] > -2.5).all() and (xy[:, 0] < 2.5).all()
     assert (xy[:, 1] > -1.5).all() and (xy[:, 1] < 1.5).all()
     assert np.abs(xy - np.round(xy)).max() > 0.1
+    step = step_length()
+    assert np.abs(xy / step - np.round(xy / step)).max() * step < 5e-3
+    # the preprocessor node was told the world's resolution: one move, one feature step
+    assert {m.gain for m in msgs["/features"]} == {0.1 / step}
     g = grids[-1]
     assert (g.info.origin.position.x, g.info.origin.position.y) == (-3.5, -2.5)
     walls = np.array(g.data).reshape(g.info.height, g.info.width)[::-1] > 0

@@ -54,8 +54,8 @@ def test_step_length_and_k_are_derived_from_the_physics():
     # the largest cell / n within sqrt 2 * 0.45: half a cell
     assert step_length() == 0.5
     assert step_length(1.0, 0.8) == 1.0
-    k_push, k_brake = primitive_steps(0.5)
-    assert k_push > 0 and k_brake > 0
+    k_push, k_brake, force = primitive_steps(0.5)
+    assert k_push > 0 and k_brake > 0 and 0.0 < force <= 1.0
     # a longer move needs a longer push
     assert primitive_steps(1.0)[0] > k_push
 
@@ -64,7 +64,7 @@ def test_a_primitive_moves_half_a_cell_and_ends_at_rest(world):
     obs, info = world.reset()
     assert np.allclose(obs, world.xy((1, 1))) and info["cell"] == (1, 1)
     obs, _, _, _, info = world.step(RIGHT)
-    assert obs[0] - world.xy((1, 1))[0] == pytest.approx(0.5, abs=0.02)
+    assert obs[0] - world.xy((1, 1))[0] == pytest.approx(0.5, abs=1e-3)   # exactly the step
     assert obs[1] == pytest.approx(world.xy((1, 1))[1], abs=1e-6)
     assert np.abs(world.data.qvel[:2]).max() < 1e-2
     assert not info.bumped
@@ -80,6 +80,34 @@ def test_a_wall_ahead_bumps_a_wall_alongside_does_not(world):
     assert info.bumped
     _, _, _, _, info = world.step(RIGHT)         # sliding along the top wall: not a bump
     assert not info.bumped
+
+
+def test_a_bumped_move_returns_to_where_it_started():
+    w = PointMazeWorld(Maze.from_text(SMALL), "G")
+    before, _ = w.reset()
+    obs, _, _, _, info = w.step(UP)              # into the top wall
+    assert info.bumped
+    assert np.abs(obs - before).max() < 1e-3     # back where it was, not at the wall
+    assert np.abs(w.data.qvel[:2]).max() <= 1e-3
+
+
+def test_the_point_stays_on_the_move_lattice():
+    # every primitive moves exactly one step or, bumped, returns: after a random walk with
+    # bumps every resting place is a point of the half-metre lattice (a bumped move left
+    # against the wall rested a point radius, 0.1 m, off it, and every move after kept it)
+    w = PointMazeWorld(Maze.from_text(SMALL), "G")
+    w.reset()
+    rng = np.random.default_rng(3)
+    bumps, worst = 0, 0.0
+    for _ in range(150):
+        obs, _, terminated, _, info = w.step(int(rng.integers(4)))
+        bumps += info.bumped
+        off = obs / w.step_length
+        worst = max(worst, float(np.abs(off - np.round(off)).max()) * w.step_length)
+        if terminated:
+            w.reset()
+    assert bumps >= 10
+    assert worst < 5e-3
 
 
 def test_the_goal_is_reached_by_the_envs_success_test():
@@ -110,15 +138,15 @@ def test_the_move_into_the_goal_region_runs_to_its_end():
 
 def test_oracle_by_the_scripted_controller(world):
     # S (1,1) to G (1,5): 4 m straight right, half a metre a primitive; the success test
-    # holds 0.45 m before the goal's centre: 7 or 8 primitives, as many as RIGHT takes
+    # holds 0.45 m from the goal's centre, within the eighth move: as many as RIGHT takes
     n = world.shortest_path_length()
-    assert n in (7, 8)
+    assert n == 8
     world.reset()
     for k in range(1, 9):
         if world.step(RIGHT)[2]:
             break
     assert k == n
-    assert world.shortest_path_length((1, 4), (1, 5)) in (1, 2)
+    assert world.shortest_path_length((1, 4), (1, 5)) == 2
     before = world.data.qpos.copy()
     world.shortest_path_length((3, 1), (1, 5))
     assert np.array_equal(world.data.qpos, before)   # the point is put back
@@ -133,8 +161,8 @@ def test_an_event_rebuilds_the_model_and_the_oracle_follows():
     w.fire_event("a")
     assert w.model is not old_model and np.array_equal(w.data.qpos, here)
     assert w.walls[1, 3] and "block_1_3" in w.env._model_names.geom_name2id
-    # round by row 3: 2 + 4 + 2 = 8 cells, two primitives a cell, corners cut at most
-    assert 12 <= w.shortest_path_length() <= 16
+    # round by row 3: 2 + 4 + 2 = 8 cells, two primitives a cell
+    assert w.shortest_path_length() == 16
     # the point cannot enter the new wall
     w.reset(start=(1, 2))
     _, _, _, _, info = w.step(RIGHT)
@@ -172,6 +200,34 @@ def test_senses_from_the_world():
     assert np.array_equal(named_world_senses("grid").primitives[0], (-1, 0))
 
 
+def test_the_resolution_is_the_move_and_the_map_tells_places_apart():
+    from tmgwr_agent.core.agent import TMGWRAgent
+    from tmgwr_agent.core.senses import Senses, SensesError
+    from tmgwr_agent.world_senses import maze_senses, named_world_senses, world_senses
+
+    w = PointMazeWorld(Maze.from_text(SMALL), "G")
+    assert world_senses(w).resolution == step_length() == w.sensor_resolution
+    assert named_world_senses("pointmaze").resolution == step_length()
+    assert maze_senses().resolution == 1.0                   # the grid: one cell
+    with pytest.raises(SensesError, match="resolution step must be a finite distance"):
+        Senses(2, PRIMITIVES, 0.0, 0.0)
+
+    def places(senses):
+        # S to the goal's neighbour along the corridor, one place per move: 7 places
+        ag = TMGWRAgent(senses, np.random.default_rng(0))
+        obs, _ = w.reset()
+        ag.begin_episode(obs)
+        for _ in range(6):
+            obs, _, _, _, info = w.step(RIGHT)
+            ag.observe(obs, info)
+        return int(ag.map.alive[:ag.map.n].sum())
+
+    assert places(world_senses(w)) == 7
+    # the resolution left at one metre: neighbouring places lie within the map's matching
+    # radius, and one node stands for several of them
+    assert places(Senses(2, PRIMITIVES, SUCCESS_RADIUS)) < 7
+
+
 def test_make_world_by_name():
     m = Maze.from_text(SMALL)
     assert isinstance(make_world("pointmaze", m, "G", 10), PointMazeWorld)
@@ -195,8 +251,8 @@ def test_the_goal_region_is_declared_and_told_to_the_agent():
 
 def _goal_node(goal_tolerance):
     """The goal node of an estimator over a corridor of places half a metre apart (feature
-    gain 0.1 a metre, the preprocessor's default) that ends 0.5 m short of the goal
-    sensation, where an episode stops by a goal region of 0.45 m."""
+    gain 0.2 a metre: the preprocessor's 0.1 a resolution step, PointMaze's move) that ends
+    0.5 m short of the goal sensation, where an episode stops by a goal region of 0.45 m."""
     from maze_sim.maze import ACTION_VECTORS
     from tmgwr_agent.core.motivation import MotivationEstimator
     from tmgwr_agent.core.sensorimotor_map import MapConfig, SensorimotorMap
@@ -204,11 +260,11 @@ def _goal_node(goal_tolerance):
     m = SensorimotorMap(dim=2, config=MapConfig(a_T=0.99, h_T=0.75, alpha_c=0.0,
                                                 insert_at=1.0), primitives=ACTION_VECTORS)
     for k in range(4):                          # 0, 0.5, 1.0, 1.5 m, moved along by 'right'
-        m.step(np.array([0.0, 0.05 * k]), ACTION_VECTORS[RIGHT] if k else None)
+        m.step(np.array([0.0, 0.1 * k]), ACTION_VECTORS[RIGHT] if k else None)
         m.h[m.winner] = 0.5
     assert m.size == 4
     est = MotivationEstimator(primitives=ACTION_VECTORS, goal_tolerance=goal_tolerance)
-    est.set_goal(np.array([0.0, 0.2]))          # 2.0 m: 0.5 m beyond the last place
+    est.set_goal(np.array([0.0, 0.4]))          # 2.0 m: 0.5 m beyond the last place
     est.update(m)
     return est.goal_node
 
@@ -217,7 +273,7 @@ def test_a_node_near_the_goal_region_represents_the_goal():
     # the nearest place is a step (0.5 m) from the goal sensation, more than the half step
     # a point goal allows, but within half a step of the region the world declares: told
     # the region, the estimator has a goal node and plans to it; not told, it never does
-    assert _goal_node(0.1 * SUCCESS_RADIUS) == 3
+    assert _goal_node(0.2 * SUCCESS_RADIUS) == 3
     assert _goal_node(0.0) == -1
 
 

@@ -21,8 +21,8 @@ Sensation: the point's position ``(x, y)`` in metres (``velocity=True``: and its
 Motor primitives (:data:`PRIMITIVES`, the four force directions ``up`` = +y, ``down`` = -y,
 ``left`` = -x, ``right`` = +x, in the order of :data:`maze_sim.maze.ACTIONS`). A primitive
 is ``K = K_push + K_brake`` physics steps of the env's own dynamics
-(:func:`physics_step`, what ``PointEnv.step`` does): full force along the direction for
-``K_push`` steps, then a brake, the force opposing the velocity (``-v`` scaled so that one
+(:func:`physics_step`, what ``PointEnv.step`` does): a constant force along the direction
+for ``K_push`` steps, then a brake, the force opposing the velocity (``-v`` scaled so that one
 physics step would stop the point, clipped to full force) for up to ``K_brake`` steps or
 until the point is at rest. So a primitive is a move of :func:`step_length` that ends at rest:
 the next primitive starts from rest and the position alone tells where the point is
@@ -30,15 +30,36 @@ the next primitive starts from rest and the position alone tells where the point
 and a position would not tell what a force does next).
 
 The move's length is the largest ``S / n`` not longer than ``sqrt 2`` times the success
-radius (half a cell here): a bump leaves the point off a cell's centre on that axis, and
-with moves of a whole cell that offset would stay for ever; with this length some point of
-the move lattice always lies within the success radius of the goal's centre.
-``K_push`` and ``K_brake`` are derived from the world by :func:`primitive_steps`, measured
-once per process on the env's point model in free space (no walls, the same XML): the
-point at rest pushed for ``n`` steps and braked to rest travels ``d(n)``; ``K_push`` is
-the ``n`` whose ``d(n)`` is nearest that length, ``K_brake`` the number of steps the
-brake took to bring that move to rest, plus :data:`BRAKE_MARGIN` (a move that ran into a
-wall may need a few more).
+radius (half a cell here): with this length some point of the move lattice (the cells'
+centres, the midpoints of their edges and their corners) always lies within the success
+radius of the goal's centre. (Now that a move is exact and a bump returns, the point rests
+only on the lattice through the cells' centres, the goal's centre among them, so a whole
+cell would reach the goal too: the rule is kept, and with it four places a cell in the
+open, places between the centres that a one-cell discretisation does not tell apart.)
+``K_push``, the force and ``K_brake`` are derived from the
+world by :func:`primitive_steps`, measured once per process on the env's point model in
+free space (no walls, the same XML): the point at rest pushed at full force for ``n``
+steps and braked to rest travels ``d(n)``; ``K_push`` is the fewest ``n`` with ``d(n)`` at
+least that length, the force the share of full force at which ``K_push`` steps travel it
+exactly (bisection), ``K_brake`` the steps the brake took, plus :data:`BRAKE_MARGIN`. The
+move is exact because the places must repeat: at full force an integer number of steps
+overshoots the length by centimetres, and every move would leave the lattice a little more,
+so that no two visits to a cell rested at the same place.
+
+A move that bumps is guarded (a bumper's reflex): it stops pushing and drives the point
+back to where the move started, at rest (:meth:`PointMazeWorld._return_to`, a velocity
+servo of the same force limit, then the brake). So a blocked move leaves the point where it
+was, as a bump leaves the grid world's agent in its cell, and the point never leaves the
+move lattice. (Left against the wall, the point rested a point radius off the lattice's
+line on that axis, and every move after kept that offset: each bump made new places, a
+cell held dozens of them, and a wall bumped from one of them was open from the next.)
+
+Resolution (``sensor_resolution``, told to the agent through its ``Senses`` as
+``resolution``): the move's length. The agent's preprocessor scales one resolution step to
+one feature step, as one cell is in the grid world, so its map's matching radius (the GWR
+activity threshold) separates neighbouring places of the lattice. (Measured in metres as one
+cell, a half-metre move lies within that radius, about half a metre: the map merged
+neighbouring places into one node.)
 
 Outcome: ``bumped`` is the touch sensor: during the primitive the point met a wall ahead
 of its push (a MuJoCo contact between the point's geom and a ``block_*`` geom whose normal
@@ -103,6 +124,14 @@ BRAKE_MARGIN = 4
 BUMP_COSINE = 0.5
 #: Speed (m/s) below which the brake counts the point at rest.
 REST_SPEED = 1e-3
+#: The guarded move's return (:meth:`PointMazeWorld._return_to`): the time constant (s) of
+#: the velocity servo that drives the point back to where the move started, the largest
+#: speed it commands (m/s), the distance (m) from that place at which it brakes to rest,
+#: and the physics steps it may take at most.
+RETURN_TAU = 0.05
+RETURN_SPEED = 2.0
+RETURN_TOL = 1e-6
+RETURN_STEPS = 400
 #: The share of the oracle's primitive steps by which a greedy probe's route may exceed
 #: them and still count as converged (``probe_tolerance``, experiments/runner.py). 0: no
 #: share can be derived from the world, and one chosen after seeing a trial's routes would
@@ -151,29 +180,39 @@ def step_length(cell: float = CELL_SIZE, radius: float = SUCCESS_RADIUS) -> floa
     return cell / math.ceil(cell / (math.sqrt(2.0) * radius))
 
 
+def _free_move(model, data, env, n: int, force: float) -> tuple[float, int]:
+    """From rest at the origin: push along +x at ``force`` for ``n`` physics steps, brake to
+    rest; the distance travelled and the brake's steps."""
+    env.set_state(np.zeros(model.nq), np.zeros(model.nv))
+    for _ in range(n):
+        physics_step(model, data, np.array([force, 0.0]))
+    brake = 0
+    while np.abs(data.qvel[:2]).max() > REST_SPEED and brake < 1000:
+        physics_step(model, data, brake_ctrl(model, data))
+        brake += 1
+    return float(data.qpos[0]), brake
+
+
 @lru_cache(maxsize=8)
-def primitive_steps(distance: float) -> tuple[int, int]:
-    """``(K_push, K_brake)`` for a move of ``distance`` metres, measured on the env's point
-    model in free space (module doc)."""
+def primitive_steps(distance: float) -> tuple[int, int, float]:
+    """``(K_push, K_brake, force)`` for a move of ``distance`` metres, measured on the env's
+    point model in free space (module doc): ``K_push`` the fewest push steps at full force
+    that reach ``distance``, ``force`` the share of full force at which ``K_push`` steps and
+    the brake travel exactly ``distance`` (bisection)."""
     PointEnv, _ = _gym_robotics()
     env = PointEnv()                      # the point model alone: no maze, no walls
     try:
         model, data = env.model, env.data
-        best: tuple[float, int, int] | None = None
-        for n in range(1, 200):
-            env.set_state(np.zeros(model.nq), np.zeros(model.nv))
-            for _ in range(n):
-                physics_step(model, data, np.array([1.0, 0.0]))
-            brake = 0
-            while np.abs(data.qvel[:2]).max() > REST_SPEED and brake < 1000:
-                physics_step(model, data, brake_ctrl(model, data))
-                brake += 1
-            err = abs(float(data.qpos[0]) - distance)
-            if best is not None and err > best[0]:
-                break                     # d(n) grows with n: past the nearest
-            best = (err, n, brake)
-        assert best is not None
-        return best[1], best[2] + BRAKE_MARGIN
+        n = next(n for n in range(1, 1000) if _free_move(model, data, env, n, 1.0)[0]
+                 >= distance)
+        lo, hi = 0.0, 1.0
+        for _ in range(60):               # d(n, f) grows with f
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if _free_move(model, data, env, n, mid)[0] < distance \
+                else (lo, mid)
+        force = hi
+        brake = max(_free_move(model, data, env, n, f)[1] for f in (force, 1.0))
+        return n, brake + BRAKE_MARGIN, force
     finally:
         env.close()
 
@@ -216,7 +255,7 @@ class PointMazeWorld:
         self.velocity = bool(velocity)
         self.step_length = step_length()
         self.per_cell = round(CELL_SIZE / self.step_length)
-        self.k_push, self.k_brake = primitive_steps(self.step_length)
+        self.k_push, self.k_brake, self.force = primitive_steps(self.step_length)
         self.seed = seed
         self._oracle: dict[tuple, int] = {}
         self.env = None
@@ -300,12 +339,22 @@ class PointMazeWorld:
 
     def _primitive(self, action: int, goals: list[np.ndarray]) -> tuple[Primitive, int]:
         """Run primitive ``action`` to its end; the first of ``goals`` for which the env's
-        test held at one of its physics steps (its index, else -1)."""
+        test held at one of its physics steps (its index, else -1). A move that bumps is
+        guarded: it returns to where it started (:meth:`_return_to`)."""
         model, data = self.model, self.data
-        push = PRIMITIVES[action]
+        push = PRIMITIVES[action] * self.force
+        start = data.qpos[:2].copy()
         bumped = False
         steps = 0
         reached = -1
+
+        def check() -> None:
+            nonlocal reached
+            for gi, g in enumerate(goals if reached < 0 else ()):
+                if self._success(g):
+                    reached = gi
+                    break
+
         for k in range(self.k_push + self.k_brake):
             if k >= self.k_push:
                 if np.abs(data.qvel[:2]).max() <= REST_SPEED:
@@ -315,12 +364,33 @@ class PointMazeWorld:
                 ctrl = push
             physics_step(model, data, ctrl)
             steps += 1
-            bumped = bumped or self._blocked(push)
-            for gi, g in enumerate(goals if reached < 0 else ()):
-                if self._success(g):
-                    reached = gi
-                    break
+            bumped = self._blocked(PRIMITIVES[action])
+            check()
+            if bumped:
+                break
+        if bumped:
+            steps += self._return_to(start, check)
         return Primitive(bumped, reached >= 0, steps), reached
+
+    def _return_to(self, target: np.ndarray, each=lambda: None) -> int:
+        """Drive the point back to ``target`` and brake it to rest there: a velocity servo
+        (the velocity ``(target - x) / RETURN_TAU``, at most ``RETURN_SPEED``, reached in one
+        physics step as far as full force allows), then the brake once within
+        ``RETURN_TOL``; ``each()`` after every physics step. Returns the steps taken."""
+        model, data = self.model, self.data
+        gain = _brake_gain(model)
+        for k in range(RETURN_STEPS):
+            err = target - data.qpos[:2]
+            if np.abs(err).max() <= RETURN_TOL:
+                if np.abs(data.qvel[:2]).max() <= REST_SPEED:
+                    return k
+                ctrl = brake_ctrl(model, data)
+            else:
+                v = np.clip(err / RETURN_TAU, -RETURN_SPEED, RETURN_SPEED)
+                ctrl = (v - data.qvel[:2]) * gain
+            physics_step(model, data, ctrl)
+            each()
+        return RETURN_STEPS
 
     # ------------------------------------------------------------------ sensing
     def sense(self) -> np.ndarray:
@@ -356,6 +426,12 @@ class PointMazeWorld:
     goal_tolerance = SUCCESS_RADIUS
     #: The convergence probe's tolerance over the scripted oracle (:data:`PROBE_TOLERANCE`).
     probe_tolerance = PROBE_TOLERANCE
+
+    @property
+    def sensor_resolution(self) -> float:
+        """The sensor's resolution step (``Senses.resolution``, metres): one primitive's
+        move, the distance between neighbouring places of the move lattice (module doc)."""
+        return self.step_length
 
     # ------------------------------------------------------------------ the contract
     @property
@@ -520,7 +596,8 @@ class PointMazeWorld:
     def _drive(self, walls: np.ndarray, a: Cell | None, b: Cell,
                stop_in_cell: bool = False) -> int:
         """Scripted primitives from ``a`` (None: where the point is) to ``b``: until the
-        env's success test holds at ``b`` (or, ``stop_in_cell``, the point is in ``b``)."""
+        env's success test holds at ``b`` (or, ``stop_in_cell``, the point is at ``b``'s
+        centre)."""
         to_b = bfs_distances(walls, b)
         if a is not None:
             self._place(a)
@@ -530,7 +607,9 @@ class PointMazeWorld:
         goal = [self.xy(b)]
         cap = 4 * int(to_b[here]) * self.per_cell + 8
         for n in range(0, cap + 1):
-            if (stop_in_cell and self.cell_of(self.data.qpos[:2]) == b) or \
+            if (stop_in_cell and self.cell_of(self.data.qpos[:2]) == b
+                    and np.abs(self.data.qpos[:2] - goal[0]).max()
+                    < 0.25 * self.step_length) or \
                     (not stop_in_cell and n == 0 and self._success(goal[0])):
                 return n
             if n == cap:
@@ -545,11 +624,13 @@ class PointMazeWorld:
     def _towards(self, walls: np.ndarray, to_b: np.ndarray, b: Cell) -> int:
         """The scripted controller's primitive: in ``b``, the one along the larger offset
         from its centre; elsewhere, the one towards the neighbour one BFS step nearer ``b``
-        (the axis of that step)."""
+        (the axis of that step), unless the point is off its cell's centre across that
+        axis (on the edge it came in by): then the one back to the centre's line first (a
+        turn taken from the edge would graze the corner of a wall)."""
         xy = self.data.qpos[:2]
         cell = self.cell_of(xy)
+        off = xy - self.xy(cell)
         if cell == b:
-            off = xy - self.xy(b)
             axis = int(np.argmax(np.abs(off)))
             return (3 if off[0] < 0 else 2) if axis == 0 else (0 if off[1] < 0 else 1)
         rows, cols = walls.shape
@@ -559,6 +640,11 @@ class PointMazeWorld:
             if 0 <= r < rows and 0 <= c < cols and to_b[r, c] >= 0 and \
                     (best is None or to_b[r, c] < best):
                 best, best_a = int(to_b[r, c]), a
+        across = 0 if best_a < 2 else 1           # x across a vertical step, y across a
+        if abs(off[across]) > 0.25 * self.step_length:      # horizontal one
+            if across == 0:
+                return 3 if off[0] < 0 else 2
+            return 0 if off[1] < 0 else 1
         return best_a
 
 def _bump_route(old: np.ndarray, new: np.ndarray, start: Cell,

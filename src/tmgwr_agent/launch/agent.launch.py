@@ -190,6 +190,7 @@ def graph_nodes(context, watch: ExitWatch):
         "maze_sim": {"maze": LaunchConfiguration("maze"), "goal": LaunchConfiguration("goal"),
                      "seed": seed, **world},
         "action_selector": {"seed": seed, **world},
+        "sensory_preprocessor": dict(world),
         "map_learner": dict(world),
         "motivation_estimator": dict(world),
     }

@@ -65,9 +65,9 @@ SAVING = ".saving-"                  # temporary folders of saves (removed by lo
 _ARRAYS = {           # name -> (dtype kind, number of dimensions)
     "w": ("f", 2), "c": ("f", 2), "h": ("f", 1), "alive": ("b", 1), "out": ("i", 2),
     "E": ("f", 2), "a": ("f", 3), "age": ("i", 2), "terminal": ("b", 1), "meta": ("i", 1),
-    "step_id": ("iu", 0), "run_id": ("iu", 0),
+    "step_id": ("iu", 0), "run_id": ("iu", 0), "motion": ("f", 2), "x_prev": ("f", 1),
 }
-_OPTIONAL = {"terminal", FORMAT_KEY}     # maps saved before the terminal flag have none
+_OPTIONAL = {"terminal", "motion", "x_prev", FORMAT_KEY}   # absent from older maps
 
 
 class MapStoreError(ValueError):
@@ -152,8 +152,8 @@ def validate_state(s: dict[str, np.ndarray], what: str = "map") -> None:
         if name in s and s[name].shape != shape:
             bad(f"array {name} has shape {s[name].shape}, expected {shape} "
                 f"({n} nodes, {k} links per node, dim {dim})")
-    for name in ("w", "c", "h", "E", "a"):
-        if not np.isfinite(s[name]).all():
+    for name in ("w", "c", "h", "E", "a", "motion", "x_prev"):  # (the last two: optional,
+        if name in s and not np.isfinite(s[name]).all():       # ignored if of other shape)
             bad(f"array {name} holds {int((~np.isfinite(s[name])).sum())} values that are "
                 "not finite")
     if ((s["E"] < 0) | (s["E"] > 1)).any():

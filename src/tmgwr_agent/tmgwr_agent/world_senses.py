@@ -6,7 +6,8 @@ cell up, down, left or right: its declared motor primitives are those unit vecto
 its sensation as ``observation_space``, its actions as ``action_space`` and their motor
 vectors as ``primitive_vectors`` (:func:`world_senses`), and how near the goal sensation
 a sensation must be for it to end an episode at the goal as ``goal_tolerance`` (sensation
-units; 0 when absent: the goal is one sensation). This is the one place outside the
+units; 0 when absent: the goal is one sensation), and its sensor's resolution step as
+``sensor_resolution`` (sensation units; 1 when absent). This is the one place outside the
 simulator that says so; the core is handed the result and knows nothing of mazes.
 """
 
@@ -24,13 +25,13 @@ def maze_senses(dim: int = 2) -> Senses:
     return Senses(dim, ACTION_VECTORS)
 
 
-def env_senses(env, goal_tolerance: float = 0.0) -> Senses:
+def env_senses(env, goal_tolerance: float = 0.0, resolution: float = 1.0) -> Senses:
     """The senses of a Gymnasium env: its spaces, and its declared motor primitives
-    (``primitive_vectors`` of the unwrapped env) when it has them; ``goal_tolerance``:
-    what the world that drives it declares."""
+    (``primitive_vectors`` of the unwrapped env) when it has them; ``goal_tolerance`` and
+    ``resolution``: what the world that drives it declares."""
     return Senses.from_spaces(env.observation_space, env.action_space,
                               getattr(env.unwrapped, "primitive_vectors", None),
-                              goal_tolerance)
+                              goal_tolerance, resolution)
 
 
 def world_senses(world) -> Senses:
@@ -38,13 +39,15 @@ def world_senses(world) -> Senses:
     itself (``observation_space``, ``action_space``, ``primitive_vectors``: PointMaze),
     else those of the Gymnasium env it drives (``env``, seen through its sensation
     wrapper: MiniGrid, ``gym:ID``), else the grid world's (:func:`maze_senses`); each with
-    the world's declared ``goal_tolerance`` (0 when it declares none)."""
+    the world's declared ``goal_tolerance`` (0 when it declares none) and
+    ``sensor_resolution`` (1 when it declares none)."""
     tol = float(getattr(world, "goal_tolerance", 0.0))
+    res = float(getattr(world, "sensor_resolution", 1.0))
     if hasattr(world, "observation_space"):
         return Senses.from_spaces(world.observation_space, world.action_space,
-                                  getattr(world, "primitive_vectors", None), tol)
+                                  getattr(world, "primitive_vectors", None), tol, res)
     if getattr(world, "env", None) is not None:
-        return env_senses(world.env, tol)
+        return env_senses(world.env, tol, res)
     return maze_senses()
 
 
@@ -62,8 +65,9 @@ def named_world_senses(name: str, **kwargs) -> Senses:
         from maze_sim.minigrid_world import N_ACTIONS
         return Senses(4, np.eye(N_ACTIONS))
     if name == "pointmaze":
-        from maze_sim.pointmaze_world import PRIMITIVES, SUCCESS_RADIUS
-        return Senses(4 if kwargs.get("velocity") else 2, PRIMITIVES, SUCCESS_RADIUS)
+        from maze_sim.pointmaze_world import PRIMITIVES, SUCCESS_RADIUS, step_length
+        return Senses(4 if kwargs.get("velocity") else 2, PRIMITIVES, SUCCESS_RADIUS,
+                      step_length())
     raise ValueError(f"unknown world {name!r}; worlds the graph hosts: "
                      f"{', '.join(GRAPH_WORLDS)}")
 

@@ -83,7 +83,7 @@ class TMGWRAgent:
             config = tmgwr_config(config)
         self.config = config
         self.senses = senses
-        self.preprocessor = SensoryPreprocessor(config.preprocessor)
+        self.preprocessor = SensoryPreprocessor(config.preprocessor, senses.resolution)
         self.map = SensorimotorMap(dim=senses.dim, action_dim=senses.action_dim,
                                    config=config.map, primitives=senses.primitives)
         self.motivation = MotivationEstimator(
@@ -151,7 +151,7 @@ class TMGWRAgent:
         is solved) and the selector records what its last action did. A greedy probe (``learn``
         False) only finds the winner and moves the walk on."""
         x = self.preprocessor(obs, episode_start=outcome.episode_start)  # sensory_preprocessor
-        acted_from = self.winner
+        acted_from = selected_from = self.winner     # (the graph's selector sees no merges)
         self.winner = self.map.experience(x, outcome, learn)             # map_learner
         if self.map.merges:         # nodes merged this step (one node a place)
             self.motivation.merge(self.map.merges)
@@ -162,4 +162,4 @@ class TMGWRAgent:
             self.walk_next = self.stepped and self.selector.policy.draw_ahead()
             self.motivation.update(self.map, skip=self.walk_next)
             self.stepped = True
-        self.selector.record(acted_from, outcome, learn)                 # action_selector
+        self.selector.record(selected_from, outcome, learn)              # action_selector

@@ -1206,6 +1206,72 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
 
 
 @njit(cache=True)
+def option_rows_changed(w, alive, n, touched, delta, L, grid_was, grid, origin, tried, bump_e,
+                        succ, sel, episode, trust, stuck, untried, rows):
+    """The rows ``i < n`` whose :func:`option_row` may read something the map changed
+    (unknown.py, an incremental refresh of Eq. 5'), given the map rows it ``touched`` (a
+    mask of n: weights, alive, links) and the node lookup before (``grid_was``) and after
+    (``grid``) with the same shape and ``origin`` (:func:`cell_grid`): row i itself
+    (its weight, liveness, links); a pair whose remembered successor ``succ[i, a]`` was
+    touched (:func:`at_cell` reads its weight and liveness); a pair whose predicted cell
+    ``w_i + delta_a`` changed its node, or holds a touched node (:func:`node_at` reads
+    its weight); a stale wall this episode may re-test whose successor is unknown
+    (:func:`wall_exits` looks up cells along runs and reads V); with ``untried`` every
+    pair never tried (rho_new changed). Writes them, ascending, to ``rows``; returns how
+    many."""
+    changed = np.zeros(grid.shape, dtype=np.bool_)
+    for r in range(grid.shape[0]):
+        for c in range(grid.shape[1]):
+            q = grid[r, c]
+            changed[r, c] = q != grid_was[r, c] or (0 <= q < n and touched[q])
+    look = grid.shape[0] > 0 and w.shape[1] == 2
+    count = 0
+    for i in range(n):
+        hit = touched[i]
+        if alive[i] and not hit:
+            for a in range(tried.shape[1]):
+                j = succ[i, a]
+                if 0 <= j < n and touched[j]:
+                    hit = True
+                elif not tried[i, a]:
+                    hit = untried
+                elif not stuck and j < 0 and sel[i, a] and stale(bump_e, i, a, episode, trust):
+                    hit = True
+                if not hit and look:
+                    r = int(np.floor((w[i, 0] + delta[a, 0] - origin[0]) / L + 0.5))
+                    c = int(np.floor((w[i, 1] + delta[a, 1] - origin[1]) / L + 0.5))
+                    hit = 0 <= r < grid.shape[0] and 0 <= c < grid.shape[1] and changed[r, c]
+                if hit:
+                    break
+        if hit:
+            rows[count] = i
+            count += 1
+    return count
+
+
+@njit(cache=True)
+def untried_rho(alive, n, tried, chain, lattice, rho_new, rho, rows):
+    """``rho_new`` (the open prior, unknown.py) on every pair of a live node never tried,
+    except a lattice primitive's move of this episode's untried chain (rho 1): while the
+    prior stays above 0 the only value of those options that follows it
+    (:func:`option_row`; a primitive off the lattice: ``OptionRules._unplaced_options``).
+    Writes the rows holding such a pair, ascending, to ``rows``; returns how many."""
+    count = 0
+    for i in range(n):
+        if not alive[i]:
+            continue
+        hit = False
+        for a in range(tried.shape[1]):
+            if not tried[i, a] and not (lattice[a] and chain[i, a]):
+                rho[i, a] = rho_new
+                hit = True
+        if hit:
+            rows[count] = i
+            count += 1
+    return count
+
+
+@njit(cache=True)
 def record_outcome(tried, bump_t, closed_t, bump_e, succ, delta, delta_sq, moves, w, node,
                    winner, inserted, a, bumped, clock, episode):
     """The outcome memory of Eq. 5' after primitive a taken from ``node`` (unknown.py):

@@ -279,6 +279,7 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         self._v0_fresh = False
         self._v0_zero = True
         self._options_key: tuple = ()
+        self._opt_log, self._opt_pos, self._opt_L = None, -1, 0.0   # of the last key change
         self._dirty: set[int] = set()    # rows whose outcome memory changed since update
         self._alive_version, self._alive = -1, 0
         self._winner = -1                # the agent's node (from record)

@@ -1,9 +1,11 @@
 """Sensory preprocessor (section 3.2, Fig. 1a): raw observation -> feature vector.
 
 The agent senses the coordinates of its cell. The preprocessor scales them so that one
-sensor resolution step (one cell) is ``feature_scale`` apart in feature space, whatever the
-size of the maze: the map's thresholds (activity a_T, the goal similarity width) are then
-expressed per resolution step and transfer to mazes of any size. Optionally an exponential
+sensor resolution step (one cell; in another world the resolution step it declares,
+:class:`~tmgwr_agent.core.senses.Senses` ``resolution``, e.g. PointMaze's primitive move)
+is ``feature_scale`` apart in feature space, whatever the size of the maze: the map's
+thresholds (activity a_T, the goal similarity width) are then expressed per resolution
+step and transfer to mazes of any size. Optionally an exponential
 moving average filters noisy sensors (``filter_alpha`` < 1; 1 = no filtering); the filter
 restarts at every episode start because the agent is moved there, not walked.
 """
@@ -21,19 +23,22 @@ from tmgwr_common.params import Config, param
 class PreprocessorConfig(Config):
     feature_scale: float = param(0.1, "feature-space distance of one sensor resolution step "
                                  "(one maze cell)", low=0.0, low_open=True, high=100.0)
-    sensor_resolution: float = param(1.0, "raw sensor units per resolution step (1 cell = "
-                                     "1.0 for the maze simulator)", low=0.0, low_open=True,
+    sensor_resolution: float = param(1.0, "sensor units per resolution step, in the world's "
+                                     "declared resolution steps (Senses.resolution: 1 cell "
+                                     "in the maze simulator)", low=0.0, low_open=True,
                                      high=1e6)
     filter_alpha: float = param(1.0, "EMA weight of the newest observation (1 = no "
                                 "filtering)", low=0.0, low_open=True, high=1.0)
 
 
 class SensoryPreprocessor:
-    """x = feature_scale * raw / sensor_resolution, optionally EMA-filtered."""
+    """x = feature_scale * raw / (sensor_resolution * resolution), optionally EMA-filtered
+    (``resolution``: the world's declared resolution step, Senses.resolution)."""
 
-    def __init__(self, config: PreprocessorConfig = PreprocessorConfig()):
+    def __init__(self, config: PreprocessorConfig = PreprocessorConfig(),
+                 resolution: float = 1.0):
         self.config = config
-        self.gain = config.feature_scale / config.sensor_resolution
+        self.gain = config.feature_scale / (config.sensor_resolution * resolution)
         self.feature_scale = config.feature_scale
         self.filter_alpha = config.filter_alpha
         self._state: np.ndarray | None = None

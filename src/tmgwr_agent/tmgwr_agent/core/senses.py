@@ -5,7 +5,10 @@ cell, no geometry and no transition model. :class:`Senses` is that contract: the
 sensation's dimension and the motor primitives' vectors (the action labels of the
 sensorimotor links, Eq. 1-2), and how near the goal sensation a sensation must be for the
 world to count the goal reached (``goal_tolerance``, in sensation units: 0 where the goal
-is one exact sensation, as a grid cell's coordinates; PointMaze's success radius). It
+is one exact sensation, as a grid cell's coordinates; PointMaze's success radius), and the
+sensor's resolution step (``resolution``, sensation units: how far apart two places lie
+that the world's moves tell apart; 1 for a grid cell's coordinates, PointMaze's
+primitive move in metres), which the preprocessor scales to one feature step. It
 comes from the world, as Gymnasium spaces
 (:meth:`Senses.from_spaces`): a ``Box`` observation, and ``Discrete`` actions whose
 primitives are the world's declared vectors, or one-hot vectors when it declares none.
@@ -33,11 +36,13 @@ class Senses:
     (row a is the vector of action a, the label a link made with it carries);
     ``goal_tolerance``: the largest distance (Euclidean, sensation units) from the goal
     sensation at which the world ends an episode at the goal (0: only the goal sensation
-    itself)."""
+    itself); ``resolution``: the sensor's resolution step (sensation units; the module
+    doc)."""
 
     dim: int
     primitives: np.ndarray
     goal_tolerance: float = 0.0
+    resolution: float = 1.0
 
     def __post_init__(self):
         p = np.ascontiguousarray(self.primitives, dtype=float)
@@ -58,6 +63,11 @@ class Senses:
         object.__setattr__(self, "primitives", p)
         object.__setattr__(self, "dim", int(self.dim))
         object.__setattr__(self, "goal_tolerance", tol)
+        res = float(self.resolution)
+        if not math.isfinite(res) or res <= 0.0:
+            raise SensesError(f"the sensor's resolution step must be a finite distance > 0 "
+                              f"(sensation units), got {self.resolution}")
+        object.__setattr__(self, "resolution", res)
 
     @property
     def n_actions(self) -> int:
@@ -70,10 +80,10 @@ class Senses:
     @classmethod
     def from_spaces(cls, observation_space: Any, action_space: Any,
                     primitives: np.ndarray | None = None,
-                    goal_tolerance: float = 0.0) -> Senses:
+                    goal_tolerance: float = 0.0, resolution: float = 1.0) -> Senses:
         """From Gymnasium spaces: a 1-D ``Box`` observation and ``Discrete`` actions (their
         ``primitives`` declared by the world, else one-hot), and the world's declared
-        ``goal_tolerance``. Refused with the reason otherwise."""
+        ``goal_tolerance`` and ``resolution``. Refused with the reason otherwise."""
         from gymnasium import spaces  # the only place the core meets Gymnasium
         if not isinstance(observation_space, spaces.Box) or \
                 len(observation_space.shape) != 1:
@@ -88,4 +98,4 @@ class Senses:
         primitives = np.asarray(primitives, dtype=float)
         if len(primitives) != n:
             raise SensesError(f"{len(primitives)} motor primitives declared for {n} actions")
-        return cls(int(observation_space.shape[0]), primitives, goal_tolerance)
+        return cls(int(observation_space.shape[0]), primitives, goal_tolerance, resolution)

@@ -73,7 +73,33 @@ sum, ``E = min(1, E_1 + E_2)`` (links of different actions: the more reliable on
 a link between the two goes (a move within a place is not stored, as a bump); terminal
 flags are or-ed. The pairs ``(keep, gone)`` of the last step are in :attr:`merges`, for
 the consumers that keep memory per node (the motivation estimator's outcome memory; over
-the graph, :class:`~tmgwr_agent.map_replica.MapChange` carries them).
+the graph, :class:`~tmgwr_agent.map_replica.MapChange` carries them). A node inserted
+by the step and merged into a known place is that place, not a new node
+(:attr:`inserted` False: the estimator keeps the place's outcome memory).
+
+Noise spreads a place's samples beyond the matching radius, so duplicates also arise that
+never come within the radius. **The radius of a place** is therefore the wider of GWR's
+``-ln a_T`` and the sensing scatter, ``-ln a_place`` (:meth:`SensorimotorMap.
+_place_radius`), which the insertion test and the merges above use: the map keeps each
+primitive's sensed displacement ``x_t - x_{t-1}`` over its moves (not its bumps), their
+mean ``m`` and spread ``s`` (mean squared deviation from ``m``; :attr:`motion`). Where a
+primitive moves by the same vector wherever it is taken, ``s`` is the scatter of two
+samples, twice that of one sample about its place, and ``sqrt(2 s)`` is twice the root
+mean square scatter of a sample: a sample that near its winner is taken as noise on the
+winner's place, not as a new place. Only primitives whose moves stand out of their
+scatter, ``|m| > 2 sqrt(s)``, count (the radius then stays below a step, so neighbouring
+places are not taken for one), the least ``s`` among them. Without noise ``s`` is 0 (a
+grid) or far below the matching radius (PointMaze's physics): GWR's radius stands.
+
+The touch sensor tells of one more case: a *bump* (the primitive
+was blocked) leaves the agent where it was, so the two winners of a bumped step are one
+place, and they are merged as above (:meth:`SensorimotorMap._sensed_move`). A body that
+moves some way before it meets the wall (PointMaze) makes a bump that is not a stay, so
+the map checks the bump against what the primitive normally does: a bump stayed when the
+primitive's moves stand out of their scatter, ``|m| > 2 sqrt(s)``, and this bump's sensed
+displacement lies within it, ``0 < |d|^2 < s`` (:meth:`SensorimotorMap.stayed`).
+Without sensing noise a bump in a grid senses no change (``d = 0``) and a partial move in
+PointMaze lies far beyond the spread of its physics, so no bump is merged.
 
 Storage is fixed-width adjacency (``out[i, :K]`` target ids, -1 = empty slot) so that value
 iteration over the map is a few vectorised numpy operations. Node ids are slot indices; a
@@ -256,6 +282,7 @@ class SensorimotorMap:
         self.config = config
         c = config
         self.a_T, self.h_T = c.a_T, c.h_T
+        self.a_place = c.a_T       # the radius of one place, -ln a_place (_place_radius)
         self.tau_b, self.tau_n, self.kappa_h = c.tau_b, c.tau_n, c.kappa_h
         self.eps_b, self.eps_n = c.eps_b, c.eps_n
         self.insert_at = c.insert_at
@@ -267,11 +294,16 @@ class SensorimotorMap:
         self.merge = c.merge
         self.merges: list[tuple[int, int]] = []   # (keep, gone) of the last step's merges
         self._alloc(_INITIAL_CAPACITY, _INITIAL_DEGREE)
+        # each primitive's sensed displacement over its moves (not bumps): count, mean,
+        # sum of squared deviations (Welford); and the last input (the bump test)
+        self.motion = np.zeros((0 if primitives is None else len(primitives), dim + 2))
+        self.x_prev = np.full(dim, np.nan)
         self.n = 0                 # slots in use are [0, n); dead slots have alive False
         self.version = 0           # bumped on every structural change
         self.prev: int = -1        # previous winner (-1: start of an episode)
         self.winner: int = -1
-        self.inserted = False      # whether the last update inserted a node
+        self.inserted = False      # whether the last update inserted a node (its winner)
+        self.winner_new = -1       # the node the last insertion made
         self.C_t = np.zeros(dim)   # Merge-GNG context of the last input (kernels.match)
         self.log = RowLog()        # the rows each change touched (the estimator's input)
         self.rebuild_in_links()    # (none yet: compiles the kernel where maps are made)
@@ -376,11 +408,11 @@ class SensorimotorMap:
             self.log.touch(i)
 
     def nodes_at(self, i: int) -> np.ndarray:
-        """The live nodes whose weights lie within the GWR's own radius of node i's,
-        ``-ln a_T`` (a winner that near inserts no node): i's place."""
+        """The live nodes whose weights lie within the radius of a place of node i's,
+        ``-ln a_place`` (a winner that near inserts no node): i's place."""
         idx = np.flatnonzero(self.alive[: self.n])
         d = self.w[idx] - self.w[i]
-        return idx[np.einsum("ij,ij->i", d, d) < math.log(self.a_T) ** 2]
+        return idx[np.einsum("ij,ij->i", d, d) < math.log(self.a_place) ** 2]
 
     def experience(self, x: np.ndarray, outcome: Outcome, learn: bool = True) -> int:
         """The map stage of one agent step (Fig. 1a): input x, reached by the outcome's
@@ -395,7 +427,11 @@ class SensorimotorMap:
                 raise ValueError("the map was given no motor primitives: experience() "
                                  "labels links with primitives[action]")
             motor = self.primitives[outcome.action]
+        before = self.prev
         winner = self.step(x, motor, learn=learn)
+        if learn and motor is not None:
+            winner = self._sensed_move(np.asarray(x, dtype=float), outcome, before, winner)
+        self.x_prev[:] = x
         if learn and outcome.ends_episode:
             self.mark_terminal(winner)
         return winner
@@ -414,10 +450,10 @@ class SensorimotorMap:
         # and the merge's first close pair in the same call (kernels.map_step)
         has_action = action is not None
         a = np.asarray(action, dtype=float) if has_action else self.C_t[:0]
-        r2 = math.log(self.a_T) ** 2 if self.merge else -1.0
+        r2 = math.log(self.a_place) ** 2 if self.merge else -1.0
         b, insert, moved, done, changes, ends, ci, cj, linked = kernels.map_step(
             self.w, self.c, self.h, self.alive, self.out, self.inn, self.n, self.prev, x, C,
-            self.alpha_c, self.beta_c, self.a_T, self.h_T, learn, self.eps_b, self.eps_n,
+            self.alpha_c, self.beta_c, self.a_place, self.h_T, learn, self.eps_b, self.eps_n,
             self.tau_b, self.tau_n, self.kappa_h, self.E, self.a, self.age, self.terminal, a,
             has_action, self.alpha, self.sigma_a, self.eta_a, self.E_init, self.E_min,
             self.max_age, self.link_rule == "credit", self.winner, r2)
@@ -461,7 +497,7 @@ class SensorimotorMap:
         """Merge every pair of live nodes within the matching radius of which one is in
         ``moved`` (the nodes this step adapted; the module docstring); returns the
         winner's id after the merges. ``pair``: the first close pair, already found."""
-        r2 = math.log(self.a_T) ** 2
+        r2 = math.log(self.a_place) ** 2
         rows = np.asarray(moved, dtype=np.int64)
         while True:
             i, j = pair if pair is not None else kernels.close_pair(
@@ -473,6 +509,65 @@ class SensorimotorMap:
             self._merge(keep, gone)
             winner = keep if winner == gone else winner
             rows = np.append(rows[rows != gone], keep)
+
+    def _sensed_move(self, x: np.ndarray, outcome: Outcome, before: int,
+                     winner: int) -> int:
+        """After a learning step by primitive ``outcome.action`` from the winner ``before``
+        (the sensation ``x_prev``) to ``winner`` (``x``): a move adds its sensed
+        displacement ``x - x_prev`` to the primitive's statistics (:attr:`motion`); a bump
+        that stayed (:meth:`stayed`) merges its two winners, one place (the module
+        docstring); returns the winner's id after the merges."""
+        a, d = outcome.action, x - self.x_prev
+        if not np.isfinite(d).all():
+            return winner
+        if a >= len(self.motion):           # (a map made or loaded without primitives)
+            self.motion = np.concatenate([self.motion,
+                                          np.zeros((a + 1 - len(self.motion), self.dim + 2))])
+        row = self.motion[a]
+        if not outcome.bumped:
+            row[0] += 1                                    # Welford's running moments
+            dev = d - row[1:-1]
+            row[1:-1] += dev / row[0]
+            row[-1] += float(dev @ (d - row[1:-1]))
+            self._place_radius()
+            return winner
+        before = survivor(before, self.merges)
+        if not self.merge or before < 0 or before == winner or not self.alive[before] \
+                or not self.stayed(a, d):
+            return winner
+        self._merge(before, winner)         # (the node acted from keeps its id)
+        winner = self._merge_close(np.array([before], dtype=np.int64), before)
+        self.prev = self.winner = winner
+        return winner
+
+    def _place_radius(self) -> None:
+        """``a_place``, the activity threshold of one place (the module docstring): GWR's
+        ``a_T``, or the sensing scatter ``sqrt(2 s)`` as the radius where it is wider, ``s``
+        the least spread of a primitive whose moves stand out of their scatter (as in
+        :meth:`stayed`)."""
+        count = self.motion[:, 0]
+        ok = count >= 2
+        s = self.motion[ok, -1] / count[ok]
+        m2 = (self.motion[ok, 1:-1] ** 2).sum(axis=1)
+        s = s[m2 > 4.0 * s]
+        self.a_place = min(self.a_T, math.exp(-math.sqrt(2.0 * float(s.min())))) \
+            if len(s) else self.a_T
+
+    def stayed(self, a: int, d: np.ndarray) -> bool:
+        """Whether a bump of primitive ``a`` that displaced the sensation by ``d`` left the
+        agent where it was, by the primitive's own moves (:attr:`motion`): their mean
+        displacement ``m`` and spread ``s`` (mean squared deviation from ``m``). The
+        primitive moves by more than the sensing scatters, ``|m| > 2 sqrt(s)``, so a stay
+        and a move are told apart (the balls of radius ``sqrt(s)`` round 0 and ``m`` do not
+        overlap), and this bump's displacement is within that scatter of 0,
+        ``0 < |d|^2 < s``: as far as the senses tell, it stayed. (A sensation that did not
+        change at all is no noise: two winners of it differ by their temporal contexts,
+        which the map keeps apart.)"""
+        count, m, m2 = self.motion[a, 0], self.motion[a, 1:-1], self.motion[a, -1]
+        if count < 2:
+            return False
+        s, d2 = m2 / count, float(d @ d)
+        return bool(m @ m > 4.0 * s and 0.0 < d2 < s)
 
     def _merge(self, keep: int, gone: int) -> None:
         """Node ``gone`` becomes part of node ``keep`` (the module docstring): weights and
@@ -500,6 +595,8 @@ class SensorimotorMap:
         self.alive[j] = self.terminal[j] = False
         self.version += 1
         self.merges.append((i, j))
+        if self.inserted and self.winner_new in (i, j):   # a new node merged into a known
+            self.inserted = False                          # place is that place: not new
         self.rebuild_in_links()
         self.log.touch(np.asarray(touched, dtype=np.int64))
 
@@ -543,6 +640,7 @@ class SensorimotorMap:
         self.age[r] = 0
         self.version += 1
         self.inserted = True
+        self.winner_new = r
         self.log.touch(r)
         if stale:               # (a freed slot has no links: removed only when unlinked)
             self.rebuild_in_links()
@@ -570,11 +668,13 @@ class SensorimotorMap:
 
     # ------------------------------------------------------------------ persistence
     def state_dict(self) -> dict[str, np.ndarray]:
+        """The map's arrays (``x_prev`` only once an input was sensed)."""
         n = self.n
-        return {"w": self.w[:n].copy(), "c": self.c[:n].copy(), "h": self.h[:n].copy(),
+        last = {"x_prev": self.x_prev.copy()} if np.isfinite(self.x_prev).all() else {}
+        return {**last, "w": self.w[:n].copy(), "c": self.c[:n].copy(), "h": self.h[:n].copy(),
                 "alive": self.alive[:n].copy(), "out": self.out[:n].copy(),
                 "E": self.E[:n].copy(), "a": self.a[:n].copy(), "age": self.age[:n].copy(),
-                "terminal": self.terminal[:n].copy(),
+                "terminal": self.terminal[:n].copy(), "motion": self.motion.copy(),
                 "meta": np.array([self.version, self.prev, self.winner], dtype=np.int64)}
 
     def load_state_dict(self, s: dict[str, np.ndarray]) -> None:
@@ -587,6 +687,13 @@ class SensorimotorMap:
             getattr(self, name)[:n] = s[name]
         if "terminal" in s:                 # maps saved before the flag have none set
             self.terminal[:n] = s["terminal"]
+        # the sensed moves' statistics and the last input (absent from older maps, or
+        # of another dimension: learnt anew)
+        if "motion" in s and s["motion"].shape[1:] == (self.dim + 2,):
+            self.motion = np.array(s["motion"], dtype=float)
+        last = s.get("x_prev")
+        self.x_prev[:] = last if last is not None and last.shape == (self.dim,) else np.nan
+        self._place_radius()
         self.n = n
         self.version, self.prev, self.winner = (int(v) for v in s["meta"])
         self.log.invalidate()

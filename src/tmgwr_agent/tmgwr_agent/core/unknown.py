@@ -596,12 +596,15 @@ class OptionRules:
 
     def refresh_options(self, m: SensorimotorMap, n: int) -> None:
         """U and rho of every option (:func:`kernels.option_values`), recomputed in full
-        when the map's structure, the goal, the node count, the stuck state, the stale
-        clock (episodes; when stuck, ticks of the step clock) or the re-test budget
-        changed, else only on the rows whose outcome memory :meth:`record` changed
-        (weights drift a little between full passes; a pow per pair and step would
-        dominate the step time). Absorbing nodes keep theirs unused (Eq. 5' gives them
-        no successor)."""
+        when the goal, the frame, the node count, the stuck state, the stale clock
+        (episodes; when stuck, ticks of the step clock) or the re-test budget changed;
+        when only the map's structure changed (its version), on the rows whose options
+        read what the map's change log lists (:meth:`_changed_option_rows`, the same
+        values as a full pass on the same forward model); else only on the rows whose
+        outcome memory :meth:`record` changed. Weights and the forward model drift a
+        little between passes, and a row keeps the values of its last pass (a pow per
+        pair and step would dominate the step time). Absorbing nodes keep theirs unused
+        (Eq. 5' gives them no successor)."""
         stuck = self._stuck = self.stuck(m, n)
         nodes = self.nodes_alive(m, n)
         clock, T = self.stuck_clock(nodes)
@@ -611,11 +614,21 @@ class OptionRules:
         key = ((m.version, self.frame.version), clock if stuck else self.episode, n, stuck,
                spent, rho_max)
         if key != self._options_key:
+            rows = None
             if self._options_key[:1] != key[:1]:
+                was = self._grid, self._origin
                 self._grid, self._origin = kernels.cell_grid(F.w, m.alive, n, F.L)
+                if self._options_key[1:] == key[1:] and key[0][1] == self._options_key[0][1]:
+                    rows = self._changed_option_rows(m, n, F, *was, stuck)
             self._options_key = key
-            self.rho_new = self.open_prior(m, n)
-            rows = np.arange(n)
+            if rows is None:
+                self.rho_new = self.open_prior(m, n)
+                rows = np.arange(n)
+            log = getattr(m, "log", None)
+            self._opt_log, self._opt_L = log, F.L
+            self._opt_pos = log.pos if log is not None else -1
+            rows = np.union1d(rows, np.fromiter(self._dirty, dtype=np.int64)) \
+                if len(rows) < n and self._dirty else rows
         elif self._dirty:
             rows = np.fromiter(self._dirty, dtype=np.int64)
         else:
@@ -631,6 +644,39 @@ class OptionRules:
                               self.U, self.rho, self.osucc, self.onb, self.ong)
         if not self.lattice.all():
             self._unplaced_options(m, rows[rows < n], np.flatnonzero(~self.lattice))
+
+    def _changed_option_rows(self, m: SensorimotorMap, n: int, F, grid_was: np.ndarray,
+                             origin_was: np.ndarray, stuck: bool) -> np.ndarray | None:
+        """When only the map's structure changed since the options were last valued in
+        full or by this method (a link made or deleted, a node inserted or removed), the
+        rows whose options may read what changed (:func:`kernels.option_rows_changed`,
+        from the rows the map's change log lists since then); None when a full refresh
+        is due: the log cannot list them, the link length or the node lookup's extent
+        moved. Sets ``rho_new``: a change writes it on every untried pair
+        (:func:`kernels.untried_rho`; those rows join the ones the solve compares), or
+        re-values their rows when it goes to or from 0."""
+        log = getattr(m, "log", None)
+        touched_rows = log.since(self._opt_pos) if log is not None and \
+            log is self._opt_log else None
+        if touched_rows is None or F.L != self._opt_L or grid_was.shape != self._grid.shape \
+                or not np.array_equal(self._origin, origin_was):
+            return None
+        touched = np.zeros(n, dtype=bool)
+        touched[touched_rows[touched_rows < n]] = True
+        rho_new, self.rho_new = self.rho_new, self.open_prior(m, n)
+        rows = np.empty(n, dtype=np.int64)
+        untried = rho_new != self.rho_new
+        if untried and rho_new > 0.0 and self.rho_new > 0.0:   # rho alone follows it
+            c = kernels.untried_rho(m.alive, n, self.tried, self.chain, self.lattice,
+                                    self.rho_new, self.rho, rows)
+            self._opt_rows = rows[:c].copy() if self._opt_rows is None else \
+                np.union1d(self._opt_rows, rows[:c])            # for the solve to compare
+            untried = False
+        c = kernels.option_rows_changed(F.w, m.alive, n, touched, F.delta, F.L, grid_was,
+                                        self._grid, self._origin, self.tried, self.bump_e,
+                                        self.succ, self.sel, self.episode,
+                                        self.stale_horizon, stuck, untried, rows)
+        return rows[:c]
 
     def _unplaced_options(self, m: SensorimotorMap, rows: np.ndarray,
                           prims: np.ndarray) -> None:

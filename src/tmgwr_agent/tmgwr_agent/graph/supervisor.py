@@ -298,8 +298,9 @@ def _print_line(line: str) -> None:
 
 # ---------------------------------------------------------------------- the graph itself
 #: The nodes that declare ``world`` (tmgwr_common.params.WORLD_PARAM): the simulator hosts
-#: it, the agent nodes take its motor primitives.
-WORLD_NODES = ("maze_sim", "map_learner", "motivation_estimator", "action_selector")
+#: it, the agent nodes take its senses (motor primitives, resolution).
+WORLD_NODES = ("maze_sim", "sensory_preprocessor", "map_learner", "motivation_estimator",
+               "action_selector")
 
 
 def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | None = None,

@@ -10,6 +10,7 @@ from __future__ import annotations
 from rclpy.node import Node
 
 from tmgwr_agent.core.preprocessor import PreprocessorConfig, SensoryPreprocessor
+from tmgwr_agent.world_senses import node_senses
 from tmgwr_common import topics
 from tmgwr_common.cdr import codec
 from tmgwr_common.lockstep import Lockstep
@@ -21,6 +22,7 @@ from tmgwr_common.node import (
     run,
     subscribe_decoded,
 )
+from tmgwr_common.params import WORLD_PARAM
 from tmgwr_interfaces.msg import Features, Observation
 
 FEATURES = codec(Features)
@@ -29,8 +31,8 @@ FEATURES = codec(Features)
 class SensoryPreprocessorNode(Node):
     def __init__(self):
         super().__init__("sensory_preprocessor", **NODE_OPTIONS)
-        config = declare_parameters(self, PreprocessorConfig)
-        self.core = SensoryPreprocessor(config)
+        config, p = declare_parameters(self, PreprocessorConfig, (WORLD_PARAM,))
+        self.core = SensoryPreprocessor(config, node_senses(p["world"]).resolution)
         pub = self.create_publisher(Features, topics.FEATURES, STEP_QOS)
         self.lockstep = Lockstep(pub, logger=self.get_logger(), what="observation")
         subscribe_decoded(self, Observation, topics.OBSERVATION, self.on_observation, STEP_QOS)
