@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import glob
+import math
 import os
 import sys
 
@@ -1644,6 +1645,45 @@ def link_step(out, E, A, age, inn, alive, terminal, n, i, j, a, alpha, sigma_a, 
             alive[k] = False
             changes += 1
     return changes, ends
+
+
+@njit(cache=True)
+def place_activity(motion, a_T):
+    """The activity threshold of one place (sensorimotor_map, One node a place): GWR's
+    ``a_T``, or ``exp(-sqrt(2 s))`` where that radius is wider, ``s`` the least spread of a
+    primitive (rows of ``motion``: count, mean displacement, sum of squared deviations)
+    whose moves stand out of their scatter, ``|m|^2 > 4 s``."""
+    k = motion.shape[1] - 2
+    smin = np.inf
+    for p in range(motion.shape[0]):
+        count = motion[p, 0]
+        if count < 2:
+            continue
+        s = motion[p, k + 1] / count
+        m2 = 0.0
+        for j in range(k):
+            m2 += motion[p, 1 + j] ** 2
+        if m2 > 4.0 * s and s < smin:
+            smin = s
+    if smin == np.inf:
+        return a_T
+    return min(a_T, math.exp(-math.sqrt(2.0 * smin)))
+
+
+@njit(cache=True)
+def sensed_motion(motion, a, d, a_T):
+    """Add the sensed displacement ``d`` of a move by primitive ``a`` to its running
+    moments in ``motion`` (Welford: count, mean, sum of squared deviations); returns the
+    activity threshold of one place after it (:func:`place_activity`)."""
+    k = motion.shape[1] - 2
+    motion[a, 0] += 1.0
+    m2 = 0.0
+    for j in range(k):
+        dev = d[j] - motion[a, 1 + j]
+        motion[a, 1 + j] += dev / motion[a, 0]
+        m2 += dev * (d[j] - motion[a, 1 + j])
+    motion[a, k + 1] += m2
+    return place_activity(motion, a_T)
 
 
 @njit(cache=True)

@@ -523,13 +523,8 @@ class SensorimotorMap:
         if a >= len(self.motion):           # (a map made or loaded without primitives)
             self.motion = np.concatenate([self.motion,
                                           np.zeros((a + 1 - len(self.motion), self.dim + 2))])
-        row = self.motion[a]
-        if not outcome.bumped:
-            row[0] += 1                                    # Welford's running moments
-            dev = d - row[1:-1]
-            row[1:-1] += dev / row[0]
-            row[-1] += float(dev @ (d - row[1:-1]))
-            self._place_radius()
+        if not outcome.bumped:                 # Welford's running moments, then a_place
+            self.a_place = kernels.sensed_motion(self.motion, a, d, self.a_T)
             return winner
         before = survivor(before, self.merges)
         if not self.merge or before < 0 or before == winner or not self.alive[before] \
@@ -545,13 +540,7 @@ class SensorimotorMap:
         ``a_T``, or the sensing scatter ``sqrt(2 s)`` as the radius where it is wider, ``s``
         the least spread of a primitive whose moves stand out of their scatter (as in
         :meth:`stayed`)."""
-        count = self.motion[:, 0]
-        ok = count >= 2
-        s = self.motion[ok, -1] / count[ok]
-        m2 = (self.motion[ok, 1:-1] ** 2).sum(axis=1)
-        s = s[m2 > 4.0 * s]
-        self.a_place = min(self.a_T, math.exp(-math.sqrt(2.0 * float(s.min())))) \
-            if len(s) else self.a_T
+        self.a_place = kernels.place_activity(self.motion, self.a_T)
 
     def stayed(self, a: int, d: np.ndarray) -> bool:
         """Whether a bump of primitive ``a`` that displaced the sensation by ``d`` left the
