@@ -35,8 +35,10 @@ from tmgwr_common.params import ParamError, check_params_file, params_for, read_
 SPLIT = ["--suite", "blocking:1,open:1", "--open-suite", "shortcut:1", "--seeds", "1"]
 
 
-def tune(tmp_path, *args, check=True):
-    return cli("tune", "q_learning", *SPLIT, "--storage", tmp_path / "study.journal",
+def tune(tmp_path, *args, check=True, split=SPLIT):
+    """``./tmgwr tune q_learning`` on the training ``split``, its study and outputs in
+    ``tmp_path``."""
+    return cli("tune", "q_learning", *split, "--storage", tmp_path / "study.journal",
                "--study", "s", "--params-out", tmp_path / "best.yaml", "--json",
                tmp_path / "summary.json", "--quiet", *args, check=check)
 

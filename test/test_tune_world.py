@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 from test_experiments import cli
 from test_minigrid_world import TINY
+from test_tune import tune as tune_on
 
 from maze_sim.worlds import parse_world
 from tmgwr_agent.experiments.parallel import trial_seeds
@@ -24,9 +25,7 @@ SPLIT = ["--suite", "open:1", "--open-weight", "0", "--seeds", "1"]
 
 
 def tune(tmp_path, *args, check=True):
-    return cli("tune", "q_learning", *SPLIT, "--storage", tmp_path / "study.journal",
-               "--study", "s", "--params-out", tmp_path / "best.yaml", "--json",
-               tmp_path / "summary.json", "--quiet", *args, check=check)
+    return tune_on(tmp_path, *args, check=check, split=SPLIT)
 
 
 def test_a_minigrid_study_runs_its_suite_in_minigrid(tmp_path):
