@@ -47,13 +47,26 @@ def moves_of(mo, w, steps):
         mo.record(node, winner, False, Outcome(a), w)
 
 
+def link_moves(m, steps):
+    """The links of the moves ``steps`` (node, action, winner) in map m, as the map
+    learns them (the outcome memory and the map agree)."""
+    for node, _, winner in steps:
+        if not (m.out[node] == winner).any():
+            s = int(np.flatnonzero(m.out[node] < 0)[0])
+            m.out[node, s], m.E[node, s] = winner, 1.0
+    m.rebuild_in_links()
+    m.version += 1
+    m.log.invalidate()
+
+
 def test_the_estimator_keeps_the_spread_and_drops_the_options_it_cannot_place():
     # a ring of four places; primitive 0 always steps +col (a lattice step), primitive 1
     # steps along the ring whichever way it faces (heading-dependent)
     w = 0.1 * np.array([[0.0, 0.0], [0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 2.0]])
     mo = MotivationEstimator(MotivationConfig(), primitives=np.eye(2))
     mo.set_goal(w[4])
-    moves_of(mo, w, [(0, 0, 1), (1, 1, 2), (2, 1, 3), (3, 1, 0), (0, 1, 1)])
+    ring = [(0, 0, 1), (1, 1, 2), (2, 1, 3), (3, 1, 0), (0, 1, 1)]
+    moves_of(mo, w, ring)
     np.testing.assert_allclose(mo.spread()[0], 0.0, atol=1e-12)
     d = np.array([w[2] - w[1], w[3] - w[2], w[0] - w[3], w[1] - w[0]])
     np.testing.assert_allclose(mo.delta[1], d.mean(axis=0), atol=1e-12)
@@ -62,6 +75,7 @@ def test_the_estimator_keeps_the_spread_and_drops_the_options_it_cannot_place():
     m = SensorimotorMap(dim=2, action_dim=2)
     for x in w[:4]:
         m.step(x, None)
+    link_moves(m, ring)
     mo.update(m)
     np.testing.assert_array_equal(mo.lattice, [True, False])
     assert mo.value_unknown
@@ -69,6 +83,7 @@ def test_the_estimator_keeps_the_spread_and_drops_the_options_it_cannot_place():
     assert not mo.rho[:4, 1].any() and mo.rho[:4, 0].any()
     # every primitive inconsistent: only untried pairs have options, into unknown space
     moves_of(mo, w, [(1, 0, 3), (3, 0, 1)])
+    link_moves(m, [(1, 0, 3), (3, 0, 1)])
     mo.record(-1, 1, False, EPISODE_START, w)
     m.step(w[4], None)                     # a fifth node, nothing tried from it
     mo.update(m)
@@ -78,7 +93,10 @@ def test_the_estimator_keeps_the_spread_and_drops_the_options_it_cannot_place():
     np.testing.assert_allclose(mo.rho[4, :2], mo.rho_new)
     np.testing.assert_allclose(mo.U[4, :2], mo.v_star)
     assert (mo.osucc[: m.n, :2] == -1).all()
-    assert mo.goal_node == -1 and not mo.R.any()    # the goal never sensed
+    # no episode ended at the goal, but node 4's weights lie in the goal region (the
+    # goal sensation itself, tolerance 0): it represents the goal, R = 1 there alone
+    assert mo.goal_node == 4
+    np.testing.assert_array_equal(mo.R[: m.n], [0.0, 0.0, 0.0, 0.0, 1.0])
     # the spread travels with the outcome memory
     mo2 = MotivationEstimator(MotivationConfig(), primitives=np.eye(2))
     mo2.load_state_dict(mo.state_dict())

@@ -226,8 +226,12 @@ class PoseSensation(gym.ObservationWrapper):
 
     #: The goal sensation has a zero heading and any heading at the goal cell reaches it:
     #: every sensation there lies at the heading vector's length, 1, from it, every other
-    #: sensation farther (``Senses.goal_tolerance``).
-    GOAL_TOLERANCE = 1.0
+    #: sensation at sqrt(2) or farther (a neighbouring cell). Any radius in [1, sqrt 2)
+    #: tells exactly which sensations end an episode at the goal; the world declares the
+    #: one halfway (``Senses.goal_tolerance``), because the agent judges its map's nodes
+    #: by it and a node's weights are a mean of the sensations it matched, a little off
+    #: each of them: halfway, a node is counted with the sensations it lies nearer to.
+    GOAL_TOLERANCE = (1.0 + math.sqrt(2.0)) / 2.0
 
     def __init__(self, env: gym.Env, offset: int = 0):
         super().__init__(env)

@@ -489,10 +489,22 @@ class OptionRules:
         """Goal node and rewards without a lattice (no primitive consistent, frame.py):
         the test "a node within half a step of the goal sensation" and Eq. 10's width in
         link lengths both measure steps by a lattice, so the goal is represented by the
-        nodes where the agent sensed it (``goal_seen``, the outcome's goal sensing): R = 1
-        there, 0 elsewhere, the goal node the one of them nearest the goal sensation (-1
-        before any: the options lead). Returns n."""
+        nodes where the agent sensed it: where the world said so (``goal_seen``, the
+        outcome's goal sensing, since the goal was set), and the nodes whose weights lie in
+        the goal region itself, within ``goal_tolerance`` of the goal sensation (no step
+        beyond it: that needs a lattice). R = 1 there, 0 elsewhere, the goal node the one
+        of them nearest the goal sensation (-1 before any: the options lead). Returns n.
+
+        Why the region: a node's weights are a mean of the sensations it matched, and the
+        world declares every sensation of the region a goal sensation, so a node whose
+        weights lie in it is a place the agent has sensed the goal at, whatever the goal
+        was then. Without it, a goal moved to a place the map already holds is not
+        represented until an episode happens to end there again, and the agent, every
+        potential 0 and no unknown left to lead it, random-walks until then."""
         seen = self.goal_seen[:n] & m.alive[:n]
+        if self.goal_x is not None:
+            d = m.w[:n] - self.goal_x
+            seen |= m.alive[:n] & (np.einsum("ij,ij->i", d, d) <= self.goal_tolerance ** 2)
         R = seen.astype(float)
         if len(self.R) != n or not np.array_equal(R, self.R):
             self.R = R
@@ -683,20 +695,38 @@ class OptionRules:
         """The options of the primitives ``prims`` that make no lattice step (frame.py),
         on the nodes ``rows``. The forward model cannot place their successor, so no rule
         that looks a place up applies (a known node there, a wall's exits, the untried
-        chain, a closed cell): only a primitive never taken from i has an option, into
-        unknown space, ``rho = rho_new`` and ``U = V* gamma^h``, ``h = max(0, |w_i - x_g|
-        / l - 1)`` with ``l`` the root mean square step of the longest-moving primitive:
-        a path of k moves covers about k l at most (the triangle inequality, in the
-        sensation's own norm), so h does not overestimate the steps from the successor to
-        the goal (the A* argument of the module docstring holds without a lattice)."""
+        chain, a closed cell). A primitive never taken from i has an option into unknown
+        space, ``rho = rho_new`` and ``U = V* gamma^h``, ``h = max(0, |w_i - x_g| / l -
+        1)`` with ``l`` the root mean square step of the longest-moving primitive: a path
+        of k moves covers about k l at most (the triangle inequality, in the sensation's
+        own norm), so h does not overestimate the steps from the successor to the goal
+        (the A* argument of the module docstring holds without a lattice).
+
+        A primitive whose last try from i moved it to ``j = succ[i, a]`` while the map
+        has since deleted that link (it aged out: :mod:`~tmgwr_agent.core.
+        sensorimotor_map`) has an option into j with ``rho = 1``, as on a lattice
+        (:func:`kernels.option_row`): the deletion forgot a move nothing contradicted,
+        and where the map cannot place a successor the outcome memory is the only place
+        that knows it. Without it a route whose links aged out while the agent did not
+        use them (a goal moved to a part of the map it left) is neither known nor
+        unknown, and the agent random-walks round it. j must be alive and within one
+        move's reach of i (twice ``l``): a slot freed and reused elsewhere is not."""
         r, a = rows[:, None], prims[None, :]
-        untried = ~self.tried[r, a] & m.alive[rows][:, None]
+        live = m.alive[rows][:, None]
+        untried = ~self.tried[r, a] & live
         step = math.sqrt(max(float(self.delta_sq.max()), 0.0))
         gap = np.sqrt(np.einsum("ij,ij->i", m.w[rows] - self.goal_x, m.w[rows] - self.goal_x))
         h = np.maximum(gap / step - 1.0, 0.0) if step > 0.0 else np.zeros(len(rows))
-        self.rho[r, a] = np.where(untried, self.rho_new, 0.0)
+        j = self.succ[r, a]
+        jc = np.maximum(j, 0)
+        lost = (live & self.tried[r, a] & (self.bump_t[r, a] < 0) & (j >= 0) & (j != r)
+                & m.alive[jc] & ~(m.out[rows][:, None, :] == j[..., None]).any(axis=-1))
+        if lost.any():
+            d = m.w[jc] - m.w[rows][:, None, :]
+            lost &= np.einsum("ijk,ijk->ij", d, d) <= (2.0 * step) ** 2
+        self.rho[r, a] = np.where(untried, self.rho_new, np.where(lost, 1.0, 0.0))
         self.U[r, a] = np.where(untried, (self.v_star * self.gamma ** h)[:, None], 0.0)
-        self.osucc[r, a] = -1
+        self.osucc[r, a] = np.where(lost, j, -1)
 
     def open_prior(self, m: SensorimotorMap, n: int) -> float:
         """rho of a primitive never tried (Eq. 5'): ``untried_rho``, or when that is

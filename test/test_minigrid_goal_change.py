@@ -1,0 +1,114 @@
+"""Goal changes in MiniGrid (issue 26): the sensation is (row, col, cos h, sin h), no
+primitive makes a lattice step (core/frame.py), and a goal is a region of the four poses
+of its cell. The world declares its goal radius halfway between the goal cell's
+sensations and the nearest others; the agent counts a node whose weights lie in that
+region as a goal node (``OptionRules.sensed_goal``), so a goal moved to a place the map
+knows is planned for at once; a move whose link aged out keeps an option into the node it
+led to (``OptionRules._unplaced_options``)."""
+
+import math
+
+import numpy as np
+from small_mazes import SMALL
+
+from maze_sim.maze import Maze
+from maze_sim.minigrid_world import HEADING_STEP, MiniGridWorld, PoseSensation
+from tmgwr_agent.core.agent import TMGWRAgent
+from tmgwr_agent.experiments.runner import run_episode
+from tmgwr_agent.world_senses import world_senses
+
+
+def trained(goal: str = "G", episodes: int = 12, seed: int = 0):
+    """A default agent trained on ``goal`` of SMALL in MiniGrid, and its world."""
+    world = MiniGridWorld(Maze.from_text(SMALL), goal, max_episode_steps=3000)
+    agent = TMGWRAgent(world_senses(world), np.random.default_rng(seed))
+    agent.set_goal(world.goal, world.goal_observation())
+    for _ in range(episodes):
+        run_episode(world, agent)
+    return world, agent
+
+
+def cell_of(agent, i):
+    """The maze cell of node i's weights."""
+    w = agent.map.w[i] / agent.preprocessor.gain
+    return int(round(w[0])), int(round(w[1]))
+
+
+def test_the_goal_radius_tells_the_goal_cell_apart_halfway():
+    """Every pose at the goal cell lies within the radius of the goal sensation, every pose
+    elsewhere beyond it, and the radius lies as far from the first (1) as from the nearest
+    of the others (sqrt 2)."""
+    world = MiniGridWorld(Maze.from_text(SMALL), "G")
+    tol, goal = world.goal_tolerance, world.goal_observation()
+    assert world_senses(world).goal_tolerance == tol == PoseSensation.GOAL_TOLERANCE
+    assert math.isclose(tol - 1.0, math.sqrt(2.0) - tol)
+    rows, cols = world.walls.shape
+    for r in range(rows):
+        for c in range(cols):
+            for h in range(len(HEADING_STEP)):
+                d = np.linalg.norm(PoseSensation.sensation(r, c, h) - goal)
+                assert (d <= tol) == ((r, c) == world.goal), (r, c, h, d)
+
+
+def test_a_goal_moved_to_a_place_the_map_knows_is_represented_at_once():
+    """Trained on G, the map holds nodes at goal 1's cell; when the goal moves there they
+    are the goal nodes from the first solve (R = 1 on them alone), before any episode
+    ends there (before: R = 0 everywhere until one did, and the agent random-walked)."""
+    world, agent = trained()
+    m = agent.map
+    target = world.check_goal("1")
+    there = [i for i in np.flatnonzero(m.alive[: m.n]) if cell_of(agent, i) == target]
+    assert there, "the training never visited goal 1's cell"
+    world.set_goal("1", keep_previous=True)
+    agent.set_goal(world.goal, world.goal_observation())
+    obs, _ = world.reset()
+    agent.begin_episode(obs)
+    mo = agent.motivation
+    assert not mo.lattice.any()                      # the goal without a lattice
+    goal_nodes = np.flatnonzero(mo.R[: m.n] > 0)
+    assert mo.goal_node in goal_nodes.tolist()
+    assert sorted(goal_nodes.tolist()) == sorted(there)
+    np.testing.assert_array_equal(mo.R[goal_nodes], 1.0)
+    assert mo.V[agent.winner] > 0.0                  # a route is planned from S
+
+
+def test_after_goal_changes_no_episode_ends_at_the_previous_goal():
+    """Goals G -> 1 -> 2 (the previous goal stays terminal; neither shortest path passes
+    it), three trained agents: every episode after each change ends at the current goal,
+    the first within twice the world's oracle (before: the moved goal was unknown to the
+    map until an episode happened to end there)."""
+    for seed in range(3):
+        world, agent = trained(episodes=10, seed=seed)
+        for goal in ("1", "2"):
+            world.set_goal(goal, keep_previous=True)
+            agent.set_goal(world.goal, world.goal_observation())
+            oracle = world.shortest_path_length()
+            for k in range(4):
+                ep = run_episode(world, agent)
+                assert ep.reached_goal and not ep.reached_previous_goal, (seed, goal, k, ep)
+                if k == 0:
+                    assert ep.steps <= 2 * oracle, (seed, goal, ep.steps, oracle)
+
+
+def test_a_move_whose_link_aged_out_keeps_an_option_into_where_it_led():
+    """A move from i to j whose link the map deletes (by age) is neither known (no link)
+    nor untried: it keeps an option into j with rho 1, as on a lattice; while the link
+    stands it has none."""
+    world, agent = trained(episodes=6)
+    m, mo = agent.map, agent.motivation
+    n = m.n
+    pairs = [(i, a, int(mo.succ[i, a])) for i in range(n) for a in range(mo.n_primitives)
+             if m.alive[i] and mo.tried[i, a] and mo.bump_t[i, a] < 0
+             and mo.succ[i, a] not in (-1, i) and i != agent.winner
+             and (m.out[i] == mo.succ[i, a]).any()]
+    assert pairs
+    i, a, j = pairs[len(pairs) // 2]
+    mo.update(m)
+    assert mo.rho[i, a] == 0.0 and mo.osucc[i, a] == -1      # known: its link
+    s = int(np.flatnonzero(m.out[i] == j)[0])
+    m.out[i, s], m.E[i, s] = -1, 0.0                          # the link ages out
+    m.rebuild_in_links()
+    m.version += 1
+    m.log.touch(np.array([i, j]))
+    mo.update(m)
+    assert mo.rho[i, a] == 1.0 and mo.osucc[i, a] == j
