@@ -616,7 +616,7 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         inc.log, inc.log_pos, inc.epoch = log, (log.pos if log is not None else -1), self._epoch
         if swept:
             if done < 0:
-                return self._declined("budget")
+                return self._continued(m, n, R, absorbing)
             self.solves["incremental"] += 1
             return True
         relinked_o = False
@@ -644,7 +644,30 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
                                              inc.heap, inc.pos, inc.key)
         if done < 0:
             self.solves["incremental"] -= 1
+            return self._continued(m, n, R, absorbing)
+        return True
+
+    def _continued(self, m: SensorimotorMap, n: int, R: np.ndarray, absorbing: np.ndarray
+                   ) -> bool:
+        """An incremental solve over its budget goes on from the V it left, not from V = 0:
+        every node whose target (:func:`kernels.node_target`) is off its V by more than
+        the tolerance is queued and solved in order of value (:func:`kernels.ordered_solve`
+        over all nodes), at most ``ORDERED_BUDGET`` updates a node. Eq. 4-5' is a
+        contraction (gamma < 1, E and rho at most 1), so its fixed point is one whatever V
+        it starts from, and a solve that ends with every node meeting the stopping rule
+        ends where one from V = 0 does, within the same tolerance; the copy of the inputs
+        and the predecessors are already those of this map (the incremental solve brought
+        them up to date). False (counted ``budget``: the ordered solve from V = 0 takes
+        over) when this too outgrows its budget."""
+        inc = self._inc
+        done = kernels.ordered_solve(
+            m.out, m.E, R, self.V, n, self.gamma, self.vi_tol * (1.0 - self.gamma), V_FLOOR,
+            absorbing, m.alive, self.U, self.rho, self.osucc, self.onb, self.ong, inc.first,
+            inc.pred, np.arange(n, dtype=np.int64), n, ORDERED_BUDGET * n, inc.heap,
+            inc.pos, inc.key)
+        if done < 0:
             return self._declined("budget")
+        self.solves["continued"] = self.solves.get("continued", 0) + 1
         return True
 
     def _declined(self, why: str) -> bool:
