@@ -406,3 +406,24 @@ def test_the_greedy_probes_potentials_after_a_goal_change_are_exact():
         np.testing.assert_allclose(V0[:n], ref[:n], rtol=mot.vi_tol, atol=1e-12)
         run_episode(world, agent, max_steps=3000)
 
+
+@pytest.mark.parametrize("dim", [2, 3, 4])
+def test_the_median_link_length_is_numpys_to_the_bit(dim):
+    """MotivationEstimator.link_scale gathers the links' differences in a kernel
+    (kernels.link_differences) and takes their norms and median with numpy as the
+    indexing it replaces did: the same value to the bit (a summation in another order
+    would move the frame's L by an ulp and every trajectory after it)."""
+    from types import SimpleNamespace
+
+    from tmgwr_agent.core.motivation import MotivationEstimator
+
+    rng = np.random.default_rng(dim)
+    n = 300
+    out = np.where(rng.random((n + 20, 5)) < 0.6, rng.integers(0, n, (n + 20, 5)), -1)
+    m = SimpleNamespace(n=n, out=out, w=rng.normal(size=(n + 20, dim)) * 0.37)
+    src, tgt = np.nonzero(out[:n] >= 0)
+    d = m.w[src] - m.w[out[src, tgt]]
+    assert MotivationEstimator.link_scale(m) == float(np.median(np.sqrt(
+        np.einsum("ij,ij->i", d, d))))
+    m.out = np.full_like(out, -1)
+    assert MotivationEstimator.link_scale(m) == 0.0

@@ -113,6 +113,23 @@ def incident_neighbours(out, inn, n, b):
 
 
 @njit(cache=True)
+def link_differences(w, out, n, d):
+    """``w_i - w_j`` of every link i -> j of the rows ``i < n``, row by row and slot by slot
+    (the order of ``np.nonzero(out[:n] >= 0)``), written to the rows of ``d``; returns how
+    many (the median link length, motivation.py, takes their norms with numpy as
+    before, so that it is the same to the bit)."""
+    c = 0
+    for i in range(n):
+        for s in range(out.shape[1]):
+            j = out[i, s]
+            if j >= 0:
+                for k in range(w.shape[1]):
+                    d[c, k] = w[i, k] - w[j, k]
+                c += 1
+    return c
+
+
+@njit(cache=True)
 def in_links(out, n, inn):
     """The sources of the links into every node: ``inn[j]`` lists each i with a link
     i -> j once (-1: empty slots), the reverse of ``out``; returns False when some row of

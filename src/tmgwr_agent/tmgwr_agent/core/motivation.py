@@ -331,11 +331,12 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
     # ------------------------------------------------------------------ Eq. 4-5'
     @staticmethod
     def link_scale(m: SensorimotorMap) -> float:
-        """Median length of the map's links in feature space (0 if it has none)."""
-        src, tgt = np.nonzero(m.out[: m.n] >= 0)
-        if not len(src):
+        """Median length of the map's links in feature space (0 if it has none); the
+        links' differences gathered by :func:`kernels.link_differences`."""
+        d = np.empty((m.n * m.out.shape[1], m.w.shape[1]))
+        d = d[:kernels.link_differences(m.w, m.out, m.n, d)]
+        if not len(d):
             return 0.0
-        d = m.w[src] - m.w[m.out[src, tgt]]
         return float(np.median(np.sqrt(np.einsum("ij,ij->i", d, d))))
 
     def rewards(self, F: Frame, m: SensorimotorMap, g: int,
