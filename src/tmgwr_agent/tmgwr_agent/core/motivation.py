@@ -192,12 +192,30 @@ class IncrementalState:
     @classmethod
     def of(cls, m: SensorimotorMap, n: int, R: np.ndarray, absorbing: np.ndarray,
            est: "MotivationEstimator") -> "IncrementalState":
-        """The state after a full solve on map m (rewards R, the absorbing mask)."""
-        return cls(n, est.goal_node, m.out[:n].copy(), m.E[:n].copy(), R[:n].copy(),
-                   absorbing[:n].copy(), est.rho.copy(), est.U.copy(), est.osucc.copy(),
-                   est.onb.copy(), est.ong.copy(),
-                   *kernels.predecessors(m.out, n, m.alive, est.osucc, est.onb),
-                   log=getattr(m, "log", None), epoch=est._epoch)
+        """The state after a full solve on map m (rewards R, the absorbing mask); the
+        estimator's last state is written over when its arrays have these shapes (a goal
+        change on a map of the same size: no new pages to fault in)."""
+        old = est._inc
+        src = (m.out[:n], m.E[:n], R[:n], absorbing[:n], est.rho, est.U, est.osucc,
+               est.onb, est.ong)
+        if old is None or old.n != n or any(a.shape != b.shape for a, b in zip(
+                old.copies(), src)):
+            return cls(n, est.goal_node, *(a.copy() for a in src),
+                       *kernels.predecessors(m.out, n, m.alive, est.osucc, est.onb),
+                       log=getattr(m, "log", None), epoch=est._epoch)
+        for a, b in zip(old.copies(), src):
+            np.copyto(a, b)
+        old.goal_node = est.goal_node
+        old.first, old.pred = kernels.predecessors(m.out, n, m.alive, est.osucc, est.onb)
+        log = getattr(m, "log", None)
+        old.log, old.log_pos, old.epoch = log, (log.pos if log is not None else -1), \
+            est._epoch
+        return old
+
+    def copies(self) -> tuple:
+        """The copy of the last solve's inputs, in the order of :meth:`of`."""
+        return (self.out0, self.E0, self.R0, self.abs0, self.rho0, self.U0, self.osucc0,
+                self.onb0, self.ong0)
 
 
 class MotivationEstimator(OutcomeMemory, OptionRules):
