@@ -652,7 +652,8 @@ def scaling_rows(result: dict) -> list[list[str]]:
     rows = []
     for r in result.get("scaling") or []:
         sv = r.get("solves") or {}
-        total = sum(v for k, v in sv.items() if k in ("incremental", "ordered", "full"))
+        total = sum(v for k, v in sv.items()
+                    if k in ("incremental", "continued", "ordered", "full"))
         rows.append([r["family"], str(r["cells"]), str(r["nodes"]),
                      f"{r['step_median_us']:.1f}", f"{r['step_p99_us']:.0f}",
                      f"{r['step_mean_us']:.0f}", f"{r['median_over_floor']:.0f}",
