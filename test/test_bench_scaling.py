@@ -19,8 +19,10 @@ def test_scaling_alone_writes_the_rows(tmp_path):
     rows = result["scaling"]
     assert len(rows) == 1 and rows[0]["family"] == "open"
     for key in ("cells", "nodes", "step_median_us", "step_p99_us", "step_mean_us",
-                "goal_change_first_ms", "block_episode_ms"):
+                "goal_change_first_ms", "block_episode_ms", "episode_starts",
+                "episode_start_median_ms", "episode_start_max_ms"):
         assert rows[0][key] > 0, key
+    assert rows[0]["episode_start_max_ms"] >= rows[0]["episode_start_median_ms"]
 
 
 def test_scaling_by_cpu_time(tmp_path):

@@ -157,3 +157,16 @@ def test_a_changed_rows_list_misses_nothing_a_full_pass_would_change():
         wrong += not np.array_equal(opts[2][: world.n][alive], want[2][: world.n][alive])
         opts = want
     assert wrong > 0
+
+
+def test_the_union_of_option_rows_is_numpys():
+    """unknown.union_rows (a mask, where the option rows can be every row of a large map)
+    gives what np.union1d gives: the sorted rows of either list, the same dtype."""
+    from tmgwr_agent.core.unknown import union_rows
+
+    rng = np.random.default_rng(0)
+    for _ in range(500):
+        a, b = (rng.integers(0, rng.integers(1, 300), size=rng.integers(0, 40))
+                for _ in range(2))
+        u, r = np.union1d(a, b), union_rows(a, b)
+        assert u.dtype == r.dtype and np.array_equal(u, r)

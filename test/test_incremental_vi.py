@@ -210,6 +210,49 @@ def test_a_budget_exceeded_says_so_and_leaves_the_queue_clean():
     assert (pos == -1).all()
 
 
+@pytest.mark.parametrize("seed", range(10))
+def test_a_sweep_over_budget_continued_from_its_v_equals_a_full_solve(seed):
+    """An incremental solve that outgrows its budget goes on from the V it left
+    (MotivationEstimator._continued: an ordered solve over every node from that V), not
+    from V = 0: after random sequences of edits, raising and lowering values, each cut
+    off after a few updates (or none), V ends within vi_tol of the exact fixed point, and
+    nodes off every route exactly 0. Eq. 4-5' is a contraction, so its one fixed point is
+    reached from any V; the stopping rule is the same."""
+    rng = np.random.default_rng(300 + seed)
+    n = int(rng.integers(20, 150))
+    out, E, R, absorbing, alive, o = random_map(rng, n)
+    V = exact(out, E, R, absorbing, alive, o)
+    heap, pos, key = np.empty(n, np.int64), np.full(n, -1, np.int64), np.zeros(n)
+    found, mark = np.empty(n, np.int64), np.zeros(n, bool)
+    cut = 0
+    for _ in range(30):
+        rows = set()
+        for _ in range(int(rng.integers(1, 4))):
+            rows.update(removal(rng, out, E, R, absorbing, o, n) if rng.random() < 0.4
+                        else edit(rng, out, E, R, o, n))
+        seeds = np.array(sorted(rows), dtype=np.int64)
+        first, pred = kernels.predecessors(out, n, alive, o.osucc, o.onb)
+        args = (out, E, R, V, n, GAMMA, TOL * (1 - GAMMA), FLOOR, absorbing, alive, o.U,
+                o.rho, o.osucc, o.onb, o.ong, first, pred)
+        budget = int(rng.integers(0, 4))
+        if rng.random() < 0.5:                       # as motivation._incremental does
+            k = kernels.invalidate(*args, seeds, len(seeds), found, mark)
+            both = np.concatenate((seeds, found[:k]))
+            done = kernels.ordered_solve(*args, both, len(both), budget, heap, pos, key)
+        else:
+            done = kernels.prioritized_sweep(*args, seeds, len(seeds), budget, heap, pos,
+                                             key)
+        assert (pos == -1).all()
+        if done < 0:
+            cut += 1
+            everyone = np.arange(n, dtype=np.int64)
+            assert kernels.ordered_solve(*args, everyone, n, 100 * n, heap, pos, key) >= 0
+        ref = exact(out, E, R, absorbing, alive, o)
+        np.testing.assert_allclose(V[:n], ref[:n], rtol=TOL, atol=1e-12)
+        assert (V[:n][ref[:n] == 0.0] == 0.0).all()
+    assert cut > 0
+
+
 def test_changed_rows_finds_the_edits_and_flags_a_removal():
     rng = np.random.default_rng(0)
     n = 30
@@ -247,6 +290,22 @@ def test_changed_rows_of_the_logged_rows_only():
 
 
 def test_the_agent_solving_incrementally_meets_the_full_solves_stopping_rule(monkeypatch):
+    solves = _run_checked(monkeypatch)
+    assert solves["incremental"] > 3 * (solves["full"] + solves["ordered"])
+    assert solves["ordered"] > 0 and solves.get("invalidated", 0) > 0
+
+
+def test_every_incremental_solve_over_budget_continued_meets_the_stopping_rule(monkeypatch):
+    """With no budget at all every incremental solve that has something to update is
+    cut at once and continued from its V (MotivationEstimator._continued): the same
+    checks as above hold on every solve of the training run."""
+    from tmgwr_agent.core import motivation
+    monkeypatch.setattr(motivation, "INCREMENTAL_BUDGET", 0)
+    solves = _run_checked(monkeypatch)
+    assert solves.get("continued", 0) > 10 and solves.get("budget", 0) == 0
+
+
+def _run_checked(monkeypatch) -> dict:
     """Every solve of a training run on the default maze (a goal change and a block
     included): the rows brought up to date from the map's change log (the solve's copy of
     its inputs, the frame coordinates, the rewards, the goal node) equal a recompute of
@@ -308,11 +367,10 @@ def test_the_agent_solving_incrementally_meets_the_full_solves_stopping_rule(mon
         run_episode(world, agent, max_steps=3000)
     solves = agent.motivation.solves
     print(seen, worst, solves)
-    assert solves["incremental"] > 3 * (solves["full"] + solves["ordered"])
-    assert solves["ordered"] > 0 and solves.get("invalidated", 0) > 0
     assert worst["rule"] <= 1.0
     mot = agent.motivation
     assert worst["exact"] <= mot.vi_tol / (mot.beta * (1.0 - mot.gamma))
+    return solves
 
 
 def test_the_greedy_probes_potentials_after_a_goal_change_are_exact():
@@ -347,3 +405,25 @@ def test_the_greedy_probes_potentials_after_a_goal_change_are_exact():
         assert (ref[:n] > 0.0).sum() > n // 2            # a route to most nodes
         np.testing.assert_allclose(V0[:n], ref[:n], rtol=mot.vi_tol, atol=1e-12)
         run_episode(world, agent, max_steps=3000)
+
+
+@pytest.mark.parametrize("dim", [2, 3, 4])
+def test_the_median_link_length_is_numpys_to_the_bit(dim):
+    """MotivationEstimator.link_scale gathers the links' differences in a kernel
+    (kernels.link_differences) and takes their norms and median with numpy as the
+    indexing it replaces did: the same value to the bit (a summation in another order
+    would move the frame's L by an ulp and every trajectory after it)."""
+    from types import SimpleNamespace
+
+    from tmgwr_agent.core.motivation import MotivationEstimator
+
+    rng = np.random.default_rng(dim)
+    n = 300
+    out = np.where(rng.random((n + 20, 5)) < 0.6, rng.integers(0, n, (n + 20, 5)), -1)
+    m = SimpleNamespace(n=n, out=out, w=rng.normal(size=(n + 20, dim)) * 0.37)
+    src, tgt = np.nonzero(out[:n] >= 0)
+    d = m.w[src] - m.w[out[src, tgt]]
+    assert MotivationEstimator.link_scale(m) == float(np.median(np.sqrt(
+        np.einsum("ij,ij->i", d, d))))
+    m.out = np.full_like(out, -1)
+    assert MotivationEstimator.link_scale(m) == 0.0

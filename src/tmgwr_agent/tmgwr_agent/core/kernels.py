@@ -113,6 +113,23 @@ def incident_neighbours(out, inn, n, b):
 
 
 @njit(cache=True)
+def link_differences(w, out, n, d):
+    """``w_i - w_j`` of every link i -> j of the rows ``i < n``, row by row and slot by slot
+    (the order of ``np.nonzero(out[:n] >= 0)``), written to the rows of ``d``; returns how
+    many (the median link length, motivation.py, takes their norms with numpy as
+    before, so that it is the same to the bit)."""
+    c = 0
+    for i in range(n):
+        for s in range(out.shape[1]):
+            j = out[i, s]
+            if j >= 0:
+                for k in range(w.shape[1]):
+                    d[c, k] = w[i, k] - w[j, k]
+                c += 1
+    return c
+
+
+@njit(cache=True)
 def in_links(out, n, inn):
     """The sources of the links into every node: ``inn[j]`` lists each i with a link
     i -> j once (-1: empty slots), the reverse of ``out``; returns False when some row of
@@ -340,7 +357,9 @@ def stale_savings(w, alive, n, delta, L, gamma, grid, origin, tried, bump_e, suc
     cell, and on to the goal, ``dg`` steps, through the cell's known node (a move made
     before) or its best exit (:func:`wall_exits`, ``k`` cells along its run then one step
     out: ``k + 2``), against ``route`` steps. The pairs with a saving go to ``res_i``,
-    ``res_a``, ``res_s``; returns how many. ``onb`` / ``ong``: scratch."""
+    ``res_a``, ``res_s``; returns how many. ``onb`` / ``ong``: scratch. A way through a
+    wall of i takes at least ``ds[i] + 1`` steps, so the walls of the nodes with ``ds[i] +
+    1 >= route`` are not looked at (they cannot save a step)."""
     x, y, z = np.empty(w.shape[1]), np.empty(w.shape[1]), np.empty(w.shape[1])
     Vd = np.zeros(n + 1)                       # gamma^dg: wall_exits then picks min k + dg
     for q in range(n):
@@ -348,7 +367,7 @@ def stale_savings(w, alive, n, delta, L, gamma, grid, origin, tried, bump_e, suc
             Vd[q] = gamma ** dg[q]
     c = 0
     for i in range(n):
-        if not alive[i] or ds[i] < 0:
+        if not alive[i] or ds[i] < 0 or ds[i] + 1 >= route:
             continue
         for a in range(tried.shape[1]):
             if not tried[i, a] or not stale(bump_e, i, a, episode, trust):

@@ -192,12 +192,30 @@ class IncrementalState:
     @classmethod
     def of(cls, m: SensorimotorMap, n: int, R: np.ndarray, absorbing: np.ndarray,
            est: "MotivationEstimator") -> "IncrementalState":
-        """The state after a full solve on map m (rewards R, the absorbing mask)."""
-        return cls(n, est.goal_node, m.out[:n].copy(), m.E[:n].copy(), R[:n].copy(),
-                   absorbing[:n].copy(), est.rho.copy(), est.U.copy(), est.osucc.copy(),
-                   est.onb.copy(), est.ong.copy(),
-                   *kernels.predecessors(m.out, n, m.alive, est.osucc, est.onb),
-                   log=getattr(m, "log", None), epoch=est._epoch)
+        """The state after a full solve on map m (rewards R, the absorbing mask); the
+        estimator's last state is written over when its arrays have these shapes (a goal
+        change on a map of the same size: no new pages to fault in)."""
+        old = est._inc
+        src = (m.out[:n], m.E[:n], R[:n], absorbing[:n], est.rho, est.U, est.osucc,
+               est.onb, est.ong)
+        if old is None or old.n != n or any(a.shape != b.shape for a, b in zip(
+                old.copies(), src)):
+            return cls(n, est.goal_node, *(a.copy() for a in src),
+                       *kernels.predecessors(m.out, n, m.alive, est.osucc, est.onb),
+                       log=getattr(m, "log", None), epoch=est._epoch)
+        for a, b in zip(old.copies(), src):
+            np.copyto(a, b)
+        old.goal_node = est.goal_node
+        old.first, old.pred = kernels.predecessors(m.out, n, m.alive, est.osucc, est.onb)
+        log = getattr(m, "log", None)
+        old.log, old.log_pos, old.epoch = log, (log.pos if log is not None else -1), \
+            est._epoch
+        return old
+
+    def copies(self) -> tuple:
+        """The copy of the last solve's inputs, in the order of :meth:`of`."""
+        return (self.out0, self.E0, self.R0, self.abs0, self.rho0, self.U0, self.osucc0,
+                self.onb0, self.ong0)
 
 
 class MotivationEstimator(OutcomeMemory, OptionRules):
@@ -331,11 +349,12 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
     # ------------------------------------------------------------------ Eq. 4-5'
     @staticmethod
     def link_scale(m: SensorimotorMap) -> float:
-        """Median length of the map's links in feature space (0 if it has none)."""
-        src, tgt = np.nonzero(m.out[: m.n] >= 0)
-        if not len(src):
+        """Median length of the map's links in feature space (0 if it has none); the
+        links' differences gathered by :func:`kernels.link_differences`."""
+        d = np.empty((m.n * m.out.shape[1], m.w.shape[1]))
+        d = d[:kernels.link_differences(m.w, m.out, m.n, d)]
+        if not len(d):
             return 0.0
-        d = m.w[src] - m.w[m.out[src, tgt]]
         return float(np.median(np.sqrt(np.einsum("ij,ij->i", d, d))))
 
     def rewards(self, F: Frame, m: SensorimotorMap, g: int,
@@ -616,7 +635,7 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         inc.log, inc.log_pos, inc.epoch = log, (log.pos if log is not None else -1), self._epoch
         if swept:
             if done < 0:
-                return self._declined("budget")
+                return self._continued(m, n, R, absorbing)
             self.solves["incremental"] += 1
             return True
         relinked_o = False
@@ -644,7 +663,30 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
                                              inc.heap, inc.pos, inc.key)
         if done < 0:
             self.solves["incremental"] -= 1
+            return self._continued(m, n, R, absorbing)
+        return True
+
+    def _continued(self, m: SensorimotorMap, n: int, R: np.ndarray, absorbing: np.ndarray
+                   ) -> bool:
+        """An incremental solve over its budget goes on from the V it left, not from V = 0:
+        every node whose target (:func:`kernels.node_target`) is off its V by more than
+        the tolerance is queued and solved in order of value (:func:`kernels.ordered_solve`
+        over all nodes), at most ``ORDERED_BUDGET`` updates a node. Eq. 4-5' is a
+        contraction (gamma < 1, E and rho at most 1), so its fixed point is one whatever V
+        it starts from, and a solve that ends with every node meeting the stopping rule
+        ends where one from V = 0 does, within the same tolerance; the copy of the inputs
+        and the predecessors are already those of this map (the incremental solve brought
+        them up to date). False (counted ``budget``: the ordered solve from V = 0 takes
+        over) when this too outgrows its budget."""
+        inc = self._inc
+        done = kernels.ordered_solve(
+            m.out, m.E, R, self.V, n, self.gamma, self.vi_tol * (1.0 - self.gamma), V_FLOOR,
+            absorbing, m.alive, self.U, self.rho, self.osucc, self.onb, self.ong, inc.first,
+            inc.pred, np.arange(n, dtype=np.int64), n, ORDERED_BUDGET * n, inc.heap,
+            inc.pos, inc.key)
+        if done < 0:
             return self._declined("budget")
+        self.solves["continued"] = self.solves.get("continued", 0) + 1
         return True
 
     def _declined(self, why: str) -> bool:

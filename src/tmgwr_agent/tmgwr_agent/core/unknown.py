@@ -239,6 +239,15 @@ def laplace(k: int, t: int) -> float:
     return (k + 1.0) / (t + 2.0)
 
 
+def union_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The sorted rows of either list (row numbers >= 0), as ``np.union1d`` gives them,
+    by a mask instead of a sort (the lists can hold every row of a large map)."""
+    mask = np.zeros(max(int(a.max(initial=-1)), int(b.max(initial=-1))) + 1, dtype=bool)
+    mask[a] = True
+    mask[b] = True
+    return np.flatnonzero(mask)
+
+
 def grown(a: np.ndarray, n: int, fill) -> np.ndarray:
     """``a`` with at least n rows (doubling), new rows set to ``fill``."""
     if len(a) >= n:
@@ -639,7 +648,7 @@ class OptionRules:
             log = getattr(m, "log", None)
             self._opt_log, self._opt_L = log, F.L
             self._opt_pos = log.pos if log is not None else -1
-            rows = np.union1d(rows, np.fromiter(self._dirty, dtype=np.int64)) \
+            rows = union_rows(rows, np.fromiter(self._dirty, dtype=np.int64)) \
                 if len(rows) < n and self._dirty else rows
         elif self._dirty:
             rows = np.fromiter(self._dirty, dtype=np.int64)
@@ -647,7 +656,7 @@ class OptionRules:
             return
         self._dirty.clear()
         self._opt_rows = rows if self._opt_rows is None or len(rows) == n else \
-            np.union1d(self._opt_rows, rows)
+            union_rows(self._opt_rows, rows)
         kernels.option_values(F.w, m.out, m.alive, n, rows, F.goal, F.delta,
                               F.L, self.v_star, self.gamma, self.tried, self.bump_t,
                               self.closed_t, self.bump_e, self.succ, clock, T, self.episode,
@@ -682,7 +691,7 @@ class OptionRules:
             c = kernels.untried_rho(m.alive, n, self.tried, self.chain, self.lattice,
                                     self.rho_new, self.rho, rows)
             self._opt_rows = rows[:c].copy() if self._opt_rows is None else \
-                np.union1d(self._opt_rows, rows[:c])            # for the solve to compare
+                union_rows(self._opt_rows, rows[:c])            # for the solve to compare
             untried = False
         c = kernels.option_rows_changed(F.w, m.alive, n, touched, F.delta, F.L, grid_was,
                                         self._grid, self._origin, self.tried, self.bump_e,

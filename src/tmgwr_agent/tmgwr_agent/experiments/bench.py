@@ -54,18 +54,23 @@ from tmgwr_agent.experiments.scenarios import DEFAULT_MAZE
 from tmgwr_agent.experiments.stats import stat
 
 
-def timed_steps(world, agent, n: int, clock=time.perf_counter_ns
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def timed_steps(world, agent, n: int, clock=time.perf_counter_ns,
+                starts: list | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``n`` steps of training episodes, timed by ``clock`` (nanoseconds): the agent's
     (``act`` + ``observe``) and the world's (``step``) apart, and the winner each step
-    acted from."""
+    acted from. The agent's ``begin_episode`` (the episode's first solve: its route, its
+    re-tests, its options) is not a step; with ``starts`` its nanoseconds are appended
+    there."""
     agent_ns = np.empty(n, dtype=np.int64)
     world_ns = np.empty(n, dtype=np.int64)
     win = np.empty(n, dtype=np.int64)
     i = 0
     while i < n:
         obs, _ = world.reset()
+        t0 = clock()
         agent.begin_episode(obs, world.cell)
+        if starts is not None:
+            starts.append(clock() - t0)
         while i < n:
             win[i] = agent.winner
             t0 = clock()
@@ -491,10 +496,11 @@ def lookup_floor_ns(agent, winners: np.ndarray, clock=time.perf_counter_ns) -> n
     return out
 
 
-def time_steps_winners(world, agent, n: int, clock=time.perf_counter_ns
-                       ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`time_steps`, with the winner each step acted from."""
-    agent_ns, _, win = timed_steps(world, agent, n, clock)
+def time_steps_winners(world, agent, n: int, clock=time.perf_counter_ns,
+                       starts: list | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`time_steps`, with the winner each step acted from (and ``starts``, as
+    :func:`timed_steps`)."""
+    agent_ns, _, win = timed_steps(world, agent, n, clock, starts)
     return agent_ns, win
 
 
@@ -576,8 +582,10 @@ def scaling_row(family: str, cells: int, seed: int, steps: int = SCALING_STEPS,
     timed (median, p99, mean; ``solves``: how many the estimator solved incrementally), the
     lookup floor on the same winners, as many more steps with the incremental solve off
     (``full_solve_step_median_us``: the same map solved in full every step, an A/B in one
-    run), the first step after a goal change (to the free cell nearest the maze's centre,
-    and back to G), and the episode after a block on the route; every time by ``clock``
+    run), the episode starts among those steps (``begin_episode``, not counted as steps:
+    median and max), the first step after a goal change (to the free cell nearest the
+    maze's centre, and back to G), and the episode after a block on the route; every time
+    by ``clock``
     (nanoseconds; :data:`CLOCKS`)."""
     maze = scaling_maze(family, cells, seed)
     caps = Caps.for_maze(maze)
@@ -588,7 +596,8 @@ def scaling_row(family: str, cells: int, seed: int, steps: int = SCALING_STEPS,
     trained = tour_train(world, agent)
     train_s = time.perf_counter() - t0
     before = dict(getattr(agent.motivation, "solves", {}))
-    ns, winners = time_steps_winners(world, agent, steps, clock)
+    starts: list[int] = []
+    ns, winners = time_steps_winners(world, agent, steps, clock, starts)
     solves = {k: v - before.get(k, 0)
               for k, v in getattr(agent.motivation, "solves", {}).items()}
     full = None
@@ -613,6 +622,9 @@ def scaling_row(family: str, cells: int, seed: int, steps: int = SCALING_STEPS,
             "floor_median_us": float(np.median(floor)),
             "median_over_floor": med / float(np.median(floor)),
             "solves": solves, "full_solve_step_median_us": full,
+            "episode_starts": len(starts),
+            "episode_start_median_ms": float(np.median(starts)) / 1e6,
+            "episode_start_max_ms": float(np.max(starts)) / 1e6,
             "goal_change_first_ms": goal_ms, "goal_back_first_ms": back_ms,
             **block}
 
@@ -631,8 +643,8 @@ def scaling(seed: int, steps: int = SCALING_STEPS, cells=SCALING_CELLS,
 
 
 SCALING_HEADER = ("family", "cells", "nodes", "median us", "p99 us", "mean us",
-                  "median / floor", "goal change ms", "block episode ms (steps)",
-                  "incremental solves")
+                  "median / floor", "episode start ms (max)", "goal change ms",
+                  "block episode ms (steps)", "incremental solves")
 
 
 def scaling_rows(result: dict) -> list[list[str]]:
@@ -640,14 +652,22 @@ def scaling_rows(result: dict) -> list[list[str]]:
     rows = []
     for r in result.get("scaling") or []:
         sv = r.get("solves") or {}
-        total = sum(v for k, v in sv.items() if k in ("incremental", "ordered", "full"))
+        total = sum(v for k, v in sv.items()
+                    if k in ("incremental", "continued", "ordered", "full"))
         rows.append([r["family"], str(r["cells"]), str(r["nodes"]),
                      f"{r['step_median_us']:.1f}", f"{r['step_p99_us']:.0f}",
                      f"{r['step_mean_us']:.0f}", f"{r['median_over_floor']:.0f}",
-                     f"{r['goal_change_first_ms']:.1f}",
+                     _episode_start(r), f"{r['goal_change_first_ms']:.1f}",
                      f"{r['block_episode_ms']:.1f} ({r['block_episode_steps']})",
                      f"{sv.get('incremental', 0)} / {total}" if total else "-"])
     return rows
+
+
+def _episode_start(r: dict) -> str:
+    """A row's episode start, median (max) in ms; '-' in rows recorded before it was."""
+    if "episode_start_median_ms" not in r:
+        return "-"
+    return f"{r['episode_start_median_ms']:.1f} ({r['episode_start_max_ms']:.1f})"
 
 
 def scaling_table(result: dict) -> str:
