@@ -28,6 +28,14 @@ SMALL = """\
 #######
 """
 UP, DOWN, LEFT, RIGHT = range(4)
+# An open room, rows 0-4, cols 0-5: several resting places a cell in every direction.
+OPEN = """\
+######
+#S..G#
+#....#
+#....#
+######
+"""
 
 
 @pytest.fixture(scope="module")
@@ -69,13 +77,13 @@ def test_a_primitive_moves_half_a_cell_and_ends_at_rest(world):
     assert np.abs(world.data.qvel[:2]).max() < 1e-2
     assert not info.bumped
     obs, _, _, _, info = world.step(RIGHT)
-    assert info.cell == (1, 2) and not info.bumped
+    assert world.cell == (1, 2) and not info.bumped
 
 
 def test_a_wall_ahead_bumps_a_wall_alongside_does_not(world):
     world.reset()
     _, _, _, _, info = world.step(UP)            # row 0 is wall: touched head-on
-    assert info.bumped and info.cell == (1, 1)
+    assert info.bumped and world.cell == (1, 1)
     _, _, _, _, info = world.step(UP)
     assert info.bumped
     _, _, _, _, info = world.step(RIGHT)         # sliding along the top wall: not a bump
@@ -167,7 +175,7 @@ def test_an_event_rebuilds_the_model_and_the_oracle_follows():
     w.reset(start=(1, 2))
     _, _, _, _, info = w.step(RIGHT)
     _, _, _, _, info = w.step(RIGHT)
-    assert info.bumped and info.cell == (1, 2)
+    assert info.bumped and w.cell == (1, 2)
     assert w.event_oracle_steps("a") >= w.shortest_path_length()
 
 
@@ -185,7 +193,7 @@ def test_set_goal_moves_the_target_and_the_goal_sensation():
     assert w.set_goal((3, 1)) == (3, 1)
     assert np.allclose(w.env.goal, w.xy((3, 1)))
     assert np.allclose(w.goal_observation(), w.xy((3, 1)))
-    assert w.goal_state == (3, 1)
+    assert w.goal_state == (2 * 3, 2 * 1)       # the goal sensation discretised
     assert 3 <= w.shortest_path_length() <= 4
 
 
@@ -322,3 +330,64 @@ def test_the_greedy_probe_allows_the_worlds_declared_tolerance():
     w.probe_tolerance = 0.0                     # an exact oracle: exactly D steps
     assert not greedy_optimal(w, _DetourAgent(w, 1))
     assert greedy_optimal(w, _DetourAgent(w, 0))
+
+
+def _walk(w, steps, seed):
+    """A random walk of ``steps`` primitives (a new episode after each end): the
+    sensation, the world's tabular state, ``info`` and the true cell of every step."""
+    w.reset()
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(steps):
+        obs, _, terminated, truncated, info = w.step(int(rng.integers(4)))
+        out.append((obs, w.state, info, w.cell))
+        if terminated or truncated:
+            w.reset()
+    return out
+
+
+@pytest.mark.parametrize("velocity", [False, True])
+def test_the_tabular_state_is_the_sensation_at_the_declared_resolution(velocity):
+    # the tables key on the lattice point the sensed position rests on, in resolution steps
+    # from cell (0, 0)'s centre: the places inside one cell are states of their own (keyed
+    # on the cell, up to four resting places of a cell were one state)
+    w = PointMazeWorld(Maze.from_text(OPEN), "G", velocity=velocity)
+    obs, info = w.reset()
+    assert info["state"] == w.state == w.discretise(obs) == (2 * 1, 2 * 1)
+    res, origin = w.sensor_resolution, w.xy((0, 0))
+    states_of_cell: dict = {}
+    for obs, state, info, cell in _walk(w, 200, 5):
+        assert info.cell == state == w.discretise(obs)
+        on_lattice = origin + res * np.array([state[1], -state[0]])
+        assert np.abs(obs[:2] - on_lattice).max() < 5e-3        # the nearest lattice point
+        states_of_cell.setdefault(cell, set()).add(state)
+    assert max(len(s) for s in states_of_cell.values()) >= 3
+
+
+def test_the_goal_state_is_reached_exactly_when_the_env_reports_success():
+    w = PointMazeWorld(Maze.from_text(OPEN), "G")
+    assert w.goal_state == w.discretise(w.goal_observation()) == (2 * 1, 2 * 4)
+    walk = _walk(w, 600, 11)
+    reached = [info.reached_goal for _, _, info, _ in walk]
+    assert sum(reached) >= 2
+    assert reached == [state == w.goal_state for _, state, _, _ in walk]
+    w.set_goal((3, 1))                            # the goal's state follows the goal
+    assert w.goal_state == (2 * 3, 2 * 1)
+
+
+def test_the_tables_in_pointmaze_key_on_the_lattice():
+    # Q-learning run by the experiments' loop in the hosted world: the keys it learnt are
+    # lattice points (several in a cell), its goal the goal sensation's
+    from tmgwr_agent.experiments.agent_factory import make_agent
+    from tmgwr_agent.experiments.runner import run_episode, set_goal
+    from tmgwr_agent.experiments.sensing import HostedWorld
+
+    w = HostedWorld(PointMazeWorld(Maze.from_text(OPEN), "G", max_episode_steps=150))
+    agent = make_agent("q_learning", w.maze, np.random.default_rng(2),
+                       sensed=not w.identity, senses=w.senses)
+    set_goal(w, agent, "G")
+    assert agent.goal == w.goal_state
+    for _ in range(3):
+        run_episode(w, agent)
+    assert next(iter(agent.sensed)) == w.discretise(w.xy(w.maze.start)) == (2, 2)
+    assert len(agent.sensed) > len(w.maze.free_cells())     # more states than cells

@@ -21,23 +21,23 @@ Families:
   those three actions (a locked door, lava on every route) is refused.
 * ``PointMaze_*`` (``gymnasium-robotics``, the ``*Dense*`` ids too): the registered env's
   layout built into :class:`maze_sim.pointmaze_world.PointMazeWorld` (its sensation, motor
-  primitives, ``K``, goal region and oracle; see that module): walls the ``maze_map``'s 1
-  cells, every other cell free. Start and goal cells are the env's own draw: the env made
-  with its registered (and ``--world-kwargs``) arguments and reset once with the layout
-  seed (default 0), its ``goal`` and ``reset_pos`` taken to the cells they lie in (the
-  draw's position noise, under a quarter cell, dropped: the world starts at rest at the
-  start cell's centre and its goal is the goal cell's centre). So a ``maze_map`` of plain
-  0/1 (UMaze, Open, Medium) draws among all free cells, one with ``g``/``r``/``c`` cells
-  among those, and the same seed gives the same cells every episode. An episode ends at
-  the env's success test (within 0.45 m of the goal), whatever ``continuing_task`` says
-  (the registered ids are continuing tasks, which never terminate: the adapter takes the
-  first success as the episode's end); the env's reward (``reward_type``, sparse or dense)
-  is not the agent's input and is ignored; the episode cap is the scenario's, in primitive
-  steps (the registered ``max_episode_steps`` count physics steps). Refused, naming the
-  kwarg: ``reset_target`` true (the goal jumps when reached: no fixed goal to map), a
-  ``position_noise_range`` other than 0 (the world has no position noise) and any kwarg
-  the env does not take or the adapter does not know. Without maze_sim.pointmaze_world
-  the family is refused as "not available in this build".
+  primitives, ``K``, goal region, tabular state and oracle; see that module): walls the
+  ``maze_map``'s 1 cells, every other cell free. Start and goal cells are the env's own
+  draw: the env made with its registered (and ``--world-kwargs``) arguments and reset once
+  with the layout seed (default 0), its ``goal`` and ``reset_pos`` taken to the cells they
+  lie in (the draw's position noise, under a quarter cell, dropped: the world starts at
+  rest at the start cell's centre and its goal is the goal cell's centre). So a
+  ``maze_map`` of plain 0/1 (UMaze, Open, Medium) draws among all free cells, one with
+  ``g``/``r``/``c`` cells among those, and the same seed gives the same cells every
+  episode. An episode ends at the env's success test (within 0.45 m of the goal), whatever
+  ``continuing_task`` says (the registered ids are continuing tasks, which never terminate:
+  the adapter takes the first success as the episode's end); the env's reward
+  (``reward_type``, sparse or dense) is not the agent's input and is ignored; the episode
+  cap is the scenario's, in primitive steps (the registered ``max_episode_steps`` count
+  physics steps). Refused, naming the kwarg: ``reset_target`` true (the goal jumps when
+  reached: no fixed goal to map), a ``position_noise_range`` other than 0 (the world has no
+  position noise) and any kwarg the env does not take or the adapter does not know. Without
+  maze_sim.pointmaze_world the family is refused as "not available in this build".
 
 Only the event-free scenarios run here (training to convergence, sample complexity): a
 registered env has no events and no named goals.

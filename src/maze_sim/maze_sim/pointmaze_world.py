@@ -76,10 +76,22 @@ agent that came to such a point from a side where the next move does not enter t
 took it for the goal. Run to its end, a move into the region from the lattice comes to rest
 at the goal's centre, a place of its own.)
 
-Tabular state (``info.cell``, :attr:`PointMazeWorld.state`, what Q-learning and Dyna-Q+
-key on): the cell the sensed position lies in (the floor discretisation above at the
-resolution of one maze cell, the usual discretisation of PointMaze's position), never an
-index the point cannot sense.
+Tabular state (``info.cell``, :attr:`PointMazeWorld.state`, ``goal_state``: what
+Q-learning and Dyna-Q+ key on): the sensed position discretised at the world's declared
+resolution (:meth:`PointMazeWorld.discretise`), the point of the lattice of spacing
+``sensor_resolution`` through the cells' centres nearest to it, numbered in resolution
+steps from the centre of cell (0, 0) as ``(down, right)`` (``floor(d / resolution + 1/2)``
+per axis, ``d`` the offset in metres; the velocity of a ``velocity`` sensation is left out:
+at rest it is zero). So the tables are told what TMGWR is told (the sensation, at the
+resolution its preprocessor scales by), never an index the point cannot sense: the
+places inside one cell are states of their own (the cell's centre is ``(n r, n c)`` with
+``n`` moves a cell), where a discretisation at one cell would alias up to four resting
+places into one state. The goal's state is that of the goal sensation (the goal cell's
+centre); a move into the success region comes to rest there (below) and no other lattice
+point lies within the success radius (the lattice's spacing exceeds it), so the tables
+reach the goal's state exactly when the env's success test ends the episode there. The
+true cell (:attr:`PointMazeWorld.cell`) stays the experimenter's, for the oracle, the
+ROS graph's pose and the book-keeper.
 
 Oracle (:meth:`PointMazeWorld.shortest_path_length`): the primitive steps a scripted
 controller takes on the same physics: the point at rest at the start cell's centre, each
@@ -434,22 +446,33 @@ class PointMazeWorld:
         return self.step_length
 
     # ------------------------------------------------------------------ the contract
+    def discretise(self, sensation: np.ndarray) -> tuple[int, int]:
+        """The tabular state of a sensation (module doc): its position's nearest point of
+        the move lattice, in resolution steps ``(down, right)`` from the centre of cell
+        (0, 0). The one discretisation of this world's sensation."""
+        d = (np.asarray(sensation[:2], dtype=float) - self.xy((0, 0))) / \
+            self.sensor_resolution
+        return int(math.floor(-d[1] + 0.5)), int(math.floor(d[0] + 0.5))
+
     @property
     def cell(self) -> Cell:
-        """The cell the point's position lies in (the tabular state)."""
+        """The cell the point's position lies in (the experimenter's truth, not an agent's
+        input)."""
         return self.grid.cell
 
     @property
-    def state(self) -> Cell:
-        return self.grid.cell
+    def state(self) -> tuple[int, int]:
+        """The tabular state: the sensation discretised (:meth:`discretise`)."""
+        return self.discretise(self.sense())
 
     @property
     def goal(self) -> Cell:
         return self.grid.goal
 
     @property
-    def goal_state(self) -> Cell:
-        return self.grid.goal
+    def goal_state(self) -> tuple[int, int]:
+        """The goal sensation discretised (:meth:`discretise`)."""
+        return self.discretise(self.goal_observation())
 
     @property
     def max_episode_steps(self) -> int | None:
@@ -465,7 +488,8 @@ class PointMazeWorld:
         """A new episode: the point at rest at the centre of the start cell (or ``start``)."""
         _, info = self.grid.reset(seed, start)
         self._place(self.grid.cell)
-        return self.sense(), info
+        obs = self.sense()
+        return obs, {**info, "state": self.discretise(obs)}
 
     def end_episode(self) -> None:
         self.grid.end_episode()
@@ -481,15 +505,15 @@ class PointMazeWorld:
         g.cell = self.cell_of(self.data.qpos[:2])
         g.total_steps += 1
         g.episode_steps += 1
-        info = StepInfo(cell=g.cell, action=int(action), bumped=prim.bumped,
+        obs = self.sense()
+        info = StepInfo(cell=self.discretise(obs), action=int(action), bumped=prim.bumped,
                         reached_goal=which == 0, reached_previous_goal=which == 1,
                         step=g.total_steps, episode=g.episode)
         truncated = (g.max_episode_steps is not None
                      and g.episode_steps >= g.max_episode_steps and not info.terminated)
         if info.terminated or truncated:
             g.in_episode = False
-        return (self.sense(), 1.0 if info.reached_goal else 0.0, info.terminated, truncated,
-                info)
+        return obs, 1.0 if info.reached_goal else 0.0, info.terminated, truncated, info
 
     # ------------------------------------------------------------------ edits
     def check_goal(self, goal: str | Cell) -> Cell:
