@@ -418,8 +418,20 @@ def successor_value(V, j, U_o, nb, ng, k, gamma):
 
 @njit(cache=True)
 def option_successor(V, U, osucc, onb, ong, i, a, gamma):
-    """The value of option (i, a)'s successor (:func:`successor_value`)."""
-    return successor_value(V, osucc[i, a], U[i, a], onb[i], ong[i], a, gamma)
+    """The value of option (i, a)'s successor: :func:`successor_value` read off the
+    (node, primitive) tables in place (no view of node i's rows: the solves call this for
+    every option of every node they update)."""
+    j = osucc[i, a]
+    if j >= 0:
+        return V[j]
+    if j == -2:
+        best = 0.0
+        for b in range(onb.shape[2]):
+            q = onb[i, a, b]
+            if q >= 0 and ong[i, a, b] * V[q] > best:
+                best = ong[i, a, b] * V[q]
+        return gamma * best
+    return U[i, a]
 
 
 @njit(cache=True)
@@ -558,7 +570,20 @@ def node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb, on
     for a in range(rho.shape[1]):                       # max_a O(i, a), Eq. 5'
         r = rho[i, a]
         if r > 0.0:
-            sv = successor_value(V, osucc[i, a], U[i, a], onb[i], ong[i], a, gamma)
+            # S (:func:`option_successor`), written out: the solves spend most of their
+            # time here, and the call is not inlined
+            j = osucc[i, a]
+            if j >= 0:
+                sv = V[j]
+            elif j == -2:
+                sv = 0.0
+                for b in range(onb.shape[2]):
+                    q = onb[i, a, b]
+                    if q >= 0 and ong[i, a, b] * V[q] > sv:
+                        sv = ong[i, a, b] * V[q]
+                sv *= gamma
+            else:
+                sv = U[i, a]
             ov = r * sv + (1.0 - r) * stay
             if ov > opt:
                 opt = ov
@@ -662,13 +687,15 @@ def _heap_push(heap, pos, key, size, i, priority):
 
 @njit(cache=True)
 def _queue_seeds(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb,
-                 ong, seeds, n_seeds, heap, pos, key, size, by_value):
+                 ong, seeds, n_seeds, heap, pos, key, size, by_value, target):
     """Push every node of ``seeds[:n_seeds]`` whose target (:func:`node_target`) differs
     from its V by more than ``tol`` times the target plus ``v_floor``, keyed by that
-    change, or with ``by_value`` by the target itself; returns the queue's size."""
+    change, or with ``by_value`` by the target itself; returns the queue's size. Every
+    target computed is kept in ``target`` (:func:`_drain`)."""
     for k in range(n_seeds):
         i = seeds[k]
         t = node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb, ong)
+        target[i] = t
         d = abs(t - V[i])
         if d > tol * t + v_floor:
             size = _heap_push(heap, pos, key, size, i, t if by_value else d)
@@ -677,12 +704,14 @@ def _queue_seeds(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, os
 
 @njit(cache=True)
 def _drain(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb, ong,
-           first, pred, max_updates, heap, pos, key, size, by_value):
+           first, pred, max_updates, heap, pos, key, size, by_value, target):
     """The loop of :func:`prioritized_sweep` and :func:`ordered_solve`: pop the node of
     the largest key, set its V to its target, queue the nodes that read it whose own
     change would exceed ``tol`` (keyed as :func:`_queue_seeds`); until the queue is empty
     (returns the updates) or ``max_updates`` were made (returns -1, ``pos`` left all
-    -1)."""
+    -1). A queued node's target is the one last computed for it (``target``): within a
+    call only V changes, and every change of V(j) computes again the target of every
+    node that reads it (``pred``), so that one is still its target when it is popped."""
     updates = 0
     while size > 0:
         i = heap[0]
@@ -697,13 +726,13 @@ def _drain(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, o
                 size -= 1
                 pos[heap[size]] = -1
             return -1
-        V[i] = node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb,
-                           ong)
+        V[i] = target[i]
         updates += 1
         for c in range(first[i], first[i + 1]):
             p = pred[c]
             t = node_target(p, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb,
                             ong)
+            target[p] = t
             d = abs(t - V[p])
             if d > tol * t + v_floor:
                 size = _heap_push(heap, pos, key, size, p, t if by_value else d)
@@ -722,10 +751,11 @@ def prioritized_sweep(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U,
     updates made, or -1 after ``max_updates`` (the caller then solves in full: a change
     that cuts a region off its sources decays only geometrically). ``heap``, ``pos``
     (-1 = not queued) and ``key`` are work arrays of n entries; ``pos`` is left all -1."""
+    target = np.empty(len(V))
     size = _queue_seeds(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
-                        onb, ong, seeds, n_seeds, heap, pos, key, 0, False)
+                        onb, ong, seeds, n_seeds, heap, pos, key, 0, False, target)
     return _drain(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb,
-                  ong, first, pred, max_updates, heap, pos, key, size, False)
+                  ong, first, pred, max_updates, heap, pos, key, size, False, target)
 
 
 @njit(cache=True)
@@ -766,17 +796,19 @@ def ordered_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho
         if change <= v_floor:
             break
     size = 0
+    target = np.empty(len(V))
     for j in cluster:                              # then who reads them, and the seeds
         for c in range(first[j], first[j + 1]):
             p = pred[c]
             t = node_target(p, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb,
                             ong)
+            target[p] = t
             if abs(t - V[p]) > tol * t + v_floor:
                 size = _heap_push(heap, pos, key, size, p, t)
     size = _queue_seeds(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
-                        onb, ong, seeds, n_seeds, heap, pos, key, size, True)
+                        onb, ong, seeds, n_seeds, heap, pos, key, size, True, target)
     return _drain(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb,
-                  ong, first, pred, max_updates, heap, pos, key, size, True)
+                  ong, first, pred, max_updates, heap, pos, key, size, True, target)
 
 
 @njit(cache=True)
