@@ -1149,88 +1149,6 @@ def wall_exits_into(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong, y, z
 
 
 @njit(cache=True)
-def option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t,
-               bump_e, succ, clock, horizon, episode, trust, rho_max, rho_new, stuck, grid,
-               origin, V, sel, chain, U, rho, osucc, onb, ong):
-    """The options of the value of the unknown (motivation.py, Eq. 5') of node i, per
-    primitive a: ``rho[i, a]`` = ``rho_new`` for a primitive never taken from i (the
-    chance a move opens, ``MotivationEstimator.open_prior``), 1 if it is a move of this
-    episode's untried chain (``chain[i, a]``, :func:`untried_chain`); 1 for one whose move's
-    link (to ``succ[i, a]``) the map has since deleted; for one whose last outcome was a
-    bump (a remembered wall): when ``stuck``, ``rho_max (1 - exp(-tau / (horizon + e)))``,
-    ``tau`` the steps since the bump and ``e`` those it had been known closed before it
-    (``bump_t - closed_t``: failed re-tests stretch the horizon); else ``rho_max`` once
-    ``trust`` episodes (``trust`` > 0) have started since its bump (``bump_e``) and the
-    pair is one of this episode's re-tests (``sel[i, a]``), 0 otherwise;
-    0 otherwise (known: no option). The option's successor ``osucc[i, a]``: a known node
-    (where the move once led, if that node is still alive and there, else a node at the
-    predicted position ``w_i + delta_a``),
-    whose V the sweep reads; -1 when none, and then ``U[i, a] = v_star gamma^h``, ``h =
-    |w_i + delta_a - x_g|_1 / L`` (the fewest steps from the predicted successor to the
-    goal sensation); -2 for a remembered wall cell (not ``stuck``), whose value if it
-    opened is gamma times the best ``gamma^k V(q)`` of its exits ``onb[i, a]`` (discounts
-    ``ong[i, a]``): the known nodes next to it, or next to a cell of a run of unknown
-    cells from it, ``k`` cells along (straight on or sideways: a wall that opens opens
-    along its run, :func:`wall_exits`); no exit: no option. ``stuck``: the optimistic U,
-    as for unknown space. ``V``: the last solve's potentials (they pick the exits)."""
-    x = np.empty(w.shape[1])
-    for a in range(U.shape[1]):
-        j = -1
-        wall = False
-        if not tried[i, a]:
-            r = 1.0 if chain[i, a] else rho_new
-        elif stuck and 0 <= bump_t[i, a] < clock and horizon > 0.0:
-            tau = clock - bump_t[i, a]
-            e = bump_t[i, a] - closed_t[i, a] if closed_t[i, a] >= 0 else 0
-            r = rho_max * (1.0 - np.exp(-tau / (horizon + e)))
-            j = succ[i, a]
-        elif not stuck and stale(bump_e, i, a, episode, trust):
-            r = rho_max if sel[i, a] else 0.0
-            j = succ[i, a]
-            wall = j < 0
-        elif bump_t[i, a] < 0 and succ[i, a] >= 0 and not _linked(out, i, succ[i, a]):
-            r = 1.0
-            j = succ[i, a]
-        else:
-            r = 0.0
-        if r == 0.0:                    # no option (most pairs): nothing to look up
-            for b in range(U.shape[1]):
-                onb[i, a, b] = -1
-                ong[i, a, b] = 0.0
-            rho[i, a] = 0.0
-            U[i, a] = 0.0
-            osucc[i, a] = -1
-            continue
-        d = 0.0
-        for k in range(w.shape[1]):
-            x[k] = w[i, k] + delta[a, k]
-            d += abs(x[k] - goal[k])
-        if j >= 0 and not at_cell(w, alive, j, x, L):
-            j = -1          # where the move led, a node since removed (its slot maybe
-            #                 reused elsewhere): the cell is looked up as for any move
-        for b in range(U.shape[1]):
-            onb[i, a, b] = -1
-            ong[i, a, b] = 0.0
-        u = v_star * gamma ** (d / L)
-        if r > 0.0 and wall:
-            # a remembered wall: if it opened, the cell leads on to known nodes
-            j = -2
-            u = 1.0
-            if not wall_exits(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong):
-                r = 0.0
-        elif r > 0.0 and j < 0:
-            j = node_at(grid, origin, L, w, x)
-        if r == 0.0:
-            rho[i, a] = 0.0
-            U[i, a] = 0.0
-            osucc[i, a] = -1
-            continue
-        rho[i, a] = r
-        U[i, a] = u
-        osucc[i, a] = j if j != i else -1
-
-
-@njit(cache=True)
 def _linked(out, i, j):
     for s in range(out.shape[1]):
         if out[i, s] == j:
@@ -1242,7 +1160,29 @@ def _linked(out, i, j):
 def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, bump_t,
                   closed_t, bump_e, succ, clock, horizon, episode, trust, rho_max, rho_new,
                   stuck, grid, origin, V, sel, chain, U, rho, osucc, onb, ong):
-    """:func:`option_row` of the nodes ``rows`` (none for dead slots)."""
+    """The options of the value of the unknown (motivation.py, Eq. 5') of the nodes
+    ``rows`` (none for dead slots; rows >= n are skipped), per node i and primitive a:
+    ``rho[i, a]`` = ``rho_new`` for a primitive never taken from i (the chance a move opens,
+    ``MotivationEstimator.open_prior``), 1 if it is a move of this episode's untried chain
+    (``chain[i, a]``, :func:`untried_chain`); 1 for one whose move's link (to ``succ[i,
+    a]``) the map has since deleted; for one whose last outcome was a bump (a remembered
+    wall): when ``stuck``, ``rho_max (1 - exp(-tau / (horizon + e)))``, ``tau`` the steps
+    since the bump and ``e`` those it had been known closed before it (``bump_t -
+    closed_t``: failed re-tests stretch the horizon); else ``rho_max`` once ``trust``
+    episodes (``trust`` > 0) have started since its bump (``bump_e``) and the pair is one of
+    this episode's re-tests (``sel[i, a]``), 0 otherwise; 0 otherwise (known: no option).
+    The option's successor ``osucc[i, a]``: a known node (where the move once led, if that
+    node is still alive and there, else a node at the predicted position ``w_i + delta_a``),
+    whose V the sweep reads; -1 when none, and then ``U[i, a] = v_star gamma^h``, ``h = |w_i
+    + delta_a - x_g|_1 / L`` (the fewest steps from the predicted successor to the goal
+    sensation); -2 for a remembered wall cell (not ``stuck``), whose value if it opened is
+    gamma times the best ``gamma^k V(q)`` of its exits ``onb[i, a]`` (discounts ``ong[i,
+    a]``): the known nodes next to it, or next to a cell of a run of unknown cells from it,
+    ``k`` cells along (straight on or sideways: a wall that opens opens along its run,
+    :func:`wall_exits`); no exit: no option. ``stuck``: the optimistic U, as for unknown
+    space. ``V``: the last solve's potentials (they pick the exits). (One loop over the rows
+    and pairs: a call per row cost more than its work.)"""
+    x = np.empty(w.shape[1])
     for i in rows:
         if i >= n:
             continue
@@ -1252,15 +1192,66 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
                 U[i, a] = 0.0
                 osucc[i, a] = -1
             continue
-        option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t,
-                   bump_e, succ, clock, horizon, episode, trust, rho_max, rho_new, stuck, grid,
-                   origin, V, sel, chain, U, rho, osucc, onb, ong)
+        for a in range(U.shape[1]):
+            j = -1
+            wall = False
+            if not tried[i, a]:
+                r = 1.0 if chain[i, a] else rho_new
+            elif stuck and 0 <= bump_t[i, a] < clock and horizon > 0.0:
+                tau = clock - bump_t[i, a]
+                e = bump_t[i, a] - closed_t[i, a] if closed_t[i, a] >= 0 else 0
+                r = rho_max * (1.0 - np.exp(-tau / (horizon + e)))
+                j = succ[i, a]
+            elif not stuck and stale(bump_e, i, a, episode, trust):
+                r = rho_max if sel[i, a] else 0.0
+                j = succ[i, a]
+                wall = j < 0
+            elif bump_t[i, a] < 0 and succ[i, a] >= 0 and not _linked(out, i, succ[i, a]):
+                r = 1.0
+                j = succ[i, a]
+            else:
+                r = 0.0
+            if r == 0.0:                    # no option (most pairs): nothing to look up
+                for b in range(U.shape[1]):
+                    onb[i, a, b] = -1
+                    ong[i, a, b] = 0.0
+                rho[i, a] = 0.0
+                U[i, a] = 0.0
+                osucc[i, a] = -1
+                continue
+            d = 0.0
+            for k in range(w.shape[1]):
+                x[k] = w[i, k] + delta[a, k]
+                d += abs(x[k] - goal[k])
+            if j >= 0 and not at_cell(w, alive, j, x, L):
+                j = -1          # where the move led, a node since removed (its slot maybe
+                #                 reused elsewhere): the cell is looked up as for any move
+            for b in range(U.shape[1]):
+                onb[i, a, b] = -1
+                ong[i, a, b] = 0.0
+            u = v_star * gamma ** (d / L)
+            if r > 0.0 and wall:
+                # a remembered wall: if it opened, the cell leads on to known nodes
+                j = -2
+                u = 1.0
+                if not wall_exits(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong):
+                    r = 0.0
+            elif r > 0.0 and j < 0:
+                j = node_at(grid, origin, L, w, x)
+            if r == 0.0:
+                rho[i, a] = 0.0
+                U[i, a] = 0.0
+                osucc[i, a] = -1
+                continue
+            rho[i, a] = r
+            U[i, a] = u
+            osucc[i, a] = j if j != i else -1
 
 
 @njit(cache=True)
 def option_rows_changed(w, alive, n, touched, delta, L, grid_was, grid, origin, tried, bump_e,
                         succ, sel, episode, trust, stuck, untried, rows):
-    """The rows ``i < n`` whose :func:`option_row` may read something the map changed
+    """The rows ``i < n`` whose options (:func:`option_values`) may read something the map changed
     (unknown.py, an incremental refresh of Eq. 5'), given the map rows it ``touched`` (a
     mask of n: weights, alive, links) and the node lookup before (``grid_was``) and after
     (``grid``) with the same shape and ``origin`` (:func:`cell_grid`): row i itself
@@ -1306,7 +1297,7 @@ def untried_rho(alive, n, tried, chain, lattice, rho_new, rho, rows):
     """``rho_new`` (the open prior, unknown.py) on every pair of a live node never tried,
     except a lattice primitive's move of this episode's untried chain (rho 1): while the
     prior stays above 0 the only value of those options that follows it
-    (:func:`option_row`; a primitive off the lattice: ``OptionRules._unplaced_options``).
+    (:func:`option_values`; a primitive off the lattice: ``OptionRules._unplaced_options``).
     Writes the rows holding such a pair, ascending, to ``rows``; returns how many."""
     count = 0
     for i in range(n):
