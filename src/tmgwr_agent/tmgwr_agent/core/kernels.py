@@ -1182,7 +1182,7 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
     :func:`wall_exits`); no exit: no option. ``stuck``: the optimistic U, as for unknown
     space. ``V``: the last solve's potentials (they pick the exits). (One loop over the rows
     and pairs: a call per row cost more than its work.)"""
-    x = np.empty(w.shape[1])
+    x, y, z = np.empty(w.shape[1]), np.empty(w.shape[1]), np.empty(w.shape[1])
     for i in rows:
         if i >= n:
             continue
@@ -1234,7 +1234,8 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
                 # a remembered wall: if it opened, the cell leads on to known nodes
                 j = -2
                 u = 1.0
-                if not wall_exits(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong):
+                if not wall_exits_into(w, i, a, x, delta, L, grid, origin, V, gamma, onb,
+                                       ong, y, z):
                     r = 0.0
             elif r > 0.0 and j < 0:
                 j = node_at(grid, origin, L, w, x)
