@@ -407,6 +407,42 @@ def test_the_greedy_probes_potentials_after_a_goal_change_are_exact():
         run_episode(world, agent, max_steps=3000)
 
 
+def test_a_goal_change_writes_over_the_retired_copy_and_solves_the_same():
+    """The ordered solve after a goal change writes its copy of the inputs over the state
+    the goal change retired (no fresh arrays), and solves to the same bits as an estimator
+    that starts from fresh ones, at the change and in the episode after it."""
+    import copy
+
+    from maze_sim.maze import Maze
+    from tmgwr_agent.experiments.agent_factory import make_agent
+    from tmgwr_agent.experiments.runner import Caps, make_world, run_episode, set_goal
+    from tmgwr_agent.experiments.scenarios import DEFAULT_MAZE
+
+    maze = Maze.from_file(DEFAULT_MAZE)
+    world = make_world(maze, "G", Caps.for_maze(maze))
+    agent = make_agent("tmgwr", maze, np.random.default_rng(0))
+    set_goal(world, agent, "G")
+    for _ in range(4):
+        run_episode(world, agent, max_steps=3000)
+    world2, agent2 = copy.deepcopy((world, agent))
+    fresh = agent2.motivation
+    fresh._retire_incremental = lambda: setattr(fresh, "_inc", None)   # nothing kept
+    for goal in ("3", "G"):
+        inc = agent.motivation._inc
+        assert inc is not None
+        set_goal(world, agent, goal)
+        set_goal(world2, agent2, goal)
+        for a in (agent, agent2):
+            if not a.motivation.solved:
+                a.motivation.update(a.map)
+        assert agent.motivation._inc is inc and agent2.motivation._inc is not inc
+        np.testing.assert_array_equal(agent.motivation.V, agent2.motivation.V)
+        e1 = run_episode(world, agent, max_steps=3000)
+        e2 = run_episode(world2, agent2, max_steps=3000)
+        assert e1 == e2
+        np.testing.assert_array_equal(agent.motivation.V, agent2.motivation.V)
+
+
 @pytest.mark.parametrize("dim", [2, 3, 4])
 def test_the_median_link_length_is_numpys_to_the_bit(dim):
     """MotivationEstimator.link_scale gathers the links' differences in a kernel
