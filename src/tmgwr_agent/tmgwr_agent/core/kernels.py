@@ -687,15 +687,20 @@ def _heap_push(heap, pos, key, size, i, priority):
 
 @njit(cache=True)
 def _queue_seeds(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb,
-                 ong, seeds, n_seeds, heap, pos, key, size, by_value, target):
+                 ong, seeds, n_seeds, heap, pos, key, size, by_value, target, reuse):
     """Push every node of ``seeds[:n_seeds]`` whose target (:func:`node_target`) differs
     from its V by more than ``tol`` times the target plus ``v_floor``, keyed by that
     change, or with ``by_value`` by the target itself; returns the queue's size. Every
-    target computed is kept in ``target`` (:func:`_drain`)."""
+    target computed is kept in ``target`` (:func:`_drain`); with ``reuse``, a seed's
+    target already there (not NaN: computed since the last change of what it reads) is
+    taken as it is."""
     for k in range(n_seeds):
         i = seeds[k]
-        t = node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb, ong)
-        target[i] = t
+        t = target[i]
+        if not reuse or t != t:
+            t = node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb,
+                            ong)
+            target[i] = t
         d = abs(t - V[i])
         if d > tol * t + v_floor:
             size = _heap_push(heap, pos, key, size, i, t if by_value else d)
@@ -753,7 +758,7 @@ def prioritized_sweep(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U,
     (-1 = not queued) and ``key`` are work arrays of n entries; ``pos`` is left all -1."""
     target = np.empty(len(V))
     size = _queue_seeds(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
-                        onb, ong, seeds, n_seeds, heap, pos, key, 0, False, target)
+                        onb, ong, seeds, n_seeds, heap, pos, key, 0, False, target, False)
     return _drain(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb,
                   ong, first, pred, max_updates, heap, pos, key, size, False, target)
 
@@ -761,6 +766,16 @@ def prioritized_sweep(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U,
 @njit(cache=True)
 def ordered_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
                   onb, ong, first, pred, seeds, n_seeds, max_updates, heap, pos, key):
+    """:func:`_ordered_solve` computing every seed's target."""
+    return _ordered_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho,
+                          osucc, onb, ong, first, pred, seeds, n_seeds, max_updates, heap,
+                          pos, key, np.empty(len(V)), False)
+
+
+@njit(cache=True)
+def _ordered_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
+                   onb, ong, first, pred, seeds, n_seeds, max_updates, heap, pos, key, target,
+                   reuse):
     """Eq. 4-5' on the nodes ``seeds[:n_seeds]`` from values at or below their fixed point
     (V = 0 after a goal change, or after :func:`invalidate`), largest value first, as
     Dijkstra's algorithm settles a shortest path: with ``R`` = 0 a node is worth at most
@@ -773,7 +788,8 @@ def ordered_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho
     an option mixes two successors (``rho S + (1 - rho) stay``), so a node may rise again
     when a smaller successor is settled: it is queued again, as by
     :func:`prioritized_sweep`, whose stopping rule this shares. Returns the updates made
-    (the rounds of the first part not counted), or -1 after ``max_updates``."""
+    (the rounds of the first part not counted), or -1 after ``max_updates``.
+    ``target``, ``reuse``: the targets already known (:func:`_queue_seeds`)."""
     m = 0
     for k in range(n_seeds):
         if R[seeds[k]] > 0.0 and alive[seeds[k]]:
@@ -796,7 +812,6 @@ def ordered_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho
         if change <= v_floor:
             break
     size = 0
-    target = np.empty(len(V))
     for j in cluster:                              # then who reads them, and the seeds
         for c in range(first[j], first[j + 1]):
             p = pred[c]
@@ -806,7 +821,8 @@ def ordered_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho
             if abs(t - V[p]) > tol * t + v_floor:
                 size = _heap_push(heap, pos, key, size, p, t)
     size = _queue_seeds(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
-                        onb, ong, seeds, n_seeds, heap, pos, key, size, True, target)
+                        onb, ong, seeds, n_seeds, heap, pos, key, size, True, target,
+                        reuse)
     return _drain(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb,
                   ong, first, pred, max_updates, heap, pos, key, size, True, target)
 
@@ -814,6 +830,35 @@ def ordered_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho
 @njit(cache=True)
 def invalidate(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb,
                ong, first, pred, seeds, n_seeds, found, mark):
+    """:func:`_invalidate` without keeping the targets."""
+    return _invalidate(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho,
+                       osucc, onb, ong, first, pred, seeds, n_seeds, found, mark,
+                       np.empty(len(V)))
+
+
+@njit(cache=True)
+def invalidate_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
+                     onb, ong, first, pred, seeds, n_seeds, found, mark, max_updates, heap,
+                     pos, key):
+    """:func:`invalidate`, then :func:`ordered_solve` from the seeds and the nodes it
+    found, in one call; returns (found, the ordered solve's result). When it found none,
+    V is as it was and the targets it computed for the seeds are still theirs: the
+    ordered solve takes them instead of computing them again."""
+    target = np.full(len(V), np.nan)
+    k = _invalidate(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
+                    onb, ong, first, pred, seeds, n_seeds, found, mark, target)
+    both = seeds[:n_seeds]
+    if k > 0:
+        both = np.concatenate((seeds[:n_seeds], found[:k]))
+    done = _ordered_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho,
+                          osucc, onb, ong, first, pred, both, len(both), max_updates, heap,
+                          pos, key, target, k == 0)
+    return k, done
+
+
+@njit(cache=True)
+def _invalidate(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb,
+                ong, first, pred, seeds, n_seeds, found, mark, target):
     """Before an incremental solve of a change that may lower values (a link removed, an
     E, R or option gone, a node made absorbing or dead): the nodes whose value rested on
     it, with V set to 0 (LPA*'s under-consistent nodes, Koenig & Likhachev). A seed whose
@@ -822,13 +867,15 @@ def invalidate(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, o
     Lowering those values by sweeping would take geometrically many rounds where two
     nodes held each other up (a region cut off from its sources); from 0 they rise to the
     fixed point in one ordered pass (:func:`ordered_solve`). Writes them to ``found``
-    (n entries) and returns how many; ``mark`` (n booleans, all False) is left so."""
+    (n entries) and returns how many; ``mark`` (n booleans, all False) is left so; the
+    targets of the seeds it looked at, to ``target``."""
     c = 0
     for k in range(n_seeds):
         i = seeds[k]
         if mark[i] or V[i] <= 0.0:
             continue
         t = node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb, ong)
+        target[i] = t
         if t < V[i] - tol * V[i] - v_floor:
             mark[i] = True
             V[i] = 0.0

@@ -664,10 +664,9 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
                 self.U, self.rho, self.osucc, self.onb, self.ong, inc.first, inc.pred)
         if lost:
             self.solves["invalidated"] = self.solves.get("invalidated", 0) + 1
-            k = kernels.invalidate(*args, inc.seeds, c, inc.found, inc.mark)
-            seeds = np.concatenate((inc.seeds[:c], inc.found[:k]))
-            done = kernels.ordered_solve(*args, seeds, len(seeds), INCREMENTAL_BUDGET * n,
-                                         inc.heap, inc.pos, inc.key)
+            _, done = kernels.invalidate_solve(*args, inc.seeds, c, inc.found, inc.mark,
+                                               INCREMENTAL_BUDGET * n, inc.heap, inc.pos,
+                                               inc.key)
         else:
             done = kernels.prioritized_sweep(*args, inc.seeds, c, INCREMENTAL_BUDGET * n,
                                              inc.heap, inc.pos, inc.key)
