@@ -184,11 +184,16 @@ def test_invalidating_what_a_removal_held_up_then_an_ordered_solve_is_exact(seed
         first, pred = kernels.predecessors(out, n, alive, o.osucc, o.onb)
         args = (out, E, R, V, n, GAMMA, TOL * (1 - GAMMA), FLOOR, absorbing, alive, o.U,
                 o.rho, o.osucc, o.onb, o.ong, first, pred)
-        k = kernels.invalidate(*args, seeds, len(seeds), found, mark)
+        V2 = V.copy()                 # the same in one call, for the bits below
+        k = kernels.invalidate(*args, seeds, len(seeds), found, mark, np.empty(n + 1))
         assert not mark.any()
         invalidated += k
         both = np.concatenate((seeds, found[:k]))
         assert kernels.ordered_solve(*args, both, len(both), 100 * n, heap, pos, key) >= 0
+        args2 = args[:3] + (V2,) + args[4:]
+        assert kernels.invalidate_solve(*args2, seeds, len(seeds), found, mark, 100 * n, heap,
+                                        pos, key)[0] == k
+        np.testing.assert_array_equal(V2, V)   # invalidate's targets reused: same bits
         ref = exact(out, E, R, absorbing, alive, o)
         np.testing.assert_allclose(V[:n], ref[:n], rtol=TOL, atol=1e-12)
         assert (V[:n][ref[:n] == 0.0] == 0.0).all()
@@ -236,7 +241,8 @@ def test_a_sweep_over_budget_continued_from_its_v_equals_a_full_solve(seed):
                 o.rho, o.osucc, o.onb, o.ong, first, pred)
         budget = int(rng.integers(0, 4))
         if rng.random() < 0.5:                       # as motivation._incremental does
-            k = kernels.invalidate(*args, seeds, len(seeds), found, mark)
+            k = kernels.invalidate(*args, seeds, len(seeds), found, mark,
+                                   np.empty(n + 1))
             both = np.concatenate((seeds, found[:k]))
             done = kernels.ordered_solve(*args, both, len(both), budget, heap, pos, key)
         else:

@@ -828,15 +828,6 @@ def _ordered_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rh
 
 
 @njit(cache=True)
-def invalidate(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb,
-               ong, first, pred, seeds, n_seeds, found, mark):
-    """:func:`_invalidate` without keeping the targets."""
-    return _invalidate(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho,
-                       osucc, onb, ong, first, pred, seeds, n_seeds, found, mark,
-                       np.empty(len(V)))
-
-
-@njit(cache=True)
 def invalidate_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
                      onb, ong, first, pred, seeds, n_seeds, found, mark, max_updates, heap,
                      pos, key):
@@ -845,8 +836,8 @@ def invalidate_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, 
     V is as it was and the targets it computed for the seeds are still theirs: the
     ordered solve takes them instead of computing them again."""
     target = np.full(len(V), np.nan)
-    k = _invalidate(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
-                    onb, ong, first, pred, seeds, n_seeds, found, mark, target)
+    k = invalidate(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
+                   onb, ong, first, pred, seeds, n_seeds, found, mark, target)
     both = seeds[:n_seeds]
     if k > 0:
         both = np.concatenate((seeds[:n_seeds], found[:k]))
@@ -857,8 +848,8 @@ def invalidate_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, 
 
 
 @njit(cache=True)
-def _invalidate(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb,
-                ong, first, pred, seeds, n_seeds, found, mark, target):
+def invalidate(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb,
+               ong, first, pred, seeds, n_seeds, found, mark, target):
     """Before an incremental solve of a change that may lower values (a link removed, an
     E, R or option gone, a node made absorbing or dead): the nodes whose value rested on
     it, with V set to 0 (LPA*'s under-consistent nodes, Koenig & Likhachev). A seed whose
@@ -1229,7 +1220,7 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
     :func:`wall_exits`); no exit: no option. ``stuck``: the optimistic U, as for unknown
     space. ``V``: the last solve's potentials (they pick the exits). (One loop over the rows
     and pairs: a call per row cost more than its work.)"""
-    x, y, z = np.empty(w.shape[1]), np.empty(w.shape[1]), np.empty(w.shape[1])
+    x = np.empty(w.shape[1])
     for i in rows:
         if i >= n:
             continue
@@ -1281,8 +1272,7 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
                 # a remembered wall: if it opened, the cell leads on to known nodes
                 j = -2
                 u = 1.0
-                if not wall_exits_into(w, i, a, x, delta, L, grid, origin, V, gamma, onb,
-                                       ong, y, z):
+                if not wall_exits(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong):
                     r = 0.0
             elif r > 0.0 and j < 0:
                 j = node_at(grid, origin, L, w, x)
