@@ -101,6 +101,25 @@ displacement lies within it, ``0 < |d|^2 < s`` (:meth:`SensorimotorMap.stayed`).
 Without sensing noise a bump in a grid senses no change (``d = 0``) and a partial move in
 PointMaze lies far beyond the spread of its physics, so no bump is merged.
 
+**A bump from another place.** Under noise a node can win samples of two neighbouring
+places (a node left between them by a merge, or a sample scattered past the half-way
+line); from such a node one primitive moves when the agent stands at one place and bumps
+at the other. Read as the node's own, that bump says the move the node made has closed
+(the outcome memory then cuts the link, closes the cell it led to and may find the goal
+unreachable), and the winners of the bump, two places, are merged. So before a bump is
+learnt, the map checks where it was taken (:meth:`SensorimotorMap.bumped_elsewhere`):
+the primitive's moves from the node (its most reliable link labelled with it, to ``j``)
+started about ``w_j - m``, and a bump sensed more than half a step ``|m| / 2`` from there
+was taken nearer another place than that one (the places of a lattice of steps ``m`` lie
+a step apart, so half a step is the line between two; for a primitive whose moves stand
+out of a scatter that is not 0, as above). Such a bump is learnt as a bump at the node
+(Eq. 1-2 on a self transition: its links of that primitive lose reliability, as the
+node's share of samples where the primitive bumps grows), makes no link and merges
+nothing, and is the winner's, the place it was taken at (:attr:`SensorimotorMap.
+bump_from`, what the agent and the graph's map learner report as the node acted from;
+-1, no node, when the winner is the same node or the bump is elsewhere for it too).
+Without noise (no scatter) the check is off.
+
 Storage is fixed-width adjacency (``out[i, :K]`` target ids, -1 = empty slot) so that value
 iteration over the map is a few vectorised numpy operations. Node ids are slot indices; a
 freed slot is reused by the next insertion (lowest first) and ``version`` counts structural
@@ -304,6 +323,8 @@ class SensorimotorMap:
         self.winner: int = -1
         self.inserted = False      # whether the last update inserted a node (its winner)
         self.winner_new = -1       # the node the last insertion made
+        self.bump_from: int | None = None   # a bump taken elsewhere: the node it was (-1:
+        #                                     none; None: the step's own previous winner)
         self.C_t = np.zeros(dim)   # Merge-GNG context of the last input (kernels.match)
         self.log = RowLog()        # the rows each change touched (the estimator's input)
         self.rebuild_in_links()    # (none yet: compiles the kernel where maps are made)
@@ -428,8 +449,13 @@ class SensorimotorMap:
                                  "labels links with primitives[action]")
             motor = self.primitives[outcome.action]
         before = self.prev
-        winner = self.step(x, motor, learn=learn)
-        if learn and motor is not None:
+        self.bump_from = None
+        elsewhere = learn and motor is not None and outcome.bumped and self.merge \
+            and self.bumped_elsewhere(before, outcome.action)
+        winner = self.step(x, None if elsewhere else motor, learn=learn)
+        if elsewhere:
+            winner = self._bump_elsewhere(before, winner, motor, outcome.action)
+        elif learn and motor is not None:
             winner = self._sensed_move(np.asarray(x, dtype=float), outcome, before, winner)
         self.x_prev[:] = x
         if learn and outcome.ends_episode:
@@ -534,6 +560,50 @@ class SensorimotorMap:
         winner = self._merge_close(np.array([before], dtype=np.int64), before)
         self.prev = self.winner = winner
         return winner
+
+    def _bump_elsewhere(self, before: int, winner: int, motor: np.ndarray, a: int) -> int:
+        """After a step without a link (the matching and adaptation only) for a bump of
+        primitive ``a`` that :meth:`bumped_elsewhere` says was taken at another place than
+        the moves of ``a`` from ``before``: Eq. 1-2 as a bump at ``before`` (a self
+        transition: the links of ``a`` out of it lose reliability, as for any bump there,
+        and no link to the winner is made), no bump merge (the two winners are two
+        places), and :attr:`bump_from`, the node the bump is of, is the winner when it is
+        another node and the bump is not elsewhere for it too, else -1 (no node).
+        Returns the winner."""
+        before = survivor(before, self.merges)
+        if before >= 0 and self.alive[before]:
+            self._update_links(before, before, motor)
+        self.bump_from = winner if winner != before and winner >= 0 \
+            and not self.bumped_elsewhere(winner, a) else -1
+        return winner
+
+    def bumped_elsewhere(self, i: int, a: int) -> bool:
+        """Whether a bump of primitive ``a``, taken where the last input ``x_prev`` was
+        sensed, was taken somewhere else than the moves of ``a`` from node i (the module
+        docstring, "A bump from another place"): i's most reliable link labelled with
+        ``a`` leads to node j, so those moves started about ``w_j - m`` (``m``: the
+        primitive's mean sensed displacement), and the bump's sensation lies more than
+        half a step ``|m| / 2`` from there. Only for a primitive whose moves stand out of
+        their scatter (as in :meth:`stayed`) and whose scatter is not 0 (without noise a
+        node's place is its sensation)."""
+        if i < 0 or not self.alive[i] or a >= len(self.motion) or self.primitives is None \
+                or not np.isfinite(self.x_prev).all():
+            return False
+        count, m, m2 = self.motion[a, 0], self.motion[a, 1:-1], self.motion[a, -1]
+        if count < 2:
+            return False
+        s, mm = m2 / count, float(m @ m)
+        if not (0.0 < s and 4.0 * s < mm):
+            return False
+        best, j = 0.0, -1
+        for k in np.flatnonzero(self.out[i] >= 0):
+            if kernels.sim_action(self.a[i, k], self.primitives[a], self.sigma_a) >= 0.5 \
+                    and self.E[i, k] > best:
+                best, j = self.E[i, k], int(self.out[i, k])
+        if j < 0:
+            return False
+        d = self.x_prev - (self.w[j] - m)
+        return bool(d @ d > 0.25 * mm)
 
     def _place_radius(self) -> None:
         """``a_place``, the activity threshold of one place (the module docstring): GWR's
