@@ -452,7 +452,10 @@ class SensorimotorMap:
         self.bump_from = None
         elsewhere = learn and motor is not None and outcome.bumped and self.merge \
             and self.bumped_elsewhere(before, outcome.action)
-        winner = self.step(x, None if elsewhere else motor, learn=learn)
+        prior = -1
+        if motor is not None and self.merge and self.a_place < self.a_T and not elsewhere:
+            prior = before if outcome.bumped else self.link_target(before, outcome.action)
+        winner = self.step(x, None if elsewhere else motor, learn=learn, prior=prior)
         if elsewhere:
             winner = self._bump_elsewhere(before, winner, motor, outcome.action)
         elif learn and motor is not None:
@@ -462,8 +465,11 @@ class SensorimotorMap:
             self.mark_terminal(winner)
         return winner
 
-    def step(self, x: np.ndarray, action: np.ndarray | None, learn: bool = True) -> int:
+    def step(self, x: np.ndarray, action: np.ndarray | None, learn: bool = True,
+             prior: int = -1) -> int:
         """Present input x reached by motor vector ``action``; returns the winner.
+        ``prior``: the node the links predict (``experience``), the winner when x lies
+        within the radius of its place.
 
         With ``learn`` False only the winner is found (greedy rollouts).
         """
@@ -482,7 +488,7 @@ class SensorimotorMap:
             self.alpha_c, self.beta_c, self.a_place, self.h_T, learn, self.eps_b, self.eps_n,
             self.tau_b, self.tau_n, self.kappa_h, self.E, self.a, self.age, self.terminal, a,
             has_action, self.alpha, self.sigma_a, self.eta_a, self.E_init, self.E_min,
-            self.max_age, self.link_rule == "credit", self.winner, r2)
+            self.max_age, self.link_rule == "credit", self.winner, r2, prior)
         if len(moved):
             self.log.touch(moved)
         if done:
@@ -595,15 +601,23 @@ class SensorimotorMap:
         s, mm = m2 / count, float(m @ m)
         if not (0.0 < s and 4.0 * s < mm):
             return False
+        j = self.link_target(i, a)
+        if j < 0:
+            return False
+        d = self.x_prev - (self.w[j] - m)
+        return bool(d @ d > 0.25 * mm)
+
+    def link_target(self, i: int, a: int) -> int:
+        """The target of node i's most reliable link labelled with primitive ``a``
+        (``sim >= 1/2`` by Eq. 2), -1 without one."""
+        if i < 0 or self.primitives is None or a >= len(self.primitives):
+            return -1
         best, j = 0.0, -1
         for k in np.flatnonzero(self.out[i] >= 0):
             if kernels.sim_action(self.a[i, k], self.primitives[a], self.sigma_a) >= 0.5 \
                     and self.E[i, k] > best:
                 best, j = self.E[i, k], int(self.out[i, k])
-        if j < 0:
-            return False
-        d = self.x_prev - (self.w[j] - m)
-        return bool(d @ d > 0.25 * mm)
+        return j
 
     def _place_radius(self) -> None:
         """``a_place``, the activity threshold of one place (the module docstring): GWR's
