@@ -194,6 +194,23 @@ def test_the_agent_records_a_bump_taken_elsewhere_at_its_place():
     assert mo.tried[1, 1] and mo.bump_t[1, 1] >= 0          # the wall of node 1's place
 
 
+@pytest.mark.parametrize("spread, winner", [
+    (0.0016, 2),    # noise of 0.2 cell: within the radius of the place RIGHT leads to
+    (0.0, 3),       # no noise: the nearest node, as GWR
+])
+def test_a_sample_within_the_place_the_links_predict_is_that_place(spread, winner):
+    """RIGHT from node 0 has led to node 2 (x=0.1); it senses x=0.145, within the radius of
+    node 2's place, though node 3 (x=0.175) is nearer."""
+    m = elsewhere_map(spread)
+    m._insert(np.array([0.175, 0.0]), np.array([0.175, 0.0]))
+    m.h[3] = 0.1
+    m.motion[0] = m.motion[1] * (1, -1, 1, 1)           # LEFT: the opposite move
+    m._place_radius()
+    m.x_prev[:] = (0.0, 0.0)
+    assert m.experience(np.array([0.145, 0.0]), Outcome(action=1)) == winner
+    assert m.alive[:4].all() and not m.inserted
+
+
 def test_a_new_node_merged_into_a_known_place_is_not_new():
     """A bump's sample beyond the radius inserts a node, which the bump's merge joins to
     the place it stood on: the step's winner is that known place (``inserted`` False, so

@@ -120,6 +120,17 @@ bump_from`, what the agent and the graph's map learner report as the node acted 
 -1, no node, when the winner is the same node or the bump is elsewhere for it too).
 Without noise (no scatter) the check is off.
 
+**The place the links predict.** A sample scattered nearer a neighbouring node than its
+own makes that node the winner, and the action chosen from it is the neighbour's (a
+greedy walk then bumps or turns off its route). The links say where the move just made
+leads: the target of the previous winner's most reliable link of that primitive (the
+previous winner itself after a bump that was not elsewhere). When the input lies within
+the radius of a place of that node (``-ln a_place``, the radius within which a sample is
+noise on a node's place, above), it wins, though another node may lie a little nearer
+(:func:`kernels.match`, ``prior``); the sensation alone decides otherwise. Only while
+the radius is the sensing scatter's (``a_place < a_T``): without noise the nearest node
+wins, as in GWR.
+
 Storage is fixed-width adjacency (``out[i, :K]`` target ids, -1 = empty slot) so that value
 iteration over the map is a few vectorised numpy operations. Node ids are slot indices; a
 freed slot is reused by the next insertion (lowest first) and ``version`` counts structural
