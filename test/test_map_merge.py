@@ -148,6 +148,7 @@ def elsewhere_map(spread: float) -> SensorimotorMap:
     m.rebuild_in_links()
     m.motion[1] = (10, 0.1, 0.0, 10 * spread)
     m.prev = m.winner = 0
+    m._place_radius()
     m.x_prev[:] = (0.0, 0.09)
     return m
 

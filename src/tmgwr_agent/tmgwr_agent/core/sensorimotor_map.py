@@ -112,13 +112,13 @@ the primitive's moves from the node (its most reliable link labelled with it, to
 started about ``w_j - m``, and a bump sensed more than half a step ``|m| / 2`` from there
 was taken nearer another place than that one (the places of a lattice of steps ``m`` lie
 a step apart, so half a step is the line between two; for a primitive whose moves stand
-out of a scatter that is not 0, as above). Such a bump is learnt as a bump at the node
-(Eq. 1-2 on a self transition: its links of that primitive lose reliability, as the
-node's share of samples where the primitive bumps grows), makes no link and merges
-nothing, and is the winner's, the place it was taken at (:attr:`SensorimotorMap.
+out of their scatter, as above, while the place radius is the scatter's). Such a bump is
+learnt as a bump at the node (Eq. 1-2 on a self transition: its links of that primitive
+lose reliability, as the node's share of samples where the primitive bumps grows), makes
+no link and merges nothing, and is the winner's, the place it was taken at (:attr:`SensorimotorMap.
 bump_from`, what the agent and the graph's map learner report as the node acted from;
 -1, no node, when the winner is the same node or the bump is elsewhere for it too).
-Without noise (no scatter) the check is off.
+Without noise, or with a scatter inside GWR's radius, the check is off.
 
 **The place the links predict.** A sample scattered nearer a neighbouring node than its
 own makes that node the winner, and the action chosen from it is the neighbour's (a
@@ -601,8 +601,9 @@ class SensorimotorMap:
         ``a`` leads to node j, so those moves started about ``w_j - m`` (``m``: the
         primitive's mean sensed displacement), and the bump's sensation lies more than
         half a step ``|m| / 2`` from there. Only for a primitive whose moves stand out of
-        their scatter (as in :meth:`stayed`) and whose scatter is not 0 (without noise a
-        node's place is its sensation)."""
+        their scatter (as in :meth:`stayed`), while the place radius is the sensing
+        scatter's (``a_place < a_T``: below GWR's radius a node does not win samples of
+        two places a step apart)."""
         if i < 0 or not self.alive[i] or a >= len(self.motion) or self.primitives is None \
                 or not np.isfinite(self.x_prev).all():
             return False
@@ -610,7 +611,7 @@ class SensorimotorMap:
         if count < 2:
             return False
         s, mm = m2 / count, float(m @ m)
-        if not (0.0 < s and 4.0 * s < mm):
+        if not (self.a_place < self.a_T and 4.0 * s < mm):
             return False
         j = self.link_target(i, a)
         if j < 0:
