@@ -134,6 +134,84 @@ def test_the_winners_of_a_bump_that_stayed_are_one_node(spread, mean, dx, merged
     assert m.motion[0, 0] == 11
 
 
+def elsewhere_map(spread: float) -> SensorimotorMap:
+    """Node 0 at the origin, whose RIGHT (a cell, 0.1) has led to node 2 at x=0.1, and node
+    1 a cell below it; RIGHT has made 10 moves of mean displacement a cell and spread
+    ``spread``. The last input was sensed a cell below the origin (node 1's place), where
+    node 0 won it."""
+    m = SensorimotorMap(dim=2, config=MapConfig(alpha_c=0.0),
+                        primitives=np.array([LEFT, RIGHT]))
+    for x in ((0.0, 0.0), (0.0, 0.1), (0.1, 0.0)):
+        m._insert(np.array(x), np.array(x))
+    m.out[0, 0], m.E[0, 0], m.a[0, 0] = 2, 1.0, RIGHT
+    m.h[:3] = (0.1, 0.1, 0.1)
+    m.rebuild_in_links()
+    m.motion[1] = (10, 0.1, 0.0, 10 * spread)
+    m.prev = m.winner = 0
+    m._place_radius()
+    m.x_prev[:] = (0.0, 0.09)
+    return m
+
+
+def test_a_bump_taken_at_another_place_than_the_nodes_moves_is_that_places():
+    """Node 0 won a sample of the place below it; RIGHT, which moves from node 0's place,
+    bumps there: not evidence that node 0's link closed, nor a stay within one node."""
+    m = elsewhere_map(0.0016)                      # noise of 0.2 cell
+    assert m.bumped_elsewhere(0, 1)
+    winner = m.experience(np.array([0.0, 0.1]), Outcome(action=1, bumped=True))
+    assert winner == 1 and m.merges == [] and m.alive[:3].all()    # two places
+    assert m.bump_from == 1                        # the bump is the place it was taken at
+    assert not (m.out[0] == 1).any()               # no link made by a bump
+    assert m.E[0, 0] == pytest.approx(1.0 - m.alpha)   # Eq. 1-2: a bump at node 0
+    # taken where node 0's moves start, the bump is node 0's (and its winners merge)
+    m = elsewhere_map(0.0016)
+    m.x_prev[:] = (0.0, 0.03)
+    assert not m.bumped_elsewhere(0, 1)
+    m.experience(np.array([0.0, 0.06]), Outcome(action=1, bumped=True))
+    assert m.bump_from is None and m.merges == [(0, 1)]
+
+
+@pytest.mark.parametrize("spread", [0.0, 0.004])  # no scatter; moves hardly stand out
+def test_a_bump_is_elsewhere_only_when_the_moves_stand_out_of_their_scatter(spread):
+    m = elsewhere_map(spread)
+    assert not m.bumped_elsewhere(0, 1)
+    m.experience(np.array([0.0, 0.1]), Outcome(action=1, bumped=True))
+    assert m.bump_from is None and (m.out[0] == 1).any()
+
+
+def test_the_agent_records_a_bump_taken_elsewhere_at_its_place():
+    """The agent's outcome memory notes the bump on the node of the place it was taken
+    at, and never on the node whose moves it would contradict."""
+    agent = TMGWRAgent(maze_senses(), np.random.default_rng(0))
+    agent.map = m = elsewhere_map(0.0016)
+    m.primitives = agent.senses.primitives
+    m.a[0, 0] = m.primitives[1]
+    agent.winner = 0
+    agent.motivation.record(-1, 0, False, EPISODE_START, m.w)
+    agent.motivation.record(0, 2, False, Outcome(action=1), m.w)
+    agent.step(np.array([0.0, 0.1]) / agent.preprocessor.gain, Outcome(action=1, bumped=True))
+    mo = agent.motivation
+    assert mo.bump_t[0, 1] < 0 and mo.succ[0, 1] == 2       # node 0's move stands
+    assert mo.tried[1, 1] and mo.bump_t[1, 1] >= 0          # the wall of node 1's place
+
+
+@pytest.mark.parametrize("spread, winner", [
+    (0.0016, 2),    # noise of 0.2 cell: within the radius of the place RIGHT leads to
+    (0.0, 3),       # no noise: the nearest node, as GWR
+])
+def test_a_sample_within_the_place_the_links_predict_is_that_place(spread, winner):
+    """RIGHT from node 0 has led to node 2 (x=0.1); it senses x=0.145, within the radius of
+    node 2's place, though node 3 (x=0.175) is nearer."""
+    m = elsewhere_map(spread)
+    m._insert(np.array([0.175, 0.0]), np.array([0.175, 0.0]))
+    m.h[3] = 0.1
+    m.motion[0] = m.motion[1] * (1, -1, 1, 1)           # LEFT: the opposite move
+    m._place_radius()
+    m.x_prev[:] = (0.0, 0.0)
+    assert m.experience(np.array([0.145, 0.0]), Outcome(action=1)) == winner
+    assert m.alive[:4].all() and not m.inserted
+
+
 def test_a_new_node_merged_into_a_known_place_is_not_new():
     """A bump's sample beyond the radius inserts a node, which the bump's merge joins to
     the place it stood on: the step's winner is that known place (``inserted`` False, so
@@ -219,6 +297,8 @@ def test_the_graph_path_holds_the_agents_map_and_memory_after_merges():
         merged += len(merges)
         est.merge(merges)
         est.follow_goal(agent.motivation.goal_x)
+        if m.bump_from is not None:         # a bump taken elsewhere (nodes/map_learner.py)
+            prev = m.bump_from
         est.record(-1 if outcome.episode_start else survivor(prev, merges), m.winner,
                    m.inserted, outcome, replica.snapshot().w)
         est.update(replica.snapshot(), skip=agent.walk_next)

@@ -156,6 +156,8 @@ class TMGWRAgent:
         if self.map.merges:         # nodes merged this step (one node a place)
             self.motivation.merge(self.map.merges)
             acted_from = survivor(acted_from, self.map.merges)
+        if self.map.bump_from is not None:      # a bump taken at another place than the
+            acted_from = self.map.bump_from     # node's moves (sensorimotor_map.py)
         if learn:
             self.motivation.record(acted_from, self.winner, self.map.inserted,  # motivation_
                                    outcome, self.map.w)                           # estimator

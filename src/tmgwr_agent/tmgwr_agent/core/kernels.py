@@ -1673,7 +1673,7 @@ def update_links(out, E, A, age, inn, n, i, j, a, alpha, sigma_a, eta_a, E_init,
 
 @njit(cache=True)
 def match(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T, learn, eps_b,
-          eps_n, tau_b, tau_n, kappa):
+          eps_n, tau_b, tau_n, kappa, prior=-1):
     """The matching and adaptation of one input x (sensorimotor_map.py, one call a step):
     writes its Merge-GNG context ``C_t = (1 - beta_c) w_prev + beta_c c_prev`` into C (x
     itself at an episode start, ``prev`` < 0), finds the winner b = argmin d_n and, when
@@ -1688,6 +1688,13 @@ def match(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T, le
     else:
         C[:] = x
     b, d_b = merge_distance_argmin(w, c, alive, n, x, C, alpha_c)
+    if 0 <= prior < n and prior != b and alive[prior]:     # the place the links predict
+        d_p = 0.0
+        for k in range(x.shape[0]):
+            d_p += (1.0 - alpha_c) * (x[k] - w[prior, k]) ** 2 \
+                + alpha_c * (C[k] - c[prior, k]) ** 2
+        if d_p < np.log(a_T) ** 2:
+            b, d_b = prior, d_p
     if not learn:
         return b, False, none
     if b < 0 or (np.exp(-np.sqrt(d_b)) < a_T and h[b] <= h_T):
@@ -1769,7 +1776,7 @@ def sensed_motion(motion, a, d, a_T):
 @njit(cache=True)
 def map_step(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T, learn, eps_b,
              eps_n, tau_b, tau_n, kappa, E, A, age, terminal, a, has_action, alpha, sigma_a,
-             eta_a, E_init, E_min, max_age, credit, keep, r2):
+             eta_a, E_init, E_min, max_age, credit, keep, r2, prior=-1):
     """One learning step of the map in one call (sensorimotor_map.py) when nothing needs
     Python: :func:`match`, then, reached by action ``a`` (``has_action``) from ``prev``,
     :func:`link_step` on prev -> winner (``keep1`` prev, ``keep2`` ``keep``), then, with
@@ -1780,7 +1787,7 @@ def map_step(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T,
     ``linked`` says whether the link stage ran (``changes``, ``ends`` its result) and
     ``(i, j)`` is the close pair ((-1, -1): none, or ``r2`` < 0)."""
     b, insert, moved = match(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T,
-                             h_T, learn, eps_b, eps_n, tau_b, tau_n, kappa)
+                             h_T, learn, eps_b, eps_n, tau_b, tau_n, kappa, prior)
     changes, ends, linked = 0, np.empty(0, dtype=np.int64), False
     if not learn or insert:
         return b, insert, moved, False, changes, ends, -1, -1, linked

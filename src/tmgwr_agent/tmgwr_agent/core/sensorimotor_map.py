@@ -101,6 +101,36 @@ displacement lies within it, ``0 < |d|^2 < s`` (:meth:`SensorimotorMap.stayed`).
 Without sensing noise a bump in a grid senses no change (``d = 0``) and a partial move in
 PointMaze lies far beyond the spread of its physics, so no bump is merged.
 
+**A bump from another place.** Under noise a node can win samples of two neighbouring
+places (a node left between them by a merge, or a sample scattered past the half-way
+line); from such a node one primitive moves when the agent stands at one place and bumps
+at the other. Read as the node's own, that bump says the move the node made has closed
+(the outcome memory then cuts the link, closes the cell it led to and may find the goal
+unreachable), and the winners of the bump, two places, are merged. So before a bump is
+learnt, the map checks where it was taken (:meth:`SensorimotorMap.bumped_elsewhere`):
+the primitive's moves from the node (its most reliable link labelled with it, to ``j``)
+started about ``w_j - m``, and a bump sensed more than half a step ``|m| / 2`` from there
+was taken nearer another place than that one (the places of a lattice of steps ``m`` lie
+a step apart, so half a step is the line between two; for a primitive whose moves stand
+out of their scatter, as above, while the place radius is the scatter's). Such a bump is
+learnt as a bump at the node (Eq. 1-2 on a self transition: its links of that primitive
+lose reliability, as the node's share of samples where the primitive bumps grows), makes
+no link and merges nothing, and is the winner's, the place it was taken at (:attr:`SensorimotorMap.
+bump_from`, what the agent and the graph's map learner report as the node acted from;
+-1, no node, when the winner is the same node or the bump is elsewhere for it too).
+Without noise, or with a scatter inside GWR's radius, the check is off.
+
+**The place the links predict.** A sample scattered nearer a neighbouring node than its
+own makes that node the winner, and the action chosen from it is the neighbour's (a
+greedy walk then bumps or turns off its route). The links say where the move just made
+leads: the target of the previous winner's most reliable link of that primitive (the
+previous winner itself after a bump that was not elsewhere). When the input lies within
+the radius of a place of that node (``-ln a_place``, the radius within which a sample is
+noise on a node's place, above), it wins, though another node may lie a little nearer
+(:func:`kernels.match`, ``prior``); the sensation alone decides otherwise. Only while
+the radius is the sensing scatter's (``a_place < a_T``): without noise the nearest node
+wins, as in GWR.
+
 Storage is fixed-width adjacency (``out[i, :K]`` target ids, -1 = empty slot) so that value
 iteration over the map is a few vectorised numpy operations. Node ids are slot indices; a
 freed slot is reused by the next insertion (lowest first) and ``version`` counts structural
@@ -304,6 +334,8 @@ class SensorimotorMap:
         self.winner: int = -1
         self.inserted = False      # whether the last update inserted a node (its winner)
         self.winner_new = -1       # the node the last insertion made
+        self.bump_from: int | None = None   # a bump taken elsewhere: the node it was (-1:
+        #                                     none; None: the step's own previous winner)
         self.C_t = np.zeros(dim)   # Merge-GNG context of the last input (kernels.match)
         self.log = RowLog()        # the rows each change touched (the estimator's input)
         self.rebuild_in_links()    # (none yet: compiles the kernel where maps are made)
@@ -428,16 +460,27 @@ class SensorimotorMap:
                                  "labels links with primitives[action]")
             motor = self.primitives[outcome.action]
         before = self.prev
-        winner = self.step(x, motor, learn=learn)
-        if learn and motor is not None:
+        self.bump_from = None
+        elsewhere = learn and motor is not None and outcome.bumped and self.merge \
+            and self.bumped_elsewhere(before, outcome.action)
+        prior = -1
+        if motor is not None and self.merge and self.a_place < self.a_T and not elsewhere:
+            prior = before if outcome.bumped else self.link_target(before, outcome.action)
+        winner = self.step(x, None if elsewhere else motor, learn=learn, prior=prior)
+        if elsewhere:
+            winner = self._bump_elsewhere(before, winner, motor, outcome.action)
+        elif learn and motor is not None:
             winner = self._sensed_move(np.asarray(x, dtype=float), outcome, before, winner)
         self.x_prev[:] = x
         if learn and outcome.ends_episode:
             self.mark_terminal(winner)
         return winner
 
-    def step(self, x: np.ndarray, action: np.ndarray | None, learn: bool = True) -> int:
+    def step(self, x: np.ndarray, action: np.ndarray | None, learn: bool = True,
+             prior: int = -1) -> int:
         """Present input x reached by motor vector ``action``; returns the winner.
+        ``prior``: the node the links predict (``experience``), the winner when x lies
+        within the radius of its place.
 
         With ``learn`` False only the winner is found (greedy rollouts).
         """
@@ -456,7 +499,7 @@ class SensorimotorMap:
             self.alpha_c, self.beta_c, self.a_place, self.h_T, learn, self.eps_b, self.eps_n,
             self.tau_b, self.tau_n, self.kappa_h, self.E, self.a, self.age, self.terminal, a,
             has_action, self.alpha, self.sigma_a, self.eta_a, self.E_init, self.E_min,
-            self.max_age, self.link_rule == "credit", self.winner, r2)
+            self.max_age, self.link_rule == "credit", self.winner, r2, prior)
         if len(moved):
             self.log.touch(moved)
         if done:
@@ -534,6 +577,59 @@ class SensorimotorMap:
         winner = self._merge_close(np.array([before], dtype=np.int64), before)
         self.prev = self.winner = winner
         return winner
+
+    def _bump_elsewhere(self, before: int, winner: int, motor: np.ndarray, a: int) -> int:
+        """After a step without a link (the matching and adaptation only) for a bump of
+        primitive ``a`` that :meth:`bumped_elsewhere` says was taken at another place than
+        the moves of ``a`` from ``before``: Eq. 1-2 as a bump at ``before`` (a self
+        transition: the links of ``a`` out of it lose reliability, as for any bump there,
+        and no link to the winner is made), no bump merge (the two winners are two
+        places), and :attr:`bump_from`, the node the bump is of, is the winner when it is
+        another node and the bump is not elsewhere for it too, else -1 (no node).
+        Returns the winner."""
+        before = survivor(before, self.merges)
+        if before >= 0 and self.alive[before]:
+            self._update_links(before, before, motor)
+        self.bump_from = winner if winner != before and winner >= 0 \
+            and not self.bumped_elsewhere(winner, a) else -1
+        return winner
+
+    def bumped_elsewhere(self, i: int, a: int) -> bool:
+        """Whether a bump of primitive ``a``, taken where the last input ``x_prev`` was
+        sensed, was taken somewhere else than the moves of ``a`` from node i (the module
+        docstring, "A bump from another place"): i's most reliable link labelled with
+        ``a`` leads to node j, so those moves started about ``w_j - m`` (``m``: the
+        primitive's mean sensed displacement), and the bump's sensation lies more than
+        half a step ``|m| / 2`` from there. Only for a primitive whose moves stand out of
+        their scatter (as in :meth:`stayed`), while the place radius is the sensing
+        scatter's (``a_place < a_T``: below GWR's radius a node does not win samples of
+        two places a step apart)."""
+        if i < 0 or not self.alive[i] or a >= len(self.motion) or self.primitives is None \
+                or not np.isfinite(self.x_prev).all():
+            return False
+        count, m, m2 = self.motion[a, 0], self.motion[a, 1:-1], self.motion[a, -1]
+        if count < 2:
+            return False
+        s, mm = m2 / count, float(m @ m)
+        if not (self.a_place < self.a_T and 4.0 * s < mm):
+            return False
+        j = self.link_target(i, a)
+        if j < 0:
+            return False
+        d = self.x_prev - (self.w[j] - m)
+        return bool(d @ d > 0.25 * mm)
+
+    def link_target(self, i: int, a: int) -> int:
+        """The target of node i's most reliable link labelled with primitive ``a``
+        (``sim >= 1/2`` by Eq. 2), -1 without one."""
+        if i < 0 or self.primitives is None or a >= len(self.primitives):
+            return -1
+        best, j = 0.0, -1
+        for k in np.flatnonzero(self.out[i] >= 0):
+            if kernels.sim_action(self.a[i, k], self.primitives[a], self.sigma_a) >= 0.5 \
+                    and self.E[i, k] > best:
+                best, j = self.E[i, k], int(self.out[i, k])
+        return j
 
     def _place_radius(self) -> None:
         """``a_place``, the activity threshold of one place (the module docstring): GWR's

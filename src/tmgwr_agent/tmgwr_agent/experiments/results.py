@@ -216,9 +216,9 @@ def table_ablation(root: Path) -> str:
             + _source(*docs))
 
 
-def table_goal_change(root: Path) -> str:
+def table_goal_change(root: Path, name: str = "goal_change") -> str:
     """Tables 3-5: % of episodes at the previous / current goal per transition."""
-    d = load("goal_change", root)
+    d = load(name, root)
     r = d["result"]
     agents = list(r["agents"])
     first = r["agents"][agents[0]]["transitions"]
@@ -269,6 +269,27 @@ def table_suite(root: Path, name: str = "suite_blocks") -> str:
             "is won when the agent's median steps are strictly fewer. "
             f"Suite `{s['spec']}`, suite seed {s['seed']}, {r['trials']} trials per maze. "
             + _source(d))
+
+
+def table_suite_goals(root: Path, name: str) -> str:
+    """Goal changes on the suite: per family and agent, the median over mazes of the
+    maze's mean % of episodes at the current goal, the worst transition of any trial, and
+    the share of trials with every episode at the current goal."""
+    d = load(name, root)
+    r, s = d["result"], d["result"]["suite"]
+    agents = list(r["agents"])
+    rows = []
+    for fam, f in _families(s):
+        rows.append([f"{fam} ({f['mazes']})"]
+                    + [f"{f['current_pct'][a]['median']:.1f} / {f['worst_pct'][a]:.1f} / "
+                       f"{_pct(f['perfect_trials'][a])}" for a in agents])
+    return (_md(["family (mazes)"] + [f"`{a}` % current / worst / perfect" for a in agents],
+                rows)
+            + "\n\n% of episodes ending at the current goal: the median over mazes of each "
+            "maze's mean over transitions and trials; the worst transition of any trial; "
+            "the share of trials with every episode at the current goal. "
+            f"Suite `{s['spec']}`, suite seed {s['seed']}, {r['trials']} trials per maze, "
+            f"{r['episodes']} episodes per goal. " + _source(d))
 
 
 def table_suite_openings(root: Path, name: str = "suite_openings") -> str:
@@ -469,6 +490,8 @@ TABLES: dict[str, Callable[[Path], str]] = {
     "rivals-blocks": lambda root: table_suite(root, "rivals_blocks"),
     "rivals-openings": lambda root: table_suite_openings(root, "rivals_openings"),
     "minigrid-suite": lambda root: table_suite(root, "world_minigrid_suite"),
+    "minigrid-goal-change": lambda root: table_goal_change(root, "world_minigrid_goal"),
+    "minigrid-goal-suite": lambda root: table_suite_goals(root, "world_minigrid_goal_suite"),
 }
 
 

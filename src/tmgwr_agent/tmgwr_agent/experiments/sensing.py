@@ -217,10 +217,3 @@ def check_sensor(agents, spec: SensorSpec) -> str | None:
     return (f"agent {a!r} cannot run under --sensor {spec.text}: it keys on the "
             f"true cell (agents that learn from what they sense: tmgwr, "
             f"{', '.join(SENSED_TABLE_AGENTS)})")
-    for a in agents:
-        name = a.partition(":")[0]
-        if name not in SENSATION_AGENTS and name not in SENSED_TABLE_AGENTS:
-            return (f"agent {a!r} cannot run under --sensor {spec.text}: it keys on the "
-                    f"true cell (agents that learn from what they sense: tmgwr, "
-                    f"{', '.join(SENSED_TABLE_AGENTS)})")
-    return None

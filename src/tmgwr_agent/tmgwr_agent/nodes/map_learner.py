@@ -403,6 +403,8 @@ class MapLearnerNode(LifecycleNode):
         outcome = outcome_of(f)
         self.prev_winner = -1 if outcome.episode_start else int(self.map.prev)
         self.map.experience(x, outcome)              # what TMGWRAgent.step does here
+        if self.map.bump_from is not None:           # a bump taken at another place
+            self.prev_winner = self.map.bump_from
         state = self.make_state(f)
         if f.step_id % self.p["snapshot_period"] == 0:
             self.publish_snapshot()
