@@ -184,11 +184,16 @@ def test_invalidating_what_a_removal_held_up_then_an_ordered_solve_is_exact(seed
         first, pred = kernels.predecessors(out, n, alive, o.osucc, o.onb)
         args = (out, E, R, V, n, GAMMA, TOL * (1 - GAMMA), FLOOR, absorbing, alive, o.U,
                 o.rho, o.osucc, o.onb, o.ong, first, pred)
-        k = kernels.invalidate(*args, seeds, len(seeds), found, mark)
+        V2 = V.copy()                 # the same in one call, for the bits below
+        k = kernels.invalidate(*args, seeds, len(seeds), found, mark, np.empty(n + 1))
         assert not mark.any()
         invalidated += k
         both = np.concatenate((seeds, found[:k]))
         assert kernels.ordered_solve(*args, both, len(both), 100 * n, heap, pos, key) >= 0
+        args2 = args[:3] + (V2,) + args[4:]
+        assert kernels.invalidate_solve(*args2, seeds, len(seeds), found, mark, 100 * n, heap,
+                                        pos, key)[0] == k
+        np.testing.assert_array_equal(V2, V)   # invalidate's targets reused: same bits
         ref = exact(out, E, R, absorbing, alive, o)
         np.testing.assert_allclose(V[:n], ref[:n], rtol=TOL, atol=1e-12)
         assert (V[:n][ref[:n] == 0.0] == 0.0).all()
@@ -236,7 +241,8 @@ def test_a_sweep_over_budget_continued_from_its_v_equals_a_full_solve(seed):
                 o.rho, o.osucc, o.onb, o.ong, first, pred)
         budget = int(rng.integers(0, 4))
         if rng.random() < 0.5:                       # as motivation._incremental does
-            k = kernels.invalidate(*args, seeds, len(seeds), found, mark)
+            k = kernels.invalidate(*args, seeds, len(seeds), found, mark,
+                                   np.empty(n + 1))
             both = np.concatenate((seeds, found[:k]))
             done = kernels.ordered_solve(*args, both, len(both), budget, heap, pos, key)
         else:
@@ -405,6 +411,42 @@ def test_the_greedy_probes_potentials_after_a_goal_change_are_exact():
         assert (ref[:n] > 0.0).sum() > n // 2            # a route to most nodes
         np.testing.assert_allclose(V0[:n], ref[:n], rtol=mot.vi_tol, atol=1e-12)
         run_episode(world, agent, max_steps=3000)
+
+
+def test_a_goal_change_writes_over_the_retired_copy_and_solves_the_same():
+    """The ordered solve after a goal change writes its copy of the inputs over the state
+    the goal change retired (no fresh arrays), and solves to the same bits as an estimator
+    that starts from fresh ones, at the change and in the episode after it."""
+    import copy
+
+    from maze_sim.maze import Maze
+    from tmgwr_agent.experiments.agent_factory import make_agent
+    from tmgwr_agent.experiments.runner import Caps, make_world, run_episode, set_goal
+    from tmgwr_agent.experiments.scenarios import DEFAULT_MAZE
+
+    maze = Maze.from_file(DEFAULT_MAZE)
+    world = make_world(maze, "G", Caps.for_maze(maze))
+    agent = make_agent("tmgwr", maze, np.random.default_rng(0))
+    set_goal(world, agent, "G")
+    for _ in range(4):
+        run_episode(world, agent, max_steps=3000)
+    world2, agent2 = copy.deepcopy((world, agent))
+    fresh = agent2.motivation
+    fresh._retire_incremental = lambda: setattr(fresh, "_inc", None)   # nothing kept
+    for goal in ("3", "G"):
+        inc = agent.motivation._inc
+        assert inc is not None
+        set_goal(world, agent, goal)
+        set_goal(world2, agent2, goal)
+        for a in (agent, agent2):
+            if not a.motivation.solved:
+                a.motivation.update(a.map)
+        assert agent.motivation._inc is inc and agent2.motivation._inc is not inc
+        np.testing.assert_array_equal(agent.motivation.V, agent2.motivation.V)
+        e1 = run_episode(world, agent, max_steps=3000)
+        e2 = run_episode(world2, agent2, max_steps=3000)
+        assert e1 == e2
+        np.testing.assert_array_equal(agent.motivation.V, agent2.motivation.V)
 
 
 @pytest.mark.parametrize("dim", [2, 3, 4])

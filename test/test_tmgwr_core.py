@@ -756,11 +756,11 @@ bump_t[0, RIGHT] = closed_t[0, RIGHT] = 1
 bump_e[0, RIGHT] = 0                              # stale: 9 episodes since, trust 3
 U, rho = np.zeros((2, 4)), np.zeros((2, 4))
 osucc, onb = np.full((2, 4), -1), np.full((2, 4, 4), -1)
-kernels.option_row(w, out, np.ones(2, dtype=bool), 0, np.array([0.5, 0.5]),
-                   np.zeros((4, 2)), 0.1, 10.0, 0.97, tried, bump_t, closed_t, bump_e,
-                   succ, 10, 2.0, 9, 3.0, 1.0, 1.0, False, grid, origin, np.zeros(3),
-                   np.ones((2, 4), dtype=bool), np.zeros((2, 4), dtype=bool), U, rho, osucc,
-                   onb, np.zeros((2, 4, 4)))
+kernels.option_values(w, out, np.ones(2, dtype=bool), 2, np.array([0]), np.array([0.5, 0.5]),
+                      np.zeros((4, 2)), 0.1, 10.0, 0.97, tried, bump_t, closed_t, bump_e,
+                      succ, 10, 2.0, 9, 3.0, 1.0, 1.0, False, grid, origin, np.zeros(3),
+                      np.ones((2, 4), dtype=bool), np.zeros((2, 4), dtype=bool), U, rho,
+                      osucc, onb, np.zeros((2, 4, 4)))
 print(rho[0, RIGHT], osucc[0, RIGHT])
 """
 

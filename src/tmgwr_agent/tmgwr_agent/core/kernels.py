@@ -418,8 +418,20 @@ def successor_value(V, j, U_o, nb, ng, k, gamma):
 
 @njit(cache=True)
 def option_successor(V, U, osucc, onb, ong, i, a, gamma):
-    """The value of option (i, a)'s successor (:func:`successor_value`)."""
-    return successor_value(V, osucc[i, a], U[i, a], onb[i], ong[i], a, gamma)
+    """The value of option (i, a)'s successor: :func:`successor_value` read off the
+    (node, primitive) tables in place (no view of node i's rows: the solves call this for
+    every option of every node they update)."""
+    j = osucc[i, a]
+    if j >= 0:
+        return V[j]
+    if j == -2:
+        best = 0.0
+        for b in range(onb.shape[2]):
+            q = onb[i, a, b]
+            if q >= 0 and ong[i, a, b] * V[q] > best:
+                best = ong[i, a, b] * V[q]
+        return gamma * best
+    return U[i, a]
 
 
 @njit(cache=True)
@@ -558,7 +570,20 @@ def node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb, on
     for a in range(rho.shape[1]):                       # max_a O(i, a), Eq. 5'
         r = rho[i, a]
         if r > 0.0:
-            sv = successor_value(V, osucc[i, a], U[i, a], onb[i], ong[i], a, gamma)
+            # S (:func:`option_successor`), written out: the solves spend most of their
+            # time here, and the call is not inlined
+            j = osucc[i, a]
+            if j >= 0:
+                sv = V[j]
+            elif j == -2:
+                sv = 0.0
+                for b in range(onb.shape[2]):
+                    q = onb[i, a, b]
+                    if q >= 0 and ong[i, a, b] * V[q] > sv:
+                        sv = ong[i, a, b] * V[q]
+                sv *= gamma
+            else:
+                sv = U[i, a]
             ov = r * sv + (1.0 - r) * stay
             if ov > opt:
                 opt = ov
@@ -662,13 +687,20 @@ def _heap_push(heap, pos, key, size, i, priority):
 
 @njit(cache=True)
 def _queue_seeds(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb,
-                 ong, seeds, n_seeds, heap, pos, key, size, by_value):
+                 ong, seeds, n_seeds, heap, pos, key, size, by_value, target, reuse):
     """Push every node of ``seeds[:n_seeds]`` whose target (:func:`node_target`) differs
     from its V by more than ``tol`` times the target plus ``v_floor``, keyed by that
-    change, or with ``by_value`` by the target itself; returns the queue's size."""
+    change, or with ``by_value`` by the target itself; returns the queue's size. Every
+    target computed is kept in ``target`` (:func:`_drain`); with ``reuse``, a seed's
+    target already there (not NaN: computed since the last change of what it reads) is
+    taken as it is."""
     for k in range(n_seeds):
         i = seeds[k]
-        t = node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb, ong)
+        t = target[i]
+        if not reuse or t != t:
+            t = node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb,
+                            ong)
+            target[i] = t
         d = abs(t - V[i])
         if d > tol * t + v_floor:
             size = _heap_push(heap, pos, key, size, i, t if by_value else d)
@@ -677,12 +709,14 @@ def _queue_seeds(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, os
 
 @njit(cache=True)
 def _drain(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb, ong,
-           first, pred, max_updates, heap, pos, key, size, by_value):
+           first, pred, max_updates, heap, pos, key, size, by_value, target):
     """The loop of :func:`prioritized_sweep` and :func:`ordered_solve`: pop the node of
     the largest key, set its V to its target, queue the nodes that read it whose own
     change would exceed ``tol`` (keyed as :func:`_queue_seeds`); until the queue is empty
     (returns the updates) or ``max_updates`` were made (returns -1, ``pos`` left all
-    -1)."""
+    -1). A queued node's target is the one last computed for it (``target``): within a
+    call only V changes, and every change of V(j) computes again the target of every
+    node that reads it (``pred``), so that one is still its target when it is popped."""
     updates = 0
     while size > 0:
         i = heap[0]
@@ -697,13 +731,13 @@ def _drain(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, o
                 size -= 1
                 pos[heap[size]] = -1
             return -1
-        V[i] = node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb,
-                           ong)
+        V[i] = target[i]
         updates += 1
         for c in range(first[i], first[i + 1]):
             p = pred[c]
             t = node_target(p, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb,
                             ong)
+            target[p] = t
             d = abs(t - V[p])
             if d > tol * t + v_floor:
                 size = _heap_push(heap, pos, key, size, p, t if by_value else d)
@@ -722,15 +756,26 @@ def prioritized_sweep(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U,
     updates made, or -1 after ``max_updates`` (the caller then solves in full: a change
     that cuts a region off its sources decays only geometrically). ``heap``, ``pos``
     (-1 = not queued) and ``key`` are work arrays of n entries; ``pos`` is left all -1."""
+    target = np.empty(len(V))
     size = _queue_seeds(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
-                        onb, ong, seeds, n_seeds, heap, pos, key, 0, False)
+                        onb, ong, seeds, n_seeds, heap, pos, key, 0, False, target, False)
     return _drain(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb,
-                  ong, first, pred, max_updates, heap, pos, key, size, False)
+                  ong, first, pred, max_updates, heap, pos, key, size, False, target)
 
 
 @njit(cache=True)
 def ordered_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
                   onb, ong, first, pred, seeds, n_seeds, max_updates, heap, pos, key):
+    """:func:`_ordered_solve` computing every seed's target."""
+    return _ordered_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho,
+                          osucc, onb, ong, first, pred, seeds, n_seeds, max_updates, heap,
+                          pos, key, np.empty(len(V)), False)
+
+
+@njit(cache=True)
+def _ordered_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
+                   onb, ong, first, pred, seeds, n_seeds, max_updates, heap, pos, key, target,
+                   reuse):
     """Eq. 4-5' on the nodes ``seeds[:n_seeds]`` from values at or below their fixed point
     (V = 0 after a goal change, or after :func:`invalidate`), largest value first, as
     Dijkstra's algorithm settles a shortest path: with ``R`` = 0 a node is worth at most
@@ -743,7 +788,8 @@ def ordered_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho
     an option mixes two successors (``rho S + (1 - rho) stay``), so a node may rise again
     when a smaller successor is settled: it is queued again, as by
     :func:`prioritized_sweep`, whose stopping rule this shares. Returns the updates made
-    (the rounds of the first part not counted), or -1 after ``max_updates``."""
+    (the rounds of the first part not counted), or -1 after ``max_updates``.
+    ``target``, ``reuse``: the targets already known (:func:`_queue_seeds`)."""
     m = 0
     for k in range(n_seeds):
         if R[seeds[k]] > 0.0 and alive[seeds[k]]:
@@ -771,17 +817,39 @@ def ordered_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho
             p = pred[c]
             t = node_target(p, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb,
                             ong)
+            target[p] = t
             if abs(t - V[p]) > tol * t + v_floor:
                 size = _heap_push(heap, pos, key, size, p, t)
     size = _queue_seeds(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
-                        onb, ong, seeds, n_seeds, heap, pos, key, size, True)
+                        onb, ong, seeds, n_seeds, heap, pos, key, size, True, target,
+                        reuse)
     return _drain(out, E, R, V, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb,
-                  ong, first, pred, max_updates, heap, pos, key, size, True)
+                  ong, first, pred, max_updates, heap, pos, key, size, True, target)
+
+
+@njit(cache=True)
+def invalidate_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
+                     onb, ong, first, pred, seeds, n_seeds, found, mark, max_updates, heap,
+                     pos, key):
+    """:func:`invalidate`, then :func:`ordered_solve` from the seeds and the nodes it
+    found, in one call; returns (found, the ordered solve's result). When it found none,
+    V is as it was and the targets it computed for the seeds are still theirs: the
+    ordered solve takes them instead of computing them again."""
+    target = np.full(len(V), np.nan)
+    k = invalidate(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc,
+                   onb, ong, first, pred, seeds, n_seeds, found, mark, target)
+    both = seeds[:n_seeds]
+    if k > 0:
+        both = np.concatenate((seeds[:n_seeds], found[:k]))
+    done = _ordered_solve(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho,
+                          osucc, onb, ong, first, pred, both, len(both), max_updates, heap,
+                          pos, key, target, k == 0)
+    return k, done
 
 
 @njit(cache=True)
 def invalidate(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, osucc, onb,
-               ong, first, pred, seeds, n_seeds, found, mark):
+               ong, first, pred, seeds, n_seeds, found, mark, target):
     """Before an incremental solve of a change that may lower values (a link removed, an
     E, R or option gone, a node made absorbing or dead): the nodes whose value rested on
     it, with V set to 0 (LPA*'s under-consistent nodes, Koenig & Likhachev). A seed whose
@@ -790,13 +858,15 @@ def invalidate(out, E, R, V, n, gamma, tol, v_floor, absorbing, alive, U, rho, o
     Lowering those values by sweeping would take geometrically many rounds where two
     nodes held each other up (a region cut off from its sources); from 0 they rise to the
     fixed point in one ordered pass (:func:`ordered_solve`). Writes them to ``found``
-    (n entries) and returns how many; ``mark`` (n booleans, all False) is left so."""
+    (n entries) and returns how many; ``mark`` (n booleans, all False) is left so; the
+    targets of the seeds it looked at, to ``target``."""
     c = 0
     for k in range(n_seeds):
         i = seeds[k]
         if mark[i] or V[i] <= 0.0:
             continue
         t = node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb, ong)
+        target[i] = t
         if t < V[i] - tol * V[i] - v_floor:
             mark[i] = True
             V[i] = 0.0
@@ -1117,88 +1187,6 @@ def wall_exits_into(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong, y, z
 
 
 @njit(cache=True)
-def option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t,
-               bump_e, succ, clock, horizon, episode, trust, rho_max, rho_new, stuck, grid,
-               origin, V, sel, chain, U, rho, osucc, onb, ong):
-    """The options of the value of the unknown (motivation.py, Eq. 5') of node i, per
-    primitive a: ``rho[i, a]`` = ``rho_new`` for a primitive never taken from i (the
-    chance a move opens, ``MotivationEstimator.open_prior``), 1 if it is a move of this
-    episode's untried chain (``chain[i, a]``, :func:`untried_chain`); 1 for one whose move's
-    link (to ``succ[i, a]``) the map has since deleted; for one whose last outcome was a
-    bump (a remembered wall): when ``stuck``, ``rho_max (1 - exp(-tau / (horizon + e)))``,
-    ``tau`` the steps since the bump and ``e`` those it had been known closed before it
-    (``bump_t - closed_t``: failed re-tests stretch the horizon); else ``rho_max`` once
-    ``trust`` episodes (``trust`` > 0) have started since its bump (``bump_e``) and the
-    pair is one of this episode's re-tests (``sel[i, a]``), 0 otherwise;
-    0 otherwise (known: no option). The option's successor ``osucc[i, a]``: a known node
-    (where the move once led, if that node is still alive and there, else a node at the
-    predicted position ``w_i + delta_a``),
-    whose V the sweep reads; -1 when none, and then ``U[i, a] = v_star gamma^h``, ``h =
-    |w_i + delta_a - x_g|_1 / L`` (the fewest steps from the predicted successor to the
-    goal sensation); -2 for a remembered wall cell (not ``stuck``), whose value if it
-    opened is gamma times the best ``gamma^k V(q)`` of its exits ``onb[i, a]`` (discounts
-    ``ong[i, a]``): the known nodes next to it, or next to a cell of a run of unknown
-    cells from it, ``k`` cells along (straight on or sideways: a wall that opens opens
-    along its run, :func:`wall_exits`); no exit: no option. ``stuck``: the optimistic U,
-    as for unknown space. ``V``: the last solve's potentials (they pick the exits)."""
-    x = np.empty(w.shape[1])
-    for a in range(U.shape[1]):
-        j = -1
-        wall = False
-        if not tried[i, a]:
-            r = 1.0 if chain[i, a] else rho_new
-        elif stuck and 0 <= bump_t[i, a] < clock and horizon > 0.0:
-            tau = clock - bump_t[i, a]
-            e = bump_t[i, a] - closed_t[i, a] if closed_t[i, a] >= 0 else 0
-            r = rho_max * (1.0 - np.exp(-tau / (horizon + e)))
-            j = succ[i, a]
-        elif not stuck and stale(bump_e, i, a, episode, trust):
-            r = rho_max if sel[i, a] else 0.0
-            j = succ[i, a]
-            wall = j < 0
-        elif bump_t[i, a] < 0 and succ[i, a] >= 0 and not _linked(out, i, succ[i, a]):
-            r = 1.0
-            j = succ[i, a]
-        else:
-            r = 0.0
-        if r == 0.0:                    # no option (most pairs): nothing to look up
-            for b in range(U.shape[1]):
-                onb[i, a, b] = -1
-                ong[i, a, b] = 0.0
-            rho[i, a] = 0.0
-            U[i, a] = 0.0
-            osucc[i, a] = -1
-            continue
-        d = 0.0
-        for k in range(w.shape[1]):
-            x[k] = w[i, k] + delta[a, k]
-            d += abs(x[k] - goal[k])
-        if j >= 0 and not at_cell(w, alive, j, x, L):
-            j = -1          # where the move led, a node since removed (its slot maybe
-            #                 reused elsewhere): the cell is looked up as for any move
-        for b in range(U.shape[1]):
-            onb[i, a, b] = -1
-            ong[i, a, b] = 0.0
-        u = v_star * gamma ** (d / L)
-        if r > 0.0 and wall:
-            # a remembered wall: if it opened, the cell leads on to known nodes
-            j = -2
-            u = 1.0
-            if not wall_exits(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong):
-                r = 0.0
-        elif r > 0.0 and j < 0:
-            j = node_at(grid, origin, L, w, x)
-        if r == 0.0:
-            rho[i, a] = 0.0
-            U[i, a] = 0.0
-            osucc[i, a] = -1
-            continue
-        rho[i, a] = r
-        U[i, a] = u
-        osucc[i, a] = j if j != i else -1
-
-
-@njit(cache=True)
 def _linked(out, i, j):
     for s in range(out.shape[1]):
         if out[i, s] == j:
@@ -1210,7 +1198,29 @@ def _linked(out, i, j):
 def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, bump_t,
                   closed_t, bump_e, succ, clock, horizon, episode, trust, rho_max, rho_new,
                   stuck, grid, origin, V, sel, chain, U, rho, osucc, onb, ong):
-    """:func:`option_row` of the nodes ``rows`` (none for dead slots)."""
+    """The options of the value of the unknown (motivation.py, Eq. 5') of the nodes
+    ``rows`` (none for dead slots; rows >= n are skipped), per node i and primitive a:
+    ``rho[i, a]`` = ``rho_new`` for a primitive never taken from i (the chance a move opens,
+    ``MotivationEstimator.open_prior``), 1 if it is a move of this episode's untried chain
+    (``chain[i, a]``, :func:`untried_chain`); 1 for one whose move's link (to ``succ[i,
+    a]``) the map has since deleted; for one whose last outcome was a bump (a remembered
+    wall): when ``stuck``, ``rho_max (1 - exp(-tau / (horizon + e)))``, ``tau`` the steps
+    since the bump and ``e`` those it had been known closed before it (``bump_t -
+    closed_t``: failed re-tests stretch the horizon); else ``rho_max`` once ``trust``
+    episodes (``trust`` > 0) have started since its bump (``bump_e``) and the pair is one of
+    this episode's re-tests (``sel[i, a]``), 0 otherwise; 0 otherwise (known: no option).
+    The option's successor ``osucc[i, a]``: a known node (where the move once led, if that
+    node is still alive and there, else a node at the predicted position ``w_i + delta_a``),
+    whose V the sweep reads; -1 when none, and then ``U[i, a] = v_star gamma^h``, ``h = |w_i
+    + delta_a - x_g|_1 / L`` (the fewest steps from the predicted successor to the goal
+    sensation); -2 for a remembered wall cell (not ``stuck``), whose value if it opened is
+    gamma times the best ``gamma^k V(q)`` of its exits ``onb[i, a]`` (discounts ``ong[i,
+    a]``): the known nodes next to it, or next to a cell of a run of unknown cells from it,
+    ``k`` cells along (straight on or sideways: a wall that opens opens along its run,
+    :func:`wall_exits`); no exit: no option. ``stuck``: the optimistic U, as for unknown
+    space. ``V``: the last solve's potentials (they pick the exits). (One loop over the rows
+    and pairs: a call per row cost more than its work.)"""
+    x = np.empty(w.shape[1])
     for i in rows:
         if i >= n:
             continue
@@ -1220,15 +1230,66 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
                 U[i, a] = 0.0
                 osucc[i, a] = -1
             continue
-        option_row(w, out, alive, i, goal, delta, L, v_star, gamma, tried, bump_t, closed_t,
-                   bump_e, succ, clock, horizon, episode, trust, rho_max, rho_new, stuck, grid,
-                   origin, V, sel, chain, U, rho, osucc, onb, ong)
+        for a in range(U.shape[1]):
+            j = -1
+            wall = False
+            if not tried[i, a]:
+                r = 1.0 if chain[i, a] else rho_new
+            elif stuck and 0 <= bump_t[i, a] < clock and horizon > 0.0:
+                tau = clock - bump_t[i, a]
+                e = bump_t[i, a] - closed_t[i, a] if closed_t[i, a] >= 0 else 0
+                r = rho_max * (1.0 - np.exp(-tau / (horizon + e)))
+                j = succ[i, a]
+            elif not stuck and stale(bump_e, i, a, episode, trust):
+                r = rho_max if sel[i, a] else 0.0
+                j = succ[i, a]
+                wall = j < 0
+            elif bump_t[i, a] < 0 and succ[i, a] >= 0 and not _linked(out, i, succ[i, a]):
+                r = 1.0
+                j = succ[i, a]
+            else:
+                r = 0.0
+            if r == 0.0:                    # no option (most pairs): nothing to look up
+                for b in range(U.shape[1]):
+                    onb[i, a, b] = -1
+                    ong[i, a, b] = 0.0
+                rho[i, a] = 0.0
+                U[i, a] = 0.0
+                osucc[i, a] = -1
+                continue
+            d = 0.0
+            for k in range(w.shape[1]):
+                x[k] = w[i, k] + delta[a, k]
+                d += abs(x[k] - goal[k])
+            if j >= 0 and not at_cell(w, alive, j, x, L):
+                j = -1          # where the move led, a node since removed (its slot maybe
+                #                 reused elsewhere): the cell is looked up as for any move
+            for b in range(U.shape[1]):
+                onb[i, a, b] = -1
+                ong[i, a, b] = 0.0
+            u = v_star * gamma ** (d / L)
+            if r > 0.0 and wall:
+                # a remembered wall: if it opened, the cell leads on to known nodes
+                j = -2
+                u = 1.0
+                if not wall_exits(w, i, a, x, delta, L, grid, origin, V, gamma, onb, ong):
+                    r = 0.0
+            elif r > 0.0 and j < 0:
+                j = node_at(grid, origin, L, w, x)
+            if r == 0.0:
+                rho[i, a] = 0.0
+                U[i, a] = 0.0
+                osucc[i, a] = -1
+                continue
+            rho[i, a] = r
+            U[i, a] = u
+            osucc[i, a] = j if j != i else -1
 
 
 @njit(cache=True)
 def option_rows_changed(w, alive, n, touched, delta, L, grid_was, grid, origin, tried, bump_e,
                         succ, sel, episode, trust, stuck, untried, rows):
-    """The rows ``i < n`` whose :func:`option_row` may read something the map changed
+    """The rows ``i < n`` whose options (:func:`option_values`) may read something the map changed
     (unknown.py, an incremental refresh of Eq. 5'), given the map rows it ``touched`` (a
     mask of n: weights, alive, links) and the node lookup before (``grid_was``) and after
     (``grid``) with the same shape and ``origin`` (:func:`cell_grid`): row i itself
@@ -1274,7 +1335,7 @@ def untried_rho(alive, n, tried, chain, lattice, rho_new, rho, rows):
     """``rho_new`` (the open prior, unknown.py) on every pair of a live node never tried,
     except a lattice primitive's move of this episode's untried chain (rho 1): while the
     prior stays above 0 the only value of those options that follows it
-    (:func:`option_row`; a primitive off the lattice: ``OptionRules._unplaced_options``).
+    (:func:`option_values`; a primitive off the lattice: ``OptionRules._unplaced_options``).
     Writes the rows holding such a pair, ascending, to ``rows``; returns how many."""
     count = 0
     for i in range(n):

@@ -193,9 +193,11 @@ class IncrementalState:
     def of(cls, m: SensorimotorMap, n: int, R: np.ndarray, absorbing: np.ndarray,
            est: "MotivationEstimator") -> "IncrementalState":
         """The state after a full solve on map m (rewards R, the absorbing mask); the
-        estimator's last state is written over when its arrays have these shapes (a goal
-        change on a map of the same size: no new pages to fault in)."""
-        old = est._inc
+        estimator's last state (or the one a goal change retired, ``_spare``) is written
+        over when its arrays have these shapes (a goal change on a map of the same size:
+        no new pages to fault in)."""
+        old = est._inc if est._inc is not None else getattr(est, "_spare", None)
+        est._spare = None
         src = (m.out[:n], m.E[:n], R[:n], absorbing[:n], est.rho, est.U, est.osucc,
                est.onb, est.ong)
         if old is None or old.n != n or any(a.shape != b.shape for a, b in zip(
@@ -240,6 +242,7 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         self.vi_tol, self.vi_max_sweeps = config.vi_tol, config.vi_max_sweeps
         self.vi_incremental = config.vi_incremental
         self._inc: IncrementalState | None = None   # the copy of the last solve's inputs
+        self._spare: IncrementalState | None = None  # a retired one, its arrays to reuse
         self._opt_rows: np.ndarray | None = None    # option rows recomputed since
         self.solves = {"incremental": 0, "full": 0}   # and why the incremental declined
         self.absorbing_terminals = config.absorbing_terminals
@@ -330,11 +333,18 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         self._options_key = ()
         self.route = 0.0                  # the route to the new goal is not known yet
         self.V[:] = 0.0
-        self._inc = None
+        self._retire_incremental()
         self._R_key = None
         self.V0[:] = 0.0
         self._v0_fresh = False
         self._v0_zero = True              # V0 restarts from 0 too: solved in order
+
+    def _retire_incremental(self) -> None:
+        """The next solve is a full one (from V = 0); the copy of the inputs is kept aside
+        for it to write over (:meth:`IncrementalState.of`)."""
+        if self._inc is not None:
+            self._spare = self._inc
+        self._inc = None
 
     def follow_goal(self, goal_x: np.ndarray) -> bool:
         """The goal sensation that came with this step: :meth:`set_goal` when it differs
@@ -654,10 +664,9 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
                 self.U, self.rho, self.osucc, self.onb, self.ong, inc.first, inc.pred)
         if lost:
             self.solves["invalidated"] = self.solves.get("invalidated", 0) + 1
-            k = kernels.invalidate(*args, inc.seeds, c, inc.found, inc.mark)
-            seeds = np.concatenate((inc.seeds[:c], inc.found[:k]))
-            done = kernels.ordered_solve(*args, seeds, len(seeds), INCREMENTAL_BUDGET * n,
-                                         inc.heap, inc.pos, inc.key)
+            _, done = kernels.invalidate_solve(*args, inc.seeds, c, inc.found, inc.mark,
+                                               INCREMENTAL_BUDGET * n, inc.heap, inc.pos,
+                                               inc.key)
         else:
             done = kernels.prioritized_sweep(*args, inc.seeds, c, INCREMENTAL_BUDGET * n,
                                              inc.heap, inc.pos, inc.key)

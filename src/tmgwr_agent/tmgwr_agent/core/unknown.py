@@ -714,7 +714,7 @@ class OptionRules:
         A primitive whose last try from i moved it to ``j = succ[i, a]`` while the map
         has since deleted that link (it aged out: :mod:`~tmgwr_agent.core.
         sensorimotor_map`) has an option into j with ``rho = 1``, as on a lattice
-        (:func:`kernels.option_row`): the deletion forgot a move nothing contradicted,
+        (:func:`kernels.option_values`): the deletion forgot a move nothing contradicted,
         and where the map cannot place a successor the outcome memory is the only place
         that knows it. Without it a route whose links aged out while the agent did not
         use them (a goal moved to a part of the map it left) is neither known nor
