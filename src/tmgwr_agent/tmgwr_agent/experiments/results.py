@@ -490,6 +490,7 @@ TABLES: dict[str, Callable[[Path], str]] = {
     "rivals-blocks": lambda root: table_suite(root, "rivals_blocks"),
     "rivals-openings": lambda root: table_suite_openings(root, "rivals_openings"),
     "minigrid-suite": lambda root: table_suite(root, "world_minigrid_suite"),
+    "pointmaze-suite": lambda root: table_suite(root, "world_pointmaze_suite"),
     "minigrid-goal-change": lambda root: table_goal_change(root, "world_minigrid_goal"),
     "minigrid-goal-suite": lambda root: table_suite_goals(root, "world_minigrid_goal_suite"),
 }
