@@ -605,12 +605,7 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         solve) after ``ORDERED_BUDGET`` updates a node."""
         inc = self._inc = IncrementalState.of(m, n, R, absorbing, self)
         self.V[:n] = 0.0
-        done = kernels.ordered_solve(
-            m.out, m.E, R, self.V, n, self.gamma, self.vi_tol * (1.0 - self.gamma), V_FLOOR,
-            absorbing, m.alive, self.U, self.rho, self.osucc, self.onb, self.ong, inc.first,
-            inc.pred, np.arange(n, dtype=np.int64), n, ORDERED_BUDGET * n, inc.heap,
-            inc.pos, inc.key)
-        if done < 0:
+        if not self._ordered_all(m, n, R, absorbing, inc):
             return self._declined("ordered_budget")
         self.solves["ordered"] = self.solves.get("ordered", 0) + 1
         return True
@@ -688,15 +683,20 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         them up to date). False (counted ``budget``: the ordered solve from V = 0 takes
         over) when this too outgrows its budget."""
         inc = self._inc
-        done = kernels.ordered_solve(
-            m.out, m.E, R, self.V, n, self.gamma, self.vi_tol * (1.0 - self.gamma), V_FLOOR,
-            absorbing, m.alive, self.U, self.rho, self.osucc, self.onb, self.ong, inc.first,
-            inc.pred, np.arange(n, dtype=np.int64), n, ORDERED_BUDGET * n, inc.heap,
-            inc.pos, inc.key)
-        if done < 0:
+        if not self._ordered_all(m, n, R, absorbing, inc):
             return self._declined("budget")
         self.solves["continued"] = self.solves.get("continued", 0) + 1
         return True
+
+    def _ordered_all(self, m: SensorimotorMap, n: int, R: np.ndarray, absorbing: np.ndarray,
+                     inc: IncrementalState) -> bool:
+        """:func:`kernels.ordered_solve` seeded with every node, from the current V, within
+        ``ORDERED_BUDGET`` updates a node; False when it outgrows that budget."""
+        return kernels.ordered_solve(
+            m.out, m.E, R, self.V, n, self.gamma, self.vi_tol * (1.0 - self.gamma), V_FLOOR,
+            absorbing, m.alive, self.U, self.rho, self.osucc, self.onb, self.ong, inc.first,
+            inc.pred, np.arange(n, dtype=np.int64), n, ORDERED_BUDGET * n, inc.heap,
+            inc.pos, inc.key) >= 0
 
     def _declined(self, why: str) -> bool:
         """Count why an incremental solve declined (``solves``); False."""
