@@ -217,11 +217,11 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     if args.suite:
         return _cmd_suite(args)
     try:
-        overrides = _overrides(args)
+        overrides, params_files = _overrides(args)
         result = run_scenario(args.scenario, args.maze or _default_maze(), args.agents,
                               args.trials, args.seed, args.goals, args.episodes, args.event,
                               args.goal, args.jobs, progress=not args.quiet,
-                              overrides=overrides, params_files=args.params or (),
+                              overrides=overrides, params_files=params_files,
                               sensor=args.sensor, world=args.world,
                               world_kwargs=args.world_kwargs)
     except UsageError as exc:
@@ -237,15 +237,16 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     return 0
 
 
-def _overrides(args: argparse.Namespace) -> dict | None:
-    """``--params``: parameter overrides per agent spec (None without the flag)."""
+def _overrides(args: argparse.Namespace) -> tuple[dict | None, tuple[str, ...]]:
+    """``--params``: parameter overrides per agent spec (None without the flag) and the
+    files they came from (``AGENT=tuned`` resolved), which the JSON records."""
     if not args.params:
-        return None
+        return None, ()
     from tmgwr_agent.experiments.scenarios import DEFAULTS, check_agents
     from tmgwr_agent.experiments.tune import experiment_params, resolve_tuned
     agents = check_agents(args.agents or DEFAULTS[args.scenario]["agents"])
-    args.params = resolve_tuned(args.params, args.world)   # recorded as the files used
-    return experiment_params(agents, args.params)
+    files = tuple(resolve_tuned(args.params, args.world))
+    return experiment_params(agents, files), files
 
 
 def _cmd_suite(args: argparse.Namespace) -> int:
@@ -259,12 +260,12 @@ def _cmd_suite(args: argparse.Namespace) -> int:
         return _fail("--goal does not apply with --suite (every suite maze's goal is G)")
     maze_dir = maze_dir_for(args.json) if args.json and args.json != "-" else None
     try:
-        overrides = _overrides(args)
+        overrides, params_files = _overrides(args)
         result = run_suite(args.scenario, args.suite, args.agents, args.trials, args.seed,
                            args.suite_seed, args.suite_first, args.event, args.goals,
                            args.episodes, args.jobs, progress=not args.quiet,
                            maze_dir=maze_dir, overrides=overrides,
-                           params_files=args.params or (), sensor=args.sensor,
+                           params_files=params_files, sensor=args.sensor,
                            world=args.world, world_kwargs=args.world_kwargs)
     except UsageError as exc:
         return _fail(str(exc))
