@@ -1998,7 +1998,7 @@ def sensed_motion(motion, a, d, a_T):
 def map_step(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T, learn, eps_b,
              eps_n, tau_b, tau_n, kappa, E, A, age, terminal, a, has_action, alpha, sigma_a,
              eta_a, E_init, E_min, max_age, credit, keep, r2, prior, head, node, geom,
-             shape):
+             shape, moves, k):
     """One learning step of the map in one call (sensorimotor_map.py) when nothing needs
     Python: :func:`match`, then, reached by action ``a`` (``has_action``) from ``prev``,
     :func:`link_step` on prev -> winner (``keep1`` prev, ``keep2`` ``keep``), then, with
@@ -2008,7 +2008,9 @@ def map_step(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T,
     to widen: then only the match was made, and the caller goes on from there), else
     ``linked`` says whether the link stage ran (``changes``, ``ends`` its result) and
     ``(i, j)`` is the close pair ((-1, -1): none, or ``r2`` < 0). The node index
-    (``head`` ... ``shape``, node_index.py) follows the nodes the match moved."""
+    (``head`` ... ``shape``, node_index.py) first follows the rows ``moves[:k]`` (changed
+    since it last did), then the nodes the match moved."""
+    index_move(w, alive, n, moves, k, head, node, geom, shape)
     b, insert, moved = match(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T,
                              h_T, learn, eps_b, eps_n, tau_b, tau_n, kappa, prior, head,
                              node, geom, shape)

@@ -29,6 +29,7 @@ import numpy as np
 
 from tmgwr_agent.core import kernels
 
+_NO_ROWS = np.zeros(0, dtype=np.int64)
 #: Slots from which the map searches through the index.
 INDEX_MIN = 256
 #: Margin of the grid around the nodes' bounding box, as a share of its side.
@@ -56,20 +57,31 @@ class NodeIndex:
         return self.head, self.node, self.geom, self.shape
 
     def sync(self, m) -> None:
-        """Bring the grid up to date with map m's weights and alive flags (the rows its
-        change log lists since the last call), or build it again; below ``INDEX_MIN``
-        slots, mark it not valid (the searches scan)."""
+        """Bring the grid up to date with map m's weights and alive flags: the rows its
+        change log lists since the last call moved to their cells (:meth:`pending`), or
+        the grid built again when one left it."""
+        rows = self.pending(m)
+        if len(rows) and not kernels.index_move(m.w, m.alive, m.n, rows, len(rows),
+                                                *self.arrays):
+            self.pending(m)                 # a node left the grid: built again
+
+    def pending(self, m) -> np.ndarray:
+        """The rows of map m to move to their cells before the next search, those its
+        change log lists since the last call (the caller moves them:
+        :func:`kernels.index_move`, or :func:`kernels.map_step` in the same call as the
+        step), after building the grid again when due; below ``INDEX_MIN`` slots none,
+        the grid marked not valid (the searches scan)."""
         log, n = m.log, m.n
         if self.shape[3] and log is self._log and n <= 2 * self._built_n:
             rows = log.since(self._pos)
-            if rows is not None and (not len(rows) or kernels.index_move(
-                    m.w, m.alive, n, rows, len(rows), *self.arrays)):
+            if rows is not None:
                 self._pos = log.pos
-                return
+                return rows
         self._log, self._pos = log, log.pos
         self.shape[3] = 0
         if n >= INDEX_MIN:
             self.build(m)
+        return _NO_ROWS
 
     def build(self, m) -> None:
         """Build the grid around map m's live nodes (valid unless a weight is not

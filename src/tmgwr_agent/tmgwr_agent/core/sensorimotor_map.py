@@ -295,6 +295,7 @@ def survivor(i: int, merges) -> int:
 
 
 _INITIAL_CAPACITY = 64
+_NO_ROWS = np.zeros(0, dtype=np.int64)
 _INITIAL_DEGREE = 4
 
 
@@ -496,14 +497,15 @@ class SensorimotorMap:
         has_action = action is not None
         a = np.asarray(action, dtype=float) if has_action else self.C_t[:0]
         r2 = math.log(self.a_place) ** 2 if self.merge else -1.0
-        self._sync_index()
+        moves = self.index.pending(self) if self.n >= INDEX_MIN or self.index.shape[3] \
+            else _NO_ROWS     # rows the node index is to follow (node_index.py)
         b, insert, moved, done, changes, ends, ci, cj, linked = kernels.map_step(
             self.w, self.c, self.h, self.alive, self.out, self.inn, self.n, self.prev, x, C,
             self.alpha_c, self.beta_c, self.a_place, self.h_T, learn, self.eps_b, self.eps_n,
             self.tau_b, self.tau_n, self.kappa_h, self.E, self.a, self.age, self.terminal, a,
             has_action, self.alpha, self.sigma_a, self.eta_a, self.E_init, self.E_min,
             self.max_age, self.link_rule == "credit", self.winner, r2, prior,
-            *self.index.arrays)
+            *self.index.arrays, moves, len(moves))
         if len(moved):
             self.log.touch(moved)
         if done:
