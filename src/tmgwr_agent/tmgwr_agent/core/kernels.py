@@ -525,6 +525,70 @@ def reaches_source(out, E, n, absorbing, alive, source, mark):
 
 
 @njit(cache=True)
+def _believed(out, E, bump_t, succ, i, s):
+    """Link slot s of node i has E > 0 and is not contradicted (:func:`contradicted`)."""
+    j = out[i, s]
+    if j < 0 or E[i, s] <= 0.0:
+        return False
+    for a in range(bump_t.shape[1]):
+        if bump_t[i, a] >= 0 and succ[i, a] == j:
+            return False
+    return True
+
+
+@njit(cache=True)
+def reaches_source_from(out, E, n, absorbing, alive, source, bump_t, succ, V, start, known,
+                        stamp, seen, search, stack):
+    """:func:`reaches_source`'s mark of node ``start`` over the links the outcome memory
+    does not contradict (:func:`contradicted`), by a depth-first search from it that
+    stops at the first source, or node known to reach one; the successor of largest V
+    first, so that on a map whose potentials lead to a source the search mostly walks
+    that way alone. ``known[i]`` is ``stamp`` for a node known to reach a source,
+    ``-stamp`` for one known not to (a new stamp forgets both): a search that finds one
+    marks the nodes of its path, one that finds none every node it visited (all that
+    they lead to was visited). ``seen`` (``search``: this search's mark) and ``stack``:
+    work arrays of n entries."""
+    if not alive[start]:
+        return False
+    if known[start] == stamp or source[start]:
+        known[start] = stamp
+        return True
+    if known[start] == -stamp:
+        return False
+    K = out.shape[1]
+    depth = 0
+    stack[0] = start
+    seen[start] = search
+    while depth >= 0:
+        i = stack[depth]
+        nxt = -1
+        if not absorbing[i]:
+            best = -1.0
+            for s in range(K):                       # the untried successor of largest V
+                j = out[i, s]
+                if j < 0 or j >= n or not alive[j] or seen[j] == search or \
+                        known[j] == -stamp or not _believed(out, E, bump_t, succ, i, s):
+                    continue
+                if V[j] > best:
+                    best, nxt = V[j], j
+        if nxt < 0:
+            depth -= 1                               # nothing left from i
+            continue
+        if source[nxt] or known[nxt] == stamp:
+            for q in range(depth + 1):
+                known[stack[q]] = stamp
+            known[nxt] = stamp
+            return True
+        seen[nxt] = search
+        depth += 1
+        stack[depth] = nxt
+    for i in range(n):                               # every node it visited: none reaches
+        if seen[i] == search:
+            known[i] = -stamp
+    return False
+
+
+@njit(cache=True)
 def link_steps(out, E, n, alive, absorbing, root, reverse, dist):
     """``dist[i]``: the fewest links with E > 0 from node ``root`` to i (``reverse``: from
     i to ``root``), -1 where no link path leads; an absorbing node has no successor, a

@@ -306,7 +306,11 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         self._winner = -1                # the agent's node (from record)
         self._bumps = 0                  # bumps recorded (a key of the stuck test)
         self._reach_key: tuple = ()
-        self._reach = np.zeros(0, dtype=bool)
+        # stuck's search (kernels.reaches_source_from): what it knows of each node (by
+        # stamp), its work arrays and counters, and the flags of its key's change
+        self._reach = self._reach_seen = self._reach_stack = np.zeros(0, dtype=np.int64)
+        self._reach_stamp = self._reach_search = 0
+        self._reach_abs = self._reach_src = np.zeros(0, dtype=bool)
         # What changed since the last _prepare: the map's change log (RowLog) and its
         # position then; the inputs R was computed from (its rows are recomputed alone
         # while they hold) and the nearest node to the goal then.
