@@ -250,6 +250,7 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         self.value_unknown = model.options
         self.frame = model.frame()                 # where places are measured (frame.py)
         self.lattice = np.ones(P, dtype=bool)       # primitives whose options are valued
+        self._placed = True           # some primitive of the lattice (lattice.any())
         self._frame_episode = -1      # the episode the frame's basis was chosen in
         self._F: Frame | None = None  # the frame's coordinates of the last _prepare
         self.stale_prior, self.stale_horizon = config.stale_prior, config.stale_horizon
@@ -422,7 +423,7 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
             self._scale_version = m.version
         F = self._in_frame(m, rows)
         g, g_moved = self._nearest_goal(m, n, rows)
-        if self.value_unknown and not self.lattice.any():
+        if self.value_unknown and not self._placed:
             return self.sensed_goal(m, n)
         if g < 0 or (self.value_unknown                   # represented only once sensed
                      and not self._represents_goal(F, m, g)):
@@ -487,6 +488,7 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         if np.array_equal(lattice, self.lattice):
             return
         self.lattice = lattice.copy()
+        self._placed = bool(lattice.any())
         self._options_key = ()
         self.rho[:] = 0.0                 # recomputed in full when any is valued
         self.U[:] = 0.0
@@ -628,7 +630,8 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         inc = self._inc
         if inc is None or inc.goal_node != self.goal_node:
             return self._declined("goal")
-        if inc.n != n or inc.out0.shape != m.out[:n].shape or inc.rho0.shape != self.rho.shape:
+        if inc.n != n or inc.out0.shape != (n, m.out.shape[1]) or \
+                inc.rho0.shape != self.rho.shape:
             return self._declined("size")
         log = getattr(m, "log", None)
         logged = log.since(inc.log_pos) if log is not None and log is inc.log and \
