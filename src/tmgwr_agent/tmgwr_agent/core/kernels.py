@@ -72,6 +72,224 @@ def close_pair(w, c, alive, n, rows, alpha_c, r2):
     return bi, bj
 
 
+# ---------------------------------------------------------------- the node index
+# A uniform grid over the first one or two coordinates of the weights (place_index.py):
+# ``head[cell]`` the first node of a cell's list, ``node[0]`` / ``node[1]`` the next and
+# previous node of each node's list, ``node[2]`` its cell (-1: not listed); ``geom`` =
+# (origin x, origin y, cell width, 1 / width), ``shape`` = (cells along x, along y,
+# coordinates used, valid). A search that finds ``shape[3]`` 0 scans every node instead.
+
+
+@njit(cache=True)
+def index_cell(w, i, geom, shape):
+    """The cell of node i's weights (-1: outside the grid)."""
+    fx = (w[i, 0] - geom[0]) * geom[3]
+    if not (0.0 <= fx < shape[0]):
+        return -1
+    cy = 0
+    if shape[2] > 1:
+        fy = (w[i, 1] - geom[1]) * geom[3]
+        if not (0.0 <= fy < shape[1]):
+            return -1
+        cy = int(fy)
+    return int(fx) * shape[1] + cy
+
+
+@njit(cache=True)
+def _index_unlink(head, node, i):
+    cell = node[2, i]
+    if cell < 0:
+        return
+    nx, pv = node[0, i], node[1, i]
+    if pv >= 0:
+        node[0, pv] = nx
+    else:
+        head[cell] = nx
+    if nx >= 0:
+        node[1, nx] = pv
+    node[0, i] = node[1, i] = node[2, i] = -1
+
+
+@njit(cache=True)
+def _index_link(head, node, i, cell):
+    nx = head[cell]
+    node[0, i], node[1, i], node[2, i] = nx, -1, cell
+    if nx >= 0:
+        node[1, nx] = i
+    head[cell] = i
+
+
+@njit(cache=True)
+def index_build(w, alive, n, head, node, geom, shape):
+    """List every live node of ``[0, n)`` in its cell; False (``shape[3]`` set to 0)
+    when one lies outside the grid."""
+    head[:] = -1
+    node[:] = -1
+    for i in range(n):
+        if alive[i]:
+            cell = index_cell(w, i, geom, shape)
+            if cell < 0:
+                shape[3] = 0
+                return False
+            _index_link(head, node, i, cell)
+    shape[3] = 1
+    return True
+
+
+@njit(cache=True)
+def index_move(w, alive, n, rows, k, head, node, geom, shape):
+    """Bring the first k ``rows`` (weights or alive flags changed; may repeat) to their
+    cells; False (``shape[3]`` set to 0: the caller builds the grid again) when a live
+    one left the grid or a row lies beyond the node arrays."""
+    if shape[3] == 0:
+        return False
+    for q in range(k):
+        i = rows[q]
+        if i < 0:
+            continue
+        if i >= node.shape[1]:
+            shape[3] = 0
+            return False
+        cell = -1
+        if i < n and alive[i]:
+            cell = index_cell(w, i, geom, shape)
+            if cell < 0:
+                shape[3] = 0
+                return False
+        if cell != node[2, i]:
+            _index_unlink(head, node, i)
+            if cell >= 0:
+                _index_link(head, node, i, cell)
+    return True
+
+
+@njit(cache=True)
+def _index_square(geom, shape, x0, x1):
+    """The cell (unbounded, clamped one cell outside the grid) of the point (x0, x1) and
+    its coordinates in cell widths."""
+    fx = (x0 - geom[0]) * geom[3]
+    cx = int(min(max(math.floor(fx), -1.0), float(shape[0])))
+    fy, cy = 0.0, 0
+    if shape[2] > 1:
+        fy = (x1 - geom[1]) * geom[3]
+        cy = int(min(max(math.floor(fy), -1.0), float(shape[1])))
+    return fx, cx, fy, cy
+
+
+@njit(cache=True)
+def _index_clearance(shape, fx, cx, fy, cy, r):
+    """The distance (in cell widths, a little under) from the point to the nearest cell
+    outside the square of cells within ``r`` of (cx, cy): a lower bound on the distance
+    of every node the square does not hold (0 when the point is outside the square)."""
+    g = min(fx - (cx - r), (cx + r + 1) - fx)
+    if shape[2] > 1:
+        g = min(g, fy - (cy - r), (cy + r + 1) - fy)
+    return max(g, 0.0) * (1.0 - 1e-9)
+
+
+@njit(cache=True)
+def _index_covers(shape, cx, cy, r):
+    """The square of cells within r of (cx, cy) holds the whole grid."""
+    if cx - r > 0 or cx + r < shape[0] - 1:
+        return False
+    return shape[2] < 2 or (cy - r <= 0 and cy + r >= shape[1] - 1)
+
+
+@njit(cache=True)
+def _argmin_in_cell(w, c, alive, n, x, C, alpha_c, head, node, cell, best, best_d):
+    """:func:`merge_distance_argmin` over one cell's list, from (best, best_d)."""
+    i = head[cell]
+    while i >= 0:
+        if i < n and alive[i]:
+            dx = 0.0
+            dc = 0.0
+            for k in range(x.shape[0]):
+                t = x[k] - w[i, k]
+                dx += t * t
+                u = C[k] - c[i, k]
+                dc += u * u
+            d = (1.0 - alpha_c) * dx + alpha_c * dc
+            if d < best_d or (d == best_d and i < best):
+                best, best_d = i, d
+        i = node[0, i]
+    return best, best_d
+
+
+@njit(cache=True)
+def indexed_argmin(w, c, alive, n, x, C, alpha_c, head, node, geom, shape):
+    """:func:`merge_distance_argmin` through the node index: the cells in squares of
+    growing width around x until no node outside can be as near as the best found
+    (``(1 - alpha_c)`` times the squared distance along the indexed coordinates bounds
+    ``d_n`` below); ties to the lowest id, as the scan."""
+    if shape[3] == 0 or alpha_c >= 1.0:
+        return merge_distance_argmin(w, c, alive, n, x, C, alpha_c)
+    best, best_d = -1, np.inf
+    fx, cx, fy, cy = _index_square(geom, shape, x[0], x[1] if shape[2] > 1 else 0.0)
+    gx, gy = shape[0], shape[1]
+    r = 0
+    while True:
+        for ix in range(max(cx - r, 0), min(cx + r, gx - 1) + 1):
+            if ix == cx - r or ix == cx + r:          # a side of the square: every cell
+                for iy in range(max(cy - r, 0), min(cy + r, gy - 1) + 1):
+                    best, best_d = _argmin_in_cell(w, c, alive, n, x, C, alpha_c, head,
+                                                   node, ix * gy + iy, best, best_d)
+                continue
+            if 0 <= cy - r < gy:                       # inside: the top and bottom cells
+                best, best_d = _argmin_in_cell(w, c, alive, n, x, C, alpha_c, head, node,
+                                               ix * gy + cy - r, best, best_d)
+            if r > 0 and 0 <= cy + r < gy:
+                best, best_d = _argmin_in_cell(w, c, alive, n, x, C, alpha_c, head, node,
+                                               ix * gy + cy + r, best, best_d)
+        if _index_covers(shape, cx, cy, r):
+            return best, best_d
+        lb = _index_clearance(shape, fx, cx, fy, cy, r) * geom[2]
+        if (1.0 - alpha_c) * lb * lb > best_d:
+            return best, best_d
+        r += 1
+
+
+@njit(cache=True)
+def indexed_close_pair(w, c, alive, n, rows, alpha_c, r2, head, node, geom, shape):
+    """:func:`close_pair` through the node index: for each i of ``rows`` only the cells
+    within the radius (``(1 - alpha_c) |w_i - w_j|^2 < r2`` along the indexed
+    coordinates); ties to the first row, then the lowest j, as the scan."""
+    if shape[3] == 0 or alpha_c >= 1.0:
+        return close_pair(w, c, alive, n, rows, alpha_c, r2)
+    bi, bj, bq, best = -1, -1, -1, r2
+    dim = w.shape[1]
+    reach = math.sqrt(r2 / (1.0 - alpha_c)) * geom[3] * (1.0 + 1e-9)   # in cell widths
+    gy = shape[1]
+    for q in range(len(rows)):
+        i = rows[q]
+        if i < 0 or i >= n or not alive[i]:
+            continue
+        fx = (w[i, 0] - geom[0]) * geom[3]
+        x0 = max(int(math.floor(fx - reach)), 0)
+        x1 = min(int(math.floor(fx + reach)), shape[0] - 1)
+        y0, y1 = 0, 0
+        if shape[2] > 1:
+            fy = (w[i, 1] - geom[1]) * geom[3]
+            y0 = max(int(math.floor(fy - reach)), 0)
+            y1 = min(int(math.floor(fy + reach)), gy - 1)
+        for ix in range(x0, x1 + 1):
+            for iy in range(y0, y1 + 1):
+                j = head[ix * gy + iy]
+                while j >= 0:
+                    if j != i and j < n and alive[j]:
+                        dx = 0.0
+                        dc = 0.0
+                        for k in range(dim):
+                            t = w[i, k] - w[j, k]
+                            dx += t * t
+                            u = c[i, k] - c[j, k]
+                            dc += u * u
+                        d = (1.0 - alpha_c) * dx + alpha_c * dc
+                        if d < best or (d == best and (q < bq or (q == bq and j < bj))):
+                            bi, bj, bq, best = i, j, q, d
+                    j = node[0, j]
+    return bi, bj
+
+
 @njit(cache=True)
 def nearest_weight(w, alive, n, x):
     """argmin_n |x - w_n|^2 over live nodes (-1 if none)."""
@@ -304,6 +522,70 @@ def reaches_source(out, E, n, absorbing, alive, source, mark):
                 queue[tail] = i
                 tail += 1
     return tail
+
+
+@njit(cache=True)
+def _believed(out, E, bump_t, succ, i, s):
+    """Link slot s of node i has E > 0 and is not contradicted (:func:`contradicted`)."""
+    j = out[i, s]
+    if j < 0 or E[i, s] <= 0.0:
+        return False
+    for a in range(bump_t.shape[1]):
+        if bump_t[i, a] >= 0 and succ[i, a] == j:
+            return False
+    return True
+
+
+@njit(cache=True)
+def reaches_source_from(out, E, n, absorbing, alive, source, bump_t, succ, V, start, known,
+                        stamp, seen, search, stack):
+    """:func:`reaches_source`'s mark of node ``start`` over the links the outcome memory
+    does not contradict (:func:`contradicted`), by a depth-first search from it that
+    stops at the first source, or node known to reach one; the successor of largest V
+    first, so that on a map whose potentials lead to a source the search mostly walks
+    that way alone. ``known[i]`` is ``stamp`` for a node known to reach a source,
+    ``-stamp`` for one known not to (a new stamp forgets both): a search that finds one
+    marks the nodes of its path, one that finds none every node it visited (all that
+    they lead to was visited). ``seen`` (``search``: this search's mark) and ``stack``:
+    work arrays of n entries."""
+    if not alive[start]:
+        return False
+    if known[start] == stamp or source[start]:
+        known[start] = stamp
+        return True
+    if known[start] == -stamp:
+        return False
+    K = out.shape[1]
+    depth = 0
+    stack[0] = start
+    seen[start] = search
+    while depth >= 0:
+        i = stack[depth]
+        nxt = -1
+        if not absorbing[i]:
+            best = -1.0
+            for s in range(K):                       # the untried successor of largest V
+                j = out[i, s]
+                if j < 0 or j >= n or not alive[j] or seen[j] == search or \
+                        known[j] == -stamp or not _believed(out, E, bump_t, succ, i, s):
+                    continue
+                if V[j] > best:
+                    best, nxt = V[j], j
+        if nxt < 0:
+            depth -= 1                               # nothing left from i
+            continue
+        if source[nxt] or known[nxt] == stamp:
+            for q in range(depth + 1):
+                known[stack[q]] = stamp
+            known[nxt] = stamp
+            return True
+        seen[nxt] = search
+        depth += 1
+        stack[depth] = nxt
+    for i in range(n):                               # every node it visited: none reaches
+        if seen[i] == search:
+            known[i] = -stamp
+    return False
 
 
 @njit(cache=True)
@@ -1673,21 +1955,24 @@ def update_links(out, E, A, age, inn, n, i, j, a, alpha, sigma_a, eta_a, E_init,
 
 @njit(cache=True)
 def match(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T, learn, eps_b,
-          eps_n, tau_b, tau_n, kappa, prior=-1):
+          eps_n, tau_b, tau_n, kappa, prior, head, node, geom, shape):
     """The matching and adaptation of one input x (sensorimotor_map.py, one call a step):
     writes its Merge-GNG context ``C_t = (1 - beta_c) w_prev + beta_c c_prev`` into C (x
     itself at an episode start, ``prev`` < 0), finds the winner b = argmin d_n and, when
     learning, applies the GWR test: returns ``(b, True)`` when a node must be inserted (an
     empty map, or activity ``exp(-sqrt(d_b)) < a_T`` with ``h_b <= h_T``: the caller
     inserts), else adapts b and its neighbours towards (x, C) and returns ``(b, False)``;
-    a third value lists the nodes whose weights moved (empty when none did)."""
+    a third value lists the nodes whose weights moved (empty when none did). ``prior``:
+    the node the links predict, the winner when x lies within its place (-1: none);
+    ``head`` ... ``shape``: the node index (node_index.py) the winner is searched
+    through."""
     none = np.empty(0, dtype=np.int64)
     if prev >= 0:
         for k in range(C.shape[0]):
             C[k] = (1.0 - beta_c) * w[prev, k] + beta_c * c[prev, k]
     else:
         C[:] = x
-    b, d_b = merge_distance_argmin(w, c, alive, n, x, C, alpha_c)
+    b, d_b = indexed_argmin(w, c, alive, n, x, C, alpha_c, head, node, geom, shape)
     if 0 <= prior < n and prior != b and alive[prior]:     # the place the links predict
         d_p = 0.0
         for k in range(x.shape[0]):
@@ -1776,7 +2061,8 @@ def sensed_motion(motion, a, d, a_T):
 @njit(cache=True)
 def map_step(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T, learn, eps_b,
              eps_n, tau_b, tau_n, kappa, E, A, age, terminal, a, has_action, alpha, sigma_a,
-             eta_a, E_init, E_min, max_age, credit, keep, r2, prior=-1):
+             eta_a, E_init, E_min, max_age, credit, keep, r2, prior, head, node, geom,
+             shape, moves, k):
     """One learning step of the map in one call (sensorimotor_map.py) when nothing needs
     Python: :func:`match`, then, reached by action ``a`` (``has_action``) from ``prev``,
     :func:`link_step` on prev -> winner (``keep1`` prev, ``keep2`` ``keep``), then, with
@@ -1785,9 +2071,13 @@ def map_step(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T,
     step needs the caller (not learning, a node to insert, a terminal ``prev``, link rows
     to widen: then only the match was made, and the caller goes on from there), else
     ``linked`` says whether the link stage ran (``changes``, ``ends`` its result) and
-    ``(i, j)`` is the close pair ((-1, -1): none, or ``r2`` < 0)."""
+    ``(i, j)`` is the close pair ((-1, -1): none, or ``r2`` < 0). The node index
+    (``head`` ... ``shape``, node_index.py) first follows the rows ``moves[:k]`` (changed
+    since it last did), then the nodes the match moved."""
+    index_move(w, alive, n, moves, k, head, node, geom, shape)
     b, insert, moved = match(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T,
-                             h_T, learn, eps_b, eps_n, tau_b, tau_n, kappa, prior)
+                             h_T, learn, eps_b, eps_n, tau_b, tau_n, kappa, prior, head,
+                             node, geom, shape)
     changes, ends, linked = 0, np.empty(0, dtype=np.int64), False
     if not learn or insert:
         return b, insert, moved, False, changes, ends, -1, -1, linked
@@ -1801,7 +2091,9 @@ def map_step(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T,
         linked = True
     i, j = -1, -1
     if r2 >= 0.0 and len(moved):
-        i, j = close_pair(w, c, alive, n, moved, alpha_c, r2)
+        index_move(w, alive, n, moved, len(moved), head, node, geom, shape)
+        i, j = indexed_close_pair(w, c, alive, n, moved, alpha_c, r2, head, node, geom,
+                                  shape)
     return b, insert, moved, True, changes, ends, i, j, linked
 
 

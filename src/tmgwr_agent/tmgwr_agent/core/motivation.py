@@ -250,6 +250,7 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         self.value_unknown = model.options
         self.frame = model.frame()                 # where places are measured (frame.py)
         self.lattice = np.ones(P, dtype=bool)       # primitives whose options are valued
+        self._placed = True           # some primitive of the lattice (lattice.any())
         self._frame_episode = -1      # the episode the frame's basis was chosen in
         self._F: Frame | None = None  # the frame's coordinates of the last _prepare
         self.stale_prior, self.stale_horizon = config.stale_prior, config.stale_horizon
@@ -306,7 +307,11 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         self._winner = -1                # the agent's node (from record)
         self._bumps = 0                  # bumps recorded (a key of the stuck test)
         self._reach_key: tuple = ()
-        self._reach = np.zeros(0, dtype=bool)
+        # stuck's search (kernels.reaches_source_from): what it knows of each node (by
+        # stamp), its work arrays and counters, and the flags of its key's change
+        self._reach = self._reach_seen = self._reach_stack = np.zeros(0, dtype=np.int64)
+        self._reach_stamp = self._reach_search = 0
+        self._reach_abs = self._reach_src = np.zeros(0, dtype=bool)
         # What changed since the last _prepare: the map's change log (RowLog) and its
         # position then; the inputs R was computed from (its rows are recomputed alone
         # while they hold) and the nearest node to the goal then.
@@ -418,7 +423,7 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
             self._scale_version = m.version
         F = self._in_frame(m, rows)
         g, g_moved = self._nearest_goal(m, n, rows)
-        if self.value_unknown and not self.lattice.any():
+        if self.value_unknown and not self._placed:
             return self.sensed_goal(m, n)
         if g < 0 or (self.value_unknown                   # represented only once sensed
                      and not self._represents_goal(F, m, g)):
@@ -483,6 +488,7 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         if np.array_equal(lattice, self.lattice):
             return
         self.lattice = lattice.copy()
+        self._placed = bool(lattice.any())
         self._options_key = ()
         self.rho[:] = 0.0                 # recomputed in full when any is valued
         self.U[:] = 0.0
@@ -624,7 +630,8 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         inc = self._inc
         if inc is None or inc.goal_node != self.goal_node:
             return self._declined("goal")
-        if inc.n != n or inc.out0.shape != m.out[:n].shape or inc.rho0.shape != self.rho.shape:
+        if inc.n != n or inc.out0.shape != (n, m.out.shape[1]) or \
+                inc.rho0.shape != self.rho.shape:
             return self._declined("size")
         log = getattr(m, "log", None)
         logged = log.since(inc.log_pos) if log is not None and log is inc.log and \

@@ -147,6 +147,7 @@ from typing import NamedTuple
 import numpy as np
 
 from tmgwr_agent.core import kernels
+from tmgwr_agent.core.node_index import INDEX_MIN, NodeIndex
 from tmgwr_agent.core.outcome import Outcome
 from tmgwr_common.params import Config, param
 
@@ -294,6 +295,7 @@ def survivor(i: int, merges) -> int:
 
 
 _INITIAL_CAPACITY = 64
+_NO_ROWS = np.zeros(0, dtype=np.int64)
 _INITIAL_DEGREE = 4
 
 
@@ -338,6 +340,7 @@ class SensorimotorMap:
         #                                     none; None: the step's own previous winner)
         self.C_t = np.zeros(dim)   # Merge-GNG context of the last input (kernels.match)
         self.log = RowLog()        # the rows each change touched (the estimator's input)
+        self.index = NodeIndex()   # where the step searches for the winner (node_index.py)
         self.rebuild_in_links()    # (none yet: compiles the kernel where maps are made)
 
     # ------------------------------------------------------------------ storage
@@ -494,12 +497,15 @@ class SensorimotorMap:
         has_action = action is not None
         a = np.asarray(action, dtype=float) if has_action else self.C_t[:0]
         r2 = math.log(self.a_place) ** 2 if self.merge else -1.0
+        moves = self.index.pending(self) if self.n >= INDEX_MIN or self.index.shape[3] \
+            else _NO_ROWS     # rows the node index is to follow (node_index.py)
         b, insert, moved, done, changes, ends, ci, cj, linked = kernels.map_step(
             self.w, self.c, self.h, self.alive, self.out, self.inn, self.n, self.prev, x, C,
             self.alpha_c, self.beta_c, self.a_place, self.h_T, learn, self.eps_b, self.eps_n,
             self.tau_b, self.tau_n, self.kappa_h, self.E, self.a, self.age, self.terminal, a,
             has_action, self.alpha, self.sigma_a, self.eta_a, self.E_init, self.E_min,
-            self.max_age, self.link_rule == "credit", self.winner, r2, prior)
+            self.max_age, self.link_rule == "credit", self.winner, r2, prior,
+            *self.index.arrays, moves, len(moves))
         if len(moved):
             self.log.touch(moved)
         if done:
@@ -534,6 +540,12 @@ class SensorimotorMap:
         self.prev = self.winner = winner
         return winner
 
+    def _sync_index(self) -> None:
+        """The node index up to date before a search (node_index.py; a scan below
+        ``INDEX_MIN`` slots)."""
+        if self.n >= INDEX_MIN or self.index.shape[3]:
+            self.index.sync(self)
+
     # ------------------------------------------------------------------ one node a place
     def _merge_close(self, moved: np.ndarray, winner: int,
                      pair: tuple[int, int] | None = None) -> int:
@@ -543,8 +555,11 @@ class SensorimotorMap:
         r2 = math.log(self.a_place) ** 2
         rows = np.asarray(moved, dtype=np.int64)
         while True:
-            i, j = pair if pair is not None else kernels.close_pair(
-                self.w, self.c, self.alive, self.n, rows, self.alpha_c, r2)
+            if pair is None:
+                self._sync_index()
+            i, j = pair if pair is not None else kernels.indexed_close_pair(
+                self.w, self.c, self.alive, self.n, rows, self.alpha_c, r2,
+                *self.index.arrays)
             pair = None
             if i < 0:
                 return winner

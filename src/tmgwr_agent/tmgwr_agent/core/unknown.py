@@ -761,19 +761,30 @@ class OptionRules:
         over the links the outcome memory does not contradict (a link whose primitive
         bumped last time counts as gone): the agent's knowledge says the task is
         impossible, so all its remembered walls are doubted (``rho``'s limit
-        :meth:`wall_prior` instead of ``stale_prior``; older bumps first). Cached per
-        map version, goal node, terminal flags and bump count."""
+        :meth:`wall_prior` instead of ``stale_prior``; older bumps first). Searched from
+        the agent's node (:func:`kernels.reaches_source_from`), what it learns kept per
+        map version, goal node, terminal flags and bump count, which fix the links and
+        the outcome memory it reads (the terminal flags and the goal nodes as they were
+        when that key changed)."""
         if self.goal_node < 0 or not 0 <= self._winner < n:
             return False
         absorbing = self._absorbing(m, n, closed=False)
         key = (m.version, self.goal_node, self._abs_count, self._bumps)
         if key != self._reach_key:
             self._reach_key = key
-            self._reach = np.zeros(n, dtype=bool)
-            Eb = kernels.contradicted(m.out, m.E, n, self.bump_t, self.succ)
-            kernels.reaches_source(m.out, Eb, n, absorbing, m.alive, self.R >= GOAL_R,
-                                   self._reach)
-        return not self._reach[self._winner]
+            self._reach_abs, self._reach_src = absorbing.copy(), self.R >= GOAL_R
+            if len(self._reach) < n:
+                self._reach, self._reach_seen = (np.zeros(2 * n, np.int64) for _ in "ks")
+                self._reach_stack = np.empty(2 * n, np.int64)
+            self._reach_stamp += 1
+        known = self._reach[self._winner]
+        if known == self._reach_stamp or known == -self._reach_stamp:
+            return known < 0
+        self._reach_search += 1
+        return not kernels.reaches_source_from(
+            m.out, m.E, n, self._reach_abs, m.alive, self._reach_src, self.bump_t, self.succ,
+            self.V, self._winner, self._reach, self._reach_stamp, self._reach_seen,
+            self._reach_search, self._reach_stack)
 
     def nodes_alive(self, m: SensorimotorMap, n: int) -> int:
         if self._alive_version != m.version:
