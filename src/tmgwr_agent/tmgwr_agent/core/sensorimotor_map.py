@@ -215,7 +215,9 @@ class RowLog:
     position :attr:`pos` it read up to; positions are absolute, and the log forgets its
     oldest entries when it outgrows its bound, or all of them at a change it cannot list
     (:meth:`invalidate`: a map loaded, rebuilt or replaced): :meth:`since` then answers
-    None and the consumer compares every row. Rows may repeat."""
+    None and the consumer compares every row. Rows may repeat. The node index
+    (node_index.py) reads it too: a write of weights or alive flags that is not logged
+    leaves the index stale, so the map would pick wrong winners, not only stale values."""
 
     def __init__(self):
         self._rows = np.empty(256, dtype=np.int64)
