@@ -421,9 +421,31 @@ class PointMazeWorld:
 
     @property
     def observation_space(self):
-        """The sensation as a Gymnasium space (what ``Senses.from_spaces`` reads)."""
+        """The sensation as a Gymnasium space (what ``Senses.from_spaces`` reads), bounded
+        by the sensor's range (:meth:`sensation_range`)."""
         from gymnasium import spaces
-        return spaces.Box(-np.inf, np.inf, shape=(self.sensation_dim,), dtype=np.float64)
+        low, high = self.sensation_range()
+        return spaces.Box(low, high, dtype=np.float64)
+
+    def sensation_range(self) -> tuple[np.ndarray, np.ndarray]:
+        """The range of the sensation (module doc, Sensor's range): per axis, the extent
+        of the cells that are free in the maze or that any of its events opens, less the
+        point's radius at each end (the point's centre stays that far from a wall's face);
+        with ``velocity``, +-``MAX_SPEED`` (the env clips the velocity to it)."""
+        free = ~self.maze.walls
+        for e in self.maze.events.values():
+            for r, c in e.get("open", ()):
+                free[r, c] = True
+        rows, cols = np.nonzero(free)
+        radius = float(self.model.geom_size[self._point_geom][0])
+        half = 0.5 * CELL_SIZE - radius
+        (x0, y1), (x1, y0) = (self.xy((rows.min(), cols.min())),
+                              self.xy((rows.max(), cols.max())))
+        low, high = np.array([x0 - half, y0 - half]), np.array([x1 + half, y1 + half])
+        if self.velocity:
+            low = np.concatenate([low, [-MAX_SPEED, -MAX_SPEED]])
+            high = np.concatenate([high, [MAX_SPEED, MAX_SPEED]])
+        return low, high
 
     @property
     def action_space(self):

@@ -665,6 +665,29 @@ class OptionRules:
                               self.U, self.rho, self.osucc, self.onb, self.ong)
         if not self.lattice.all():
             self._unplaced_options(m, rows[rows < n], np.flatnonzero(~self.lattice))
+        if self.bounds is not None:
+            self.outside_options(m, n)
+
+    def outside_options(self, m: SensorimotorMap, n: int) -> None:
+        """No option whose predicted successor ``w_i + delta_a`` (the forward model's, in
+        the map's units) lies outside the sensor's range (``bounds``: the bounds of the
+        world's observation ``Box``, scaled as the sensation is): a move cannot end at a
+        sensation the sensor never gives, so neither an untried move nor a remembered
+        wall there can lead anywhere. Without it the agent, its route broken, counted
+        every untried move into the world's outer edge as a way round as likely as any
+        other untried move, and walked the edge testing them. Applied over every row
+        (rows a refresh did not write were cleared by an earlier one), so whatever an
+        incremental refresh wrote (:func:`kernels.untried_rho` writes ``rho`` on every
+        untried pair) stays cleared."""
+        if not self.delta.size:
+            return
+        lo, hi = self.bounds
+        x = m.w[:n, None, :] + self.delta[None, :, :]
+        out = ((x < lo) | (x > hi)).any(axis=-1) & (self.rho[:n] > 0.0)
+        if out.any():
+            self.rho[:n][out] = 0.0
+            self.U[:n][out] = 0.0
+            self.osucc[:n][out] = -1
 
     def _changed_option_rows(self, m: SensorimotorMap, n: int, F, grid_was: np.ndarray,
                              origin_was: np.ndarray, stuck: bool) -> np.ndarray | None:
