@@ -678,12 +678,13 @@ class OptionRules:
         other untried move, and walked the edge testing them. Applied over every row
         (rows a refresh did not write were cleared by an earlier one), so whatever an
         incremental refresh wrote (:func:`kernels.untried_rho` writes ``rho`` on every
-        untried pair) stays cleared."""
-        if not self.delta.size:
+        untried pair) stays cleared. Only for the primitives that make lattice steps
+        (frame.py): the forward model places no other's successor."""
+        if not self.delta.size or not self.lattice.any():
             return
         lo, hi = self.bounds
         x = m.w[:n, None, :] + self.delta[None, :, :]
-        out = ((x < lo) | (x > hi)).any(axis=-1) & (self.rho[:n] > 0.0)
+        out = ((x < lo) | (x > hi)).any(axis=-1) & (self.rho[:n] > 0.0) & self.lattice
         if out.any():
             self.rho[:n][out] = 0.0
             self.U[:n][out] = 0.0
