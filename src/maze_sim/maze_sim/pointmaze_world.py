@@ -61,6 +61,17 @@ activity threshold) separates neighbouring places of the lattice. (Measured in m
 cell, a half-metre move lies within that radius, about half a metre: the map merged
 neighbouring places into one node.)
 
+Sensor's range (the bounds of ``observation_space``, told to the agent through its
+``Senses`` as ``low``, ``high``): the positions the point's centre can take, per axis the
+extent of the cells free in the maze or opened by one of its events, less the point's
+radius (``particle_geom``'s) at each end, where the centre stops against a wall's face
+(:meth:`PointMazeWorld.sensation_range`); the velocity within +-``MAX_SPEED``. A Gymnasium
+``Box`` states the range its sensor can give; this is that range, a fact of the arena, not
+of where its inner walls are. (The agent makes no option of a move predicted to end
+outside it: core/unknown.py, ``outside_options``. Declared unbounded, every untried move
+into the maze's outer wall was a way round as plausible as any other once a block broke
+the route, and the agent walked the outer wall testing them.)
+
 Outcome: ``bumped`` is the touch sensor: during the primitive the point met a wall ahead
 of its push (a MuJoCo contact between the point's geom and a ``block_*`` geom whose normal
 is within 60 degrees of the push direction; a wall slid along does not count). A goal counts
