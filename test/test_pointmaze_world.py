@@ -442,8 +442,10 @@ def test_the_sensor_range_is_declared_and_no_option_leads_outside_it():
 
 def test_senses_refuse_a_range_that_does_not_fit():
     from tmgwr_agent.core.senses import Senses, SensesError
+    from tmgwr_agent.world_senses import maze_senses
 
     assert not Senses(2, PRIMITIVES).bounded
+    assert not maze_senses().bounded          # the grid world declares no range
     with pytest.raises(SensesError, match="must give 2 values"):
         Senses(2, PRIMITIVES, low=[0.0])
     with pytest.raises(SensesError, match="range is empty"):
