@@ -430,14 +430,18 @@ def test_the_sensor_range_is_declared_and_no_option_leads_outside_it():
         feats = {k: ag.preprocessor(x) for k, x in seen.items()}
         nodes = {k: int(np.argmin(np.linalg.norm(ag.map.w[:ag.map.n] - f, axis=1)))
                  for k, f in feats.items()}
-        return {(k, a): float(ag.motivation.rho[i, a]) for k, i in nodes.items()
-                for a in (UP, LEFT, RIGHT)}
+        rho = {(k, a): float(ag.motivation.rho[i, a]) for k, i in nodes.items()
+               for a in (UP, LEFT, RIGHT)}
+        return rho, ag.motivation.rho_new
 
-    told, untold = options(s), options(Senses(2, PRIMITIVES, SUCCESS_RADIUS, step_length()))
+    (told, prior), (untold, untold_prior) = \
+        options(s), options(Senses(2, PRIMITIVES, SUCCESS_RADIUS, step_length()))
     outward = [("S", UP), ("S", LEFT), ("(2, 1)", LEFT)]
     assert all(untold[k] > 0.0 for k in outward)      # untried: options when not told
     assert all(told[k] == 0.0 for k in outward)       # told the range: none
     assert told[("(2, 1)", RIGHT)] > 0.0              # a move into an inner wall stays one
+    # the moves the range closes count as tried moves that did not open (open_prior)
+    assert prior < untold_prior
 
 
 def test_senses_refuse_a_range_that_does_not_fit():
