@@ -391,3 +391,66 @@ def test_the_tables_in_pointmaze_key_on_the_lattice():
         run_episode(w, agent)
     assert next(iter(agent.sensed)) == w.discretise(w.xy(w.maze.start)) == (2, 2)
     assert len(agent.sensed) > len(w.maze.free_cells())     # more states than cells
+
+
+def test_the_sensor_range_is_declared_and_no_option_leads_outside_it():
+    from tmgwr_agent.core.agent import TMGWRAgent
+    from tmgwr_agent.core.senses import Senses
+    from tmgwr_agent.world_senses import world_senses
+
+    w = PointMazeWorld(Maze.from_text(SMALL), "G")
+    low, high = w.observation_space.low, w.observation_space.high
+    free = [tuple(c) for c in zip(*np.nonzero(~w.maze.walls))]
+    centres = np.array([w.xy(c) for c in free])
+    assert (centres >= low).all() and (centres <= high).all()
+    # a move into the outer wall would end beyond it, by the point's radius
+    radius = float(w.model.geom_size[w._point_geom][0])
+    assert np.allclose(low, centres.min(axis=0) - (0.5 - radius))
+    assert np.allclose(high, centres.max(axis=0) + (0.5 - radius))
+    s = world_senses(w)
+    assert s.bounded and np.array_equal(s.low, low) and np.array_equal(s.high, high)
+    v = PointMazeWorld(Maze.from_text(SMALL), "G", velocity=True).observation_space
+    assert np.array_equal(v.low[2:], (-5.0, -5.0)) and np.array_equal(v.high[2:], (5.0, 5.0))
+
+    def options(senses):
+        # from S (1, 1): down to (3, 1) and back, right and back; then the untried moves
+        # of the node at S and of the one at (2, 1)
+        ag = TMGWRAgent(senses, np.random.default_rng(0))
+        ag.set_goal(None, w.goal_observation())
+        obs, _ = w.reset()
+        ag.begin_episode(obs)
+        seen = {}
+        for a in (DOWN, DOWN, DOWN, DOWN, UP, UP, UP, UP, RIGHT, LEFT):
+            if np.allclose(obs, w.xy((2, 1))):
+                seen["(2, 1)"] = obs
+            obs, _, _, _, info = w.step(a)
+            ag.observe(obs, info)
+        seen["S"] = obs
+        ag.motivation.update(ag.map)
+        feats = {k: ag.preprocessor(x) for k, x in seen.items()}
+        nodes = {k: int(np.argmin(np.linalg.norm(ag.map.w[:ag.map.n] - f, axis=1)))
+                 for k, f in feats.items()}
+        rho = {(k, a): float(ag.motivation.rho[i, a]) for k, i in nodes.items()
+               for a in (UP, LEFT, RIGHT)}
+        return rho, ag.motivation.rho_new
+
+    (told, prior), (untold, untold_prior) = \
+        options(s), options(Senses(2, PRIMITIVES, SUCCESS_RADIUS, step_length()))
+    outward = [("S", UP), ("S", LEFT), ("(2, 1)", LEFT)]
+    assert all(untold[k] > 0.0 for k in outward)      # untried: options when not told
+    assert all(told[k] == 0.0 for k in outward)       # told the range: none
+    assert told[("(2, 1)", RIGHT)] > 0.0              # a move into an inner wall stays one
+    # the moves the range closes count as tried moves that did not open (open_prior)
+    assert prior < untold_prior
+
+
+def test_senses_refuse_a_range_that_does_not_fit():
+    from tmgwr_agent.core.senses import Senses, SensesError
+    from tmgwr_agent.world_senses import maze_senses
+
+    assert not Senses(2, PRIMITIVES).bounded
+    assert not maze_senses().bounded          # the grid world declares no range
+    with pytest.raises(SensesError, match="must give 2 values"):
+        Senses(2, PRIMITIVES, low=[0.0])
+    with pytest.raises(SensesError, match="range is empty"):
+        Senses(2, PRIMITIVES, low=[0.0, 1.0], high=[1.0, 0.0])

@@ -61,6 +61,17 @@ activity threshold) separates neighbouring places of the lattice. (Measured in m
 cell, a half-metre move lies within that radius, about half a metre: the map merged
 neighbouring places into one node.)
 
+Sensor's range (the bounds of ``observation_space``, told to the agent through its
+``Senses`` as ``low``, ``high``): the positions the point's centre can take, per axis the
+extent of the cells free in the maze or opened by one of its events, less the point's
+radius (``particle_geom``'s) at each end, where the centre stops against a wall's face
+(:meth:`PointMazeWorld.sensation_range`); the velocity within +-``MAX_SPEED``. A Gymnasium
+``Box`` states the range its sensor can give; this is that range, a fact of the arena, not
+of where its inner walls are. (The agent makes no option of a move predicted to end
+outside it: core/unknown.py, ``outside_options``. Declared unbounded, every untried move
+into the maze's outer wall was a way round as plausible as any other once a block broke
+the route, and the agent walked the outer wall testing them.)
+
 Outcome: ``bumped`` is the touch sensor: during the primitive the point met a wall ahead
 of its push (a MuJoCo contact between the point's geom and a ``block_*`` geom whose normal
 is within 60 degrees of the push direction; a wall slid along does not count). A goal counts
@@ -421,9 +432,31 @@ class PointMazeWorld:
 
     @property
     def observation_space(self):
-        """The sensation as a Gymnasium space (what ``Senses.from_spaces`` reads)."""
+        """The sensation as a Gymnasium space (what ``Senses.from_spaces`` reads), bounded
+        by the sensor's range (:meth:`sensation_range`)."""
         from gymnasium import spaces
-        return spaces.Box(-np.inf, np.inf, shape=(self.sensation_dim,), dtype=np.float64)
+        low, high = self.sensation_range()
+        return spaces.Box(low, high, dtype=np.float64)
+
+    def sensation_range(self) -> tuple[np.ndarray, np.ndarray]:
+        """The range of the sensation (module doc, Sensor's range): per axis, the extent
+        of the cells that are free in the maze or that any of its events opens, less the
+        point's radius at each end (the point's centre stays that far from a wall's face);
+        with ``velocity``, +-``MAX_SPEED`` (the env clips the velocity to it)."""
+        free = ~self.maze.walls
+        for e in self.maze.events.values():
+            for r, c in e.get("open", ()):
+                free[r, c] = True
+        rows, cols = np.nonzero(free)
+        radius = float(self.model.geom_size[self._point_geom][0])
+        half = 0.5 * CELL_SIZE - radius
+        (x0, y1), (x1, y0) = (self.xy((rows.min(), cols.min())),
+                              self.xy((rows.max(), cols.max())))
+        low, high = np.array([x0 - half, y0 - half]), np.array([x1 + half, y1 + half])
+        if self.velocity:
+            low = np.concatenate([low, [-MAX_SPEED, -MAX_SPEED]])
+            high = np.concatenate([high, [MAX_SPEED, MAX_SPEED]])
+        return low, high
 
     @property
     def action_space(self):

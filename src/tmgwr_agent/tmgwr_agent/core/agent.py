@@ -88,7 +88,9 @@ class TMGWRAgent:
                                    config=config.map, primitives=senses.primitives)
         self.motivation = MotivationEstimator(
             config.motivation, primitives=senses.primitives,
-            goal_tolerance=self.preprocessor.gain * senses.goal_tolerance)
+            goal_tolerance=self.preprocessor.gain * senses.goal_tolerance,
+            bounds=(self.preprocessor.gain * senses.low, self.preprocessor.gain * senses.high)
+            if senses.bounded else None)
         self.selector = ActionSelector(rng, config.selector, primitives=senses.primitives)
         self.winner = -1
         self.last_action = -1

@@ -227,15 +227,20 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
     action did) and its option rules (:class:`~tmgwr_agent.core.unknown.OptionRules`)."""
 
     def __init__(self, config: MotivationConfig = MotivationConfig(), *,
-                 primitives: np.ndarray, goal_tolerance: float = 0.0):
+                 primitives: np.ndarray, goal_tolerance: float = 0.0,
+                 bounds: tuple[np.ndarray, np.ndarray] | None = None):
         """``primitives``: the motor vector of each action (:class:`~tmgwr_agent.core.
         senses.Senses`): an option's action label; their number sizes the outcome
         memory. ``goal_tolerance``: the world's (``Senses``), in the units of the goal
-        sensation given to :meth:`set_goal`."""
+        sensation given to :meth:`set_goal`. ``bounds``: the sensor's range (``Senses``
+        ``low``, ``high``) in the same units, or None (unbounded): no option leads outside
+        it (:meth:`~tmgwr_agent.core.unknown.OptionRules.outside_options`)."""
         kernels.announce_compilation()
         self.config = config
         self.primitives = np.ascontiguousarray(primitives, dtype=float)
         self.goal_tolerance = float(goal_tolerance)
+        self.bounds = None if bounds is None else \
+            tuple(np.asarray(b, dtype=float) for b in bounds)
         P = self.n_primitives = len(self.primitives)
         self.gamma, self.beta = config.gamma, config.beta
         self.goal_sigma, self.goal_sim_floor = config.goal_sigma, config.goal_sim_floor

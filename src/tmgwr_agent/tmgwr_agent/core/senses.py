@@ -37,12 +37,15 @@ class Senses:
     ``goal_tolerance``: the largest distance (Euclidean, sensation units) from the goal
     sensation at which the world ends an episode at the goal (0: only the goal sensation
     itself); ``resolution``: the sensor's resolution step (sensation units; the module
-    doc)."""
+    doc); ``low``, ``high``: the sensor's range per value (sensation units; None or
+    -inf / +inf: unbounded), the bounds of the observation ``Box``."""
 
     dim: int
     primitives: np.ndarray
     goal_tolerance: float = 0.0
     resolution: float = 1.0
+    low: np.ndarray | None = None
+    high: np.ndarray | None = None
 
     def __post_init__(self):
         p = np.ascontiguousarray(self.primitives, dtype=float)
@@ -68,6 +71,21 @@ class Senses:
             raise SensesError(f"the sensor's resolution step must be a finite distance > 0 "
                               f"(sensation units), got {self.resolution}")
         object.__setattr__(self, "resolution", res)
+        for name, inf in (("low", -np.inf), ("high", np.inf)):
+            b = getattr(self, name)
+            b = np.full(self.dim, inf) if b is None else np.array(b, dtype=float).reshape(-1)
+            if b.shape != (self.dim,) or np.isnan(b).any():
+                raise SensesError(f"the sensor's range ({name}) must give {self.dim} "
+                                  f"values, none NaN, got {getattr(self, name)}")
+            object.__setattr__(self, name, b)
+        if np.any(self.low > self.high):
+            raise SensesError(f"the sensor's range is empty: low {self.low} exceeds high "
+                              f"{self.high}")
+
+    @property
+    def bounded(self) -> bool:
+        """The world declares a finite range for some value of the sensation."""
+        return bool(np.isfinite(self.low).any() or np.isfinite(self.high).any())
 
     @property
     def n_actions(self) -> int:
@@ -83,7 +101,8 @@ class Senses:
                     goal_tolerance: float = 0.0, resolution: float = 1.0) -> Senses:
         """From Gymnasium spaces: a 1-D ``Box`` observation and ``Discrete`` actions (their
         ``primitives`` declared by the world, else one-hot), and the world's declared
-        ``goal_tolerance`` and ``resolution``. Refused with the reason otherwise."""
+        ``goal_tolerance`` and ``resolution``; the ``Box``'s bounds are the sensor's range.
+        Refused with the reason otherwise."""
         from gymnasium import spaces  # the only place the core meets Gymnasium
         if not isinstance(observation_space, spaces.Box) or \
                 len(observation_space.shape) != 1:
@@ -98,4 +117,5 @@ class Senses:
         primitives = np.asarray(primitives, dtype=float)
         if len(primitives) != n:
             raise SensesError(f"{len(primitives)} motor primitives declared for {n} actions")
-        return cls(int(observation_space.shape[0]), primitives, goal_tolerance, resolution)
+        return cls(int(observation_space.shape[0]), primitives, goal_tolerance, resolution,
+                   observation_space.low, observation_space.high)

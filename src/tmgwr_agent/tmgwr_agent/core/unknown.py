@@ -665,6 +665,26 @@ class OptionRules:
                               self.U, self.rho, self.osucc, self.onb, self.ong)
         if not self.lattice.all():
             self._unplaced_options(m, rows[rows < n], np.flatnonzero(~self.lattice))
+        if self.bounds is not None:
+            self.outside_options(m, n)
+
+    def outside_options(self, m: SensorimotorMap, n: int) -> None:
+        """No option whose predicted successor ``w_i + delta_a`` (the forward model's, in
+        the map's units) lies outside the sensor's range (``bounds``: the bounds of the
+        world's observation ``Box``, scaled as the sensation is): a move cannot end at a
+        sensation the sensor never gives, so neither an untried move nor a remembered
+        wall there can lead anywhere. Without it the agent, its route broken, counted
+        every untried move into the world's outer edge as a way round as likely as any
+        other untried move, and walked the edge testing them. Applied over every row
+        (rows a refresh did not write were cleared by an earlier one), so whatever an
+        incremental refresh wrote (:func:`kernels.untried_rho` writes ``rho`` on every
+        untried pair) stays cleared. Only for the primitives that make lattice steps
+        (frame.py): the forward model places no other's successor."""
+        out = self._outside(m, n) & (self.rho[:n] > 0.0)
+        if out.any():
+            self.rho[:n][out] = 0.0
+            self.U[:n][out] = 0.0
+            self.osucc[:n][out] = -1
 
     def _changed_option_rows(self, m: SensorimotorMap, n: int, F, grid_was: np.ndarray,
                              origin_was: np.ndarray, stuck: bool) -> np.ndarray | None:
@@ -737,17 +757,31 @@ class OptionRules:
         self.U[r, a] = np.where(untried, (self.v_star * self.gamma ** h)[:, None], 0.0)
         self.osucc[r, a] = np.where(lost, j, -1)
 
+    def _outside(self, m: SensorimotorMap, n: int) -> np.ndarray:
+        """The (node, primitive) pairs of rows ``[0, n)`` whose predicted successor lies
+        outside the sensor's range, for the primitives that make lattice steps (n x P)."""
+        if self.bounds is None or not self.delta.size or not self.lattice.any():
+            return np.zeros((n, self.n_primitives), dtype=bool)
+        lo, hi = self.bounds
+        x = m.w[:n, None, :] + self.delta[None, :, :]
+        return ((x < lo) | (x > hi)).any(axis=-1) & self.lattice
+
     def open_prior(self, m: SensorimotorMap, n: int) -> float:
         """rho of a primitive never tried (Eq. 5'): ``untried_rho``, or when that is
         negative the chance that a move opens, estimated from the agent's own outcomes as
         the share of its tried pairs (of live nodes) whose last try moved it, (k + 1) /
-        (t + 2) (Laplace's rule: 1/2 before any try)."""
+        (t + 2) (Laplace's rule: 1/2 before any try). A pair never tried whose move the
+        sensor's range closes (:meth:`outside_options`) counts as a tried pair that did
+        not move: its outcome is known without the step, and leaving it out would count
+        only the moves inside the arena, which open more often than moves in general."""
         if self.untried_rho >= 0.0:
             return self.untried_rho
         k = min(n, len(self.tried))
         tried = self.tried[:k] & m.alive[:k, None]
         t = int(np.count_nonzero(tried))
         opened = int(np.count_nonzero(tried & (self.bump_t[:k] < 0)))
+        if self.bounds is not None:
+            t += int(np.count_nonzero(self._outside(m, k) & ~tried & m.alive[:k, None]))
         return laplace(opened, t)
 
     def wall_prior(self) -> float:
