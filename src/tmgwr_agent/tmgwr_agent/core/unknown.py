@@ -25,8 +25,11 @@ by the estimator's ``unknown`` parameter, are listed once, in :data:`UNKNOWN`:
   unit; false as soon as the axes are scaled differently, rotated or noisy.
 * ``learnt`` (the default): the same rules in the frame of the agent's own forward model
   (:class:`~tmgwr_agent.core.frame.LearntFrame`), which checks the lattice from the
-  forward model's spread and uses no rule that places a successor for a primitive that
-  fails it (:meth:`~OptionRules.sensed_goal`, :meth:`~OptionRules._unplaced_options`).
+  forward model's spread and uses no rule that places a successor by the mean
+  displacement for a primitive that fails it (:meth:`~OptionRules.sensed_goal`,
+  :meth:`~OptionRules._unplaced_options`: an untried move there is valued from the
+  successor a local forward model predicts, and the regions of earlier goals where
+  episodes ended are terminal, :meth:`~OptionRules._terminal_regions`).
 
 Today the two rule sets share their code, :class:`OutcomeMemory` and :class:`OptionRules`,
 mixins of :class:`~tmgwr_agent.core.motivation.MotivationEstimator` that read the
