@@ -4,7 +4,9 @@ of its cell. The world declares its goal radius halfway between the goal cell's
 sensations and the nearest others; the agent counts a node whose weights lie in that
 region as a goal node (``OptionRules.sensed_goal``), so a goal moved to a place the map
 knows is planned for at once; a move whose link aged out keeps an option into the node it
-led to (``OptionRules._unplaced_options``)."""
+led to (``OptionRules._unplaced_options``). The region of an earlier goal where an episode
+ended is terminal as a whole (``OptionRules._terminal_regions``), and an untried move is
+valued from the successor a local forward model predicts (``OptionRules._predicted``)."""
 
 import math
 
@@ -14,6 +16,7 @@ from small_mazes import SMALL
 from maze_sim.maze import Maze
 from maze_sim.minigrid_world import FORWARD, HEADING_STEP, MiniGridWorld, PoseSensation
 from tmgwr_agent.core.agent import TMGWRAgent
+from tmgwr_agent.core.outcome import Outcome
 from tmgwr_agent.experiments.runner import run_episode
 from tmgwr_agent.world_senses import world_senses
 
@@ -204,3 +207,20 @@ def test_an_untried_move_is_valued_from_where_it_leads():
     mo.update(m)
     assert mo.U[into[0], FORWARD] == mo.v_star
     assert 0.0 < mo.U[away[0], FORWARD] < mo.v_star
+
+
+def test_a_region_the_agent_walks_on_from_is_forgotten():
+    """An old goal's region stops being terminal once the agent acts from a node in it
+    within an episode (the episode did not end there); its unflagged nodes are then
+    ordinary again, the flagged ones stay flagged until the map clears them."""
+    world, agent, old = moved_twice(1)
+    m, mo = agent.map, agent.motivation
+    inside = region_nodes(agent, old)
+    loose = inside[~m.terminal[inside]]
+    assert len(loose) and mo._absorbing(m, m.n)[loose].all()
+    i = int(loose[0])
+    mo.record(i, i, False, Outcome(action=0), m.w)         # a turn taken from i
+    mo.update(m)
+    absorbing = mo._absorbing(m, m.n)
+    assert not absorbing[loose].any()
+    assert (absorbing[inside] == m.terminal[inside]).all()
