@@ -89,9 +89,15 @@ def test_the_estimator_keeps_the_spread_and_drops_the_options_it_cannot_place():
     mo.update(m)
     np.testing.assert_array_equal(mo.lattice, [False, False])
     assert not mo.rho[:4][mo.tried[:4, :2]].any()
-    # node 4 is the goal sensation itself: h = 0 steps from the successor
+    # node 4 is the goal sensation itself: its moves lead off it, h counted from the
+    # successor the local forward model predicts (the move of the nearest node that made it)
     np.testing.assert_allclose(mo.rho[4, :2], mo.rho_new)
-    np.testing.assert_allclose(mo.U[4, :2], mo.v_star)
+    step = np.sqrt(mo.delta_sq.max())
+    for a in range(2):
+        x = mo._predicted(m, np.array([4]), a)[0]
+        assert np.linalg.norm(x - w[4]) > 0.0
+        np.testing.assert_allclose(mo.U[4, a],
+                                   mo.v_star * mo.gamma ** (np.linalg.norm(x - w[4]) / step))
     assert (mo.osucc[: m.n, :2] == -1).all()
     # no episode ended at the goal, but node 4's weights lie in the goal region (the
     # goal sensation itself, tolerance 0): it represents the goal, R = 1 there alone

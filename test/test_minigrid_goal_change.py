@@ -4,7 +4,9 @@ of its cell. The world declares its goal radius halfway between the goal cell's
 sensations and the nearest others; the agent counts a node whose weights lie in that
 region as a goal node (``OptionRules.sensed_goal``), so a goal moved to a place the map
 knows is planned for at once; a move whose link aged out keeps an option into the node it
-led to (``OptionRules._unplaced_options``)."""
+led to (``OptionRules._unplaced_options``). The region of an earlier goal where an episode
+ended is terminal as a whole (``OptionRules._terminal_regions``), and an untried move is
+valued from the successor a local forward model predicts (``OptionRules._predicted``)."""
 
 import math
 
@@ -12,8 +14,9 @@ import numpy as np
 from small_mazes import SMALL
 
 from maze_sim.maze import Maze
-from maze_sim.minigrid_world import HEADING_STEP, MiniGridWorld, PoseSensation
+from maze_sim.minigrid_world import FORWARD, HEADING_STEP, MiniGridWorld, PoseSensation
 from tmgwr_agent.core.agent import TMGWRAgent
+from tmgwr_agent.core.outcome import Outcome
 from tmgwr_agent.experiments.runner import run_episode
 from tmgwr_agent.world_senses import world_senses
 
@@ -112,3 +115,112 @@ def test_a_move_whose_link_aged_out_keeps_an_option_into_where_it_led():
     m.log.touch(np.array([i, j]))
     mo.update(m)
     assert mo.rho[i, a] == 1.0 and mo.osucc[i, a] == j
+
+
+def moved_twice(seed: int = 0):
+    """Trained on G, then 5 episodes to goal 1, then the goal moved to 2 (goal 1, the
+    previous goal, stays terminal): the world, the agent at the start of an episode and
+    goal 1's sensation in the map's units."""
+    world, agent = trained(episodes=10, seed=seed)
+    world.set_goal("1", keep_previous=True)
+    agent.set_goal(world.goal, world.goal_observation())
+    for _ in range(5):
+        run_episode(world, agent)
+    old = agent.preprocessor.goal_features(world.goal_observation())
+    world.set_goal("2", keep_previous=True)
+    agent.set_goal(world.goal, world.goal_observation())
+    obs, _ = world.reset()
+    agent.begin_episode(obs)
+    return world, agent, old
+
+
+def region_nodes(agent, x):
+    """The live nodes within the goal radius of sensation x (map units)."""
+    m, mo = agent.map, agent.motivation
+    d = m.w[: m.n] - x
+    return np.flatnonzero(m.alive[: m.n] & (np.einsum("ij,ij->i", d, d)
+                                             <= mo.goal_tolerance ** 2))
+
+
+def forget_move(agent, i, a):
+    """The outcome memory as if primitive a had never been taken from node i."""
+    mo = agent.motivation
+    mo.tried[i, a], mo.succ[i, a], mo.bump_t[i, a] = False, -1, -1
+    mo._dirty.add(int(i))
+
+
+def test_an_old_goal_ends_episodes_in_its_whole_region():
+    """After the goal moved on, every node in the previous goal's region is terminal
+    (absorbing in Eq. 5), also those of headings no episode ended at (before: only the
+    flagged node, and a link into another heading's node led into the old goal)."""
+    for seed in range(2):
+        world, agent, old = moved_twice(seed)
+        m, mo = agent.map, agent.motivation
+        inside = region_nodes(agent, old)
+        assert m.terminal[inside].any() and not m.terminal[inside].all(), seed
+        absorbing = mo._absorbing(m, m.n)
+        assert absorbing[inside].all(), (seed, inside, absorbing[inside])
+        assert not absorbing[region_nodes(agent, mo.goal_x)].any()      # the goal's own
+
+
+def test_an_untried_move_into_an_old_goal_has_no_option():
+    """A forward move the outcome memory forgets, predicted by the local forward model into
+    the previous goal's region, has no option (before: the optimistic U of unknown space,
+    rho > 0, and the agent walked into the old goal); one into an ordinary place keeps
+    its option."""
+    world, agent, old = moved_twice(0)
+    m, mo = agent.map, agent.motivation
+    inside = set(region_nodes(agent, old).tolist())
+    into = [i for i in np.flatnonzero(m.alive[: m.n])
+            if mo.tried[i, FORWARD] and mo.bump_t[i, FORWARD] < 0
+            and int(mo.succ[i, FORWARD]) in inside]
+    other = [i for i in np.flatnonzero(m.alive[: m.n])
+             if mo.tried[i, FORWARD] and mo.bump_t[i, FORWARD] < 0
+             and int(mo.succ[i, FORWARD]) not in inside | {-1, i}
+             and mo.R[mo.succ[i, FORWARD]] == 0.0 and not m.terminal[i]]
+    assert into and other
+    for i in (into[0], other[len(other) // 2]):
+        forget_move(agent, i, FORWARD)
+    mo.update(m)
+    assert mo.rho[into[0], FORWARD] == 0.0 and mo.U[into[0], FORWARD] == 0.0
+    assert mo.rho[other[len(other) // 2], FORWARD] > 0.0
+
+
+def test_an_untried_move_is_valued_from_where_it_leads():
+    """Untried forward moves next to the goal: the one the local forward model predicts
+    into the goal region is worth a represented goal (h = 0, U = V*), one predicted
+    elsewhere less (before: both were valued from the node itself, one step short of the
+    goal, and looked alike)."""
+    world, agent, _ = moved_twice(0)
+    m, mo = agent.map, agent.motivation
+    goal = set(region_nodes(agent, mo.goal_x).tolist())
+    movers = [i for i in np.flatnonzero(m.alive[: m.n])
+              if mo.tried[i, FORWARD] and mo.bump_t[i, FORWARD] < 0 and i not in goal]
+    into = [i for i in movers if int(mo.succ[i, FORWARD]) in goal]
+    assert into
+    gain = agent.preprocessor.gain
+    away = [i for i in movers if i not in into                 # a cell next to the goal's
+            and abs(np.linalg.norm(m.w[i, :2] - mo.goal_x[:2]) - gain) < 0.01 * gain]
+    assert away
+    forget_move(agent, into[0], FORWARD)
+    forget_move(agent, away[0], FORWARD)
+    mo.update(m)
+    assert mo.U[into[0], FORWARD] == mo.v_star
+    assert 0.0 < mo.U[away[0], FORWARD] < mo.v_star
+
+
+def test_a_region_the_agent_walks_on_from_is_forgotten():
+    """An old goal's region stops being terminal once the agent acts from a node in it
+    within an episode (the episode did not end there); its unflagged nodes are then
+    ordinary again, the flagged ones stay flagged until the map clears them."""
+    world, agent, old = moved_twice(1)
+    m, mo = agent.map, agent.motivation
+    inside = region_nodes(agent, old)
+    loose = inside[~m.terminal[inside]]
+    assert len(loose) and mo._absorbing(m, m.n)[loose].all()
+    i = int(loose[0])
+    mo.record(i, i, False, Outcome(action=0), m.w)         # a turn taken from i
+    mo.update(m)
+    absorbing = mo._absorbing(m, m.n)
+    assert not absorbing[loose].any()
+    assert (absorbing[inside] == m.terminal[inside]).all()

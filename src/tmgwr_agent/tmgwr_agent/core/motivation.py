@@ -279,6 +279,9 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         self.succ = np.full((64, P), -1, dtype=np.int64)   # where a move led
         self.closed_e = np.full(64, -1, dtype=np.int64)   # episode a node's cell closed
         self.goal_seen = np.zeros(64, dtype=bool)   # the current goal was sensed there
+        self.goals_told: list[np.ndarray] = []   # goal sensations set (terminal regions)
+        self._region = np.zeros(0, dtype=bool)   # nodes of a terminal region (no lattice)
+        self._region_x = np.zeros((0, 0))        # and the goal sensations at its centres
         self.sel = np.ones((64, P), dtype=bool)  # this episode's re-tests
         self.chain = np.zeros((64, P), dtype=bool)  # its untried chain
         self._closed: np.ndarray | None = None   # its trusted marks (derived, cached)
@@ -529,7 +532,8 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         if rows is None:
             self._abs, self._abs_terminal = np.zeros(n, bool), np.zeros(n, bool)
         self._abs_count = kernels.absorbing_flags(
-            m.terminal, self.absorbing_terminals, cells, self.value_unknown, self.R, GOAL_R,
+            self.terminal_of(m, n), self.absorbing_terminals, cells, self.value_unknown,
+            self.R, GOAL_R,
             n, _NO_ROWS if rows is None else rows, -1 if rows is None else len(rows),
             self._abs, self._abs_terminal, self._abs_count)
         self._abs_key = (n, self._epoch, id(self.R))

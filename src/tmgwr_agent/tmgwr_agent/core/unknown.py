@@ -25,8 +25,11 @@ by the estimator's ``unknown`` parameter, are listed once, in :data:`UNKNOWN`:
   unit; false as soon as the axes are scaled differently, rotated or noisy.
 * ``learnt`` (the default): the same rules in the frame of the agent's own forward model
   (:class:`~tmgwr_agent.core.frame.LearntFrame`), which checks the lattice from the
-  forward model's spread and uses no rule that places a successor for a primitive that
-  fails it (:meth:`~OptionRules.sensed_goal`, :meth:`~OptionRules._unplaced_options`).
+  forward model's spread and uses no rule that places a successor by the mean
+  displacement for a primitive that fails it (:meth:`~OptionRules.sensed_goal`,
+  :meth:`~OptionRules._unplaced_options`: an untried move there is valued from the
+  successor a local forward model predicts, and the regions of earlier goals where
+  episodes ended are terminal, :meth:`~OptionRules._terminal_regions`).
 
 Today the two rule sets share their code, :class:`OutcomeMemory` and :class:`OptionRules`,
 mixins of :class:`~tmgwr_agent.core.motivation.MotivationEstimator` that read the
@@ -211,7 +214,7 @@ chain one more (over the links and the untried moves).
 The outcome memory (primitives tried per node, step and episode of the last bump and since
 when a pair is known closed, where each move led, the step and episode clocks, the known
 route, this episode's re-tests and untried chain, the forward model ``delta`` and its
-spread, the nodes where the goal was sensed) is plain data:
+spread, the nodes where the goal was sensed, the goal sensations set so far) is plain data:
 :meth:`OutcomeMemory.state_dict` / :meth:`OutcomeMemory.load_state_dict`.
 """
 
@@ -344,6 +347,8 @@ class OutcomeMemory:
                 and self.goal_seen[winner] != outcome.goal_reached:
             self.goal_seen[winner] = outcome.goal_reached   # a goal node, or a new slot
             self._R_key = None
+        if 0 <= node:
+            self.forget_region(node, w)
         if 0 <= node and self.bump_t[node, outcome.action] >= 0:
             self.wall_tests += 1
             self.wall_opened += not outcome.bumped
@@ -430,6 +435,8 @@ class OutcomeMemory:
                 "closed_t": self.closed_t.copy(), "bump_e": self.bump_e.copy(),
                 "succ": self.succ.copy(), "closed_e": self.closed_e.copy(),
                 "goal_seen": self.goal_seen.copy(),
+                "goals_told": np.array(self.goals_told, dtype=float).reshape(
+                    len(self.goals_told), -1) if self.goals_told else np.zeros((0, 0)),
                 "clock": int(self.clock), "delta": self.delta.copy(),
                 "delta_sq": self.delta_sq.copy(),
                 "moves": self.moves.copy(), "episode": int(self.episode),
@@ -449,6 +456,10 @@ class OutcomeMemory:
         self._closed = None
         self.goal_seen = grown(np.array(d.get("goal_seen", ()), dtype=bool), len(self.succ),
                                False)                        # older checkpoints: none
+        # absent from older checkpoints: no earlier goal (no terminal region)
+        self.goals_told = [np.array(x, dtype=float) for x in d.get("goals_told", ())]
+        self._region = np.zeros(0, dtype=bool)
+        self._region_x = np.zeros((0, 0))
         self.clock = int(d["clock"])
         # absent from older checkpoints: the episode counters start afresh and every
         # remembered wall is trusted from now on
@@ -514,6 +525,7 @@ class OptionRules:
         if self.goal_x is not None:
             d = m.w[:n] - self.goal_x
             seen |= m.alive[:n] & (np.einsum("ij,ij->i", d, d) <= self.goal_tolerance ** 2)
+        self._terminal_regions(m, n)
         R = seen.astype(float)
         if len(self.R) != n or not np.array_equal(R, self.R):
             self.R = R
@@ -526,6 +538,61 @@ class OptionRules:
         d = m.w[idx] - self.goal_x
         self.goal_node = int(idx[np.argmin(np.einsum("ij,ij->i", d, d))])
         return n
+
+    def _terminal_regions(self, m: SensorimotorMap, n: int) -> None:
+        """The terminal regions without a lattice (``_region``, a mask of n; their centres
+        ``_region_x``): the goal region (``goal_tolerance`` about a goal sensation) of each
+        earlier goal the agent was told, once one of its nodes is flagged terminal (an
+        episode ended there: :meth:`~tmgwr_agent.core.sensorimotor_map.SensorimotorMap.
+        mark_terminal`). Every node in such a region is absorbing in Eq. 5 as a flagged one
+        is (:meth:`terminal_of`), and an untried move predicted into one has no option
+        (:meth:`_unplaced_options`). A region is forgotten when the agent walks on from a
+        node in it (:meth:`forget_region`).
+
+        Why the region: the world declares that a goal is a region, and the agent cannot
+        tell a goal from another place where episodes end; an episode end is the region's,
+        not the node's. The flags are the map's, one place each (its nodes within the
+        place radius), and a region may hold several places the agent reached in different
+        ways (MiniGrid: one per heading at the goal cell); without it a link into a place
+        of an old goal that the episode ends had never ended at, or an untried move into
+        one, ended episodes at the old goal. A goal sensation with no tolerance is a point,
+        and its flags are the region."""
+        x = self.goal_x
+        if x is not None and not any(np.array_equal(x, c) for c in self.goals_told):
+            self.goals_told.append(x.copy())
+        region = np.zeros(n, dtype=bool)
+        centres = []
+        if self.goal_tolerance > 0.0:
+            for c in self.goals_told:
+                if x is not None and np.array_equal(c, x):
+                    continue                        # the current goal: R >= 1/2 there
+                d = m.w[:n] - c
+                inside = m.alive[:n] & (np.einsum("ij,ij->i", d, d)
+                                        <= self.goal_tolerance ** 2)
+                if (inside & m.terminal[:n]).any():
+                    region |= inside
+                    centres.append(c)
+        if len(region) != len(self._region) or not np.array_equal(region, self._region):
+            self._epoch += 1                        # absorbing rows the log does not list
+        self._region = region
+        self._region_x = np.array(centres).reshape(len(centres), m.w.shape[1])
+
+    def terminal_of(self, m: SensorimotorMap, n: int) -> np.ndarray:
+        """The terminal nodes of Eq. 5: the map's flags and the terminal regions
+        (:meth:`_terminal_regions`)."""
+        if len(self._region) < n or not self._region[:n].any():
+            return m.terminal
+        return m.terminal[:n] | self._region[:n]
+
+    def forget_region(self, i: int, w: np.ndarray) -> None:
+        """The agent acted from node i within an episode: a terminal region holding i's
+        weights does not end episodes (it would have ended this one), and is forgotten."""
+        if not 0 <= i < len(self._region) or not self._region[i]:
+            return
+        d = self._region_x - w[i]
+        near = np.einsum("ij,ij->i", d, d) <= self.goal_tolerance ** 2
+        for c in self._region_x[near]:
+            self.goals_told = [g for g in self.goals_told if not np.array_equal(g, c)]
 
     def closed_cells(self, n: int) -> np.ndarray:
         """The nodes of cells that closed, while trusted (``stale_horizon`` episodes since),
@@ -722,14 +789,25 @@ class OptionRules:
     def _unplaced_options(self, m: SensorimotorMap, rows: np.ndarray,
                           prims: np.ndarray) -> None:
         """The options of the primitives ``prims`` that make no lattice step (frame.py),
-        on the nodes ``rows``. The forward model cannot place their successor, so no rule
-        that looks a place up applies (a known node there, a wall's exits, the untried
+        on the nodes ``rows``. The mean forward model cannot place their successor, so no
+        rule that looks a place up applies (a known node there, a wall's exits, the untried
         chain, a closed cell). A primitive never taken from i has an option into unknown
-        space, ``rho = rho_new`` and ``U = V* gamma^h``, ``h = max(0, |w_i - x_g| / l -
-        1)`` with ``l`` the root mean square step of the longest-moving primitive: a path
-        of k moves covers about k l at most (the triangle inequality, in the sensation's
-        own norm), so h does not overestimate the steps from the successor to the goal
-        (the A* argument of the module docstring holds without a lattice).
+        space, ``rho = rho_new`` and ``U = V* gamma^h``, ``h = |x - x_g| / l``: ``x`` the
+        successor the local forward model predicts (:meth:`_predicted`), ``l`` the root
+        mean square step of the longest-moving primitive (a path of k moves covers about
+        k l at most: the triangle inequality, in the sensation's own norm, so h does not
+        overestimate the steps from a rightly predicted successor to the goal, the A*
+        argument of the module docstring); ``h = 0`` when x lies in the goal region
+        (within ``goal_tolerance`` of x_g), and no option when it lies in a terminal
+        region (:meth:`_terminal_regions`: the move is predicted to end the episode short
+        of the goal, worth its R = 0). Before the primitive has moved anywhere, ``h =
+        max(0, |w_i - x_g| / l - 1)``, the bound from i itself.
+
+        Why the local model: the mean displacement of a primitive whose effect depends on
+        where it is taken (MiniGrid's forward, by the heading) predicts nothing, and with
+        the bound from i every untried move within a few steps of the goal looked as good
+        as one into the goal, and one into an old goal's cell (no node of the region there
+        yet) as good as any: the agent walked off its route into the old goal.
 
         A primitive whose last try from i moved it to ``j = succ[i, a]`` while the map
         has since deleted that link (it aged out: :mod:`~tmgwr_agent.core.
@@ -746,6 +824,20 @@ class OptionRules:
         step = math.sqrt(max(float(self.delta_sq.max()), 0.0))
         gap = np.sqrt(np.einsum("ij,ij->i", m.w[rows] - self.goal_x, m.w[rows] - self.goal_x))
         h = np.maximum(gap / step - 1.0, 0.0) if step > 0.0 else np.zeros(len(rows))
+        h = np.repeat(h[:, None], len(prims), axis=1)
+        rho_u = np.full(h.shape, self.rho_new)
+        for c, p in enumerate(prims):
+            q = np.flatnonzero(untried[:, c])
+            x = self._predicted(m, rows[q], int(p)) if len(q) and step > 0.0 else None
+            if x is None:
+                continue
+            dx = x - self.goal_x
+            gx = np.sqrt(np.einsum("ij,ij->i", dx, dx))
+            h[q, c] = np.where(gx <= self.goal_tolerance, 0.0, gx / step)
+            if len(self._region_x):
+                d = x[:, None, :] - self._region_x[None, :, :]
+                ends = (np.einsum("ijk,ijk->ij", d, d) <= self.goal_tolerance ** 2).any(axis=1)
+                rho_u[q[ends], c] = 0.0
         j = self.succ[r, a]
         jc = np.maximum(j, 0)
         lost = (live & self.tried[r, a] & (self.bump_t[r, a] < 0) & (j >= 0) & (j != r)
@@ -753,8 +845,8 @@ class OptionRules:
         if lost.any():
             d = m.w[jc] - m.w[rows][:, None, :]
             lost &= np.einsum("ijk,ijk->ij", d, d) <= (2.0 * step) ** 2
-        self.rho[r, a] = np.where(untried, self.rho_new, np.where(lost, 1.0, 0.0))
-        self.U[r, a] = np.where(untried, (self.v_star * self.gamma ** h)[:, None], 0.0)
+        self.rho[r, a] = np.where(untried, rho_u, np.where(lost, 1.0, 0.0))
+        self.U[r, a] = np.where(untried & (rho_u > 0.0), self.v_star * self.gamma ** h, 0.0)
         self.osucc[r, a] = np.where(lost, j, -1)
 
     def _outside(self, m: SensorimotorMap, n: int) -> np.ndarray:
@@ -765,6 +857,25 @@ class OptionRules:
         lo, hi = self.bounds
         x = m.w[:n, None, :] + self.delta[None, :, :]
         return ((x < lo) | (x > hi)).any(axis=-1) & self.lattice
+
+    def _predicted(self, m: SensorimotorMap, rows: np.ndarray, a: int) -> np.ndarray | None:
+        """The successors of primitive a from the nodes ``rows`` as the local forward model
+        predicts them: ``w_i + (w_j - w_k)``, k the node nearest i (in weights) whose last
+        try of a moved it, to j = ``succ[k, a]`` (a move does from a place what it did from
+        the place most like it); None before a has moved from any live node."""
+        n = m.n
+        k = np.flatnonzero(m.alive[:n] & self.tried[:n, a] & (self.bump_t[:n, a] < 0))
+        j = self.succ[k, a]
+        ok = (j >= 0) & (j != k) & (j < n)
+        k, j = k[ok], j[ok]
+        k, j = k[m.alive[j]], j[m.alive[j]]
+        if not len(k):
+            return None
+        wr, wk = m.w[rows], m.w[k]
+        d2 = (np.einsum("ij,ij->i", wr, wr)[:, None] - 2.0 * wr @ wk.T
+              + np.einsum("ij,ij->i", wk, wk)[None, :])
+        near = np.argmin(d2, axis=1)
+        return wr + (m.w[j[near]] - wk[near])
 
     def open_prior(self, m: SensorimotorMap, n: int) -> float:
         """rho of a primitive never tried (Eq. 5'): ``untried_rho``, or when that is
@@ -797,13 +908,13 @@ class OptionRules:
         impossible, so all its remembered walls are doubted (``rho``'s limit
         :meth:`wall_prior` instead of ``stale_prior``; older bumps first). Searched from
         the agent's node (:func:`kernels.reaches_source_from`), what it learns kept per
-        map version, goal node, terminal flags and bump count, which fix the links and
-        the outcome memory it reads (the terminal flags and the goal nodes as they were
-        when that key changed)."""
+        map version, goal node, terminal flags (and regions: ``_epoch``) and bump count,
+        which fix the links and the outcome memory it reads (the terminal flags and the
+        goal nodes as they were when that key changed)."""
         if self.goal_node < 0 or not 0 <= self._winner < n:
             return False
         absorbing = self._absorbing(m, n, closed=False)
-        key = (m.version, self.goal_node, self._abs_count, self._bumps)
+        key = (m.version, self.goal_node, self._abs_count, self._epoch, self._bumps)
         if key != self._reach_key:
             self._reach_key = key
             self._reach_abs, self._reach_src = absorbing.copy(), self.R >= GOAL_R
