@@ -1,0 +1,82 @@
+"""The graph's agent is told what the in-process agent is told of the world's sensor.
+
+The in-process agent builds its motivation estimator with the world's goal region
+(``Senses.goal_tolerance``) and sensor's range (``Senses.low``, ``high``: PointMaze's
+depends on the maze file), both scaled into feature units by its preprocessor's gain. Over
+real DDS (``./tmgwr up --world W``, own ROS_DOMAIN_ID) maze_sim declares them
+(``SensorInfo`` on ``/world_senses``), the preprocessor scales them (``/feature_senses``)
+and the motivation estimator sets them on its core before it solves a step: the estimator
+then holds exactly the in-process agent's goal tolerance and bounds, for each world the
+graph hosts and the same maze. Both declarations are recorded, so a replay carries them.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+from test_recorder import mcap_files
+from world_graph import ctrl_c, up_world
+
+from maze_sim.maze import Maze
+from maze_sim.worlds import make_world
+from tmgwr_agent.core.agent import TMGWRAgent
+from tmgwr_agent.world_senses import world_senses
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+MAZE = """\
+#######
+#S.a.G#
+#.###.#
+#.1...#
+#######
+"""
+# the estimator's line when it sets the world's declaration on its core
+SET = (r"\[motivation_estimator\].*step 0 \(run \d+\): the world's senses set: goal "
+       r"tolerance (\S+), sensor's range \[(.*)\] \.\. \[(.*)\] \(feature units\)")
+
+
+def values(text: str) -> np.ndarray:
+    return np.array([float(v) for v in text.split(",") if v.strip()])
+
+
+@pytest.mark.parametrize("world", ["grid", "minigrid", "pointmaze"])
+@pytest.mark.timeout(300)
+def test_the_graphs_estimator_has_the_in_process_goal_region_and_range(world, ros_domain,
+                                                                      tmp_path):
+    if world == "minigrid":
+        pytest.importorskip("minigrid")
+    if world == "pointmaze":
+        pytest.importorskip("gymnasium_robotics")
+        pytest.importorskip("mujoco")
+    agent = TMGWRAgent(world_senses(make_world(world, Maze.from_text(MAZE))),
+                       np.random.default_rng(0))
+    want = agent.motivation
+    up, bag = up_world(world, MAZE, tmp_path, ros_domain)
+    with up:
+        line = up.wait_for_line(SET, timeout=150)
+        print(line)
+        ctrl_c(up)
+    assert up.proc.returncode == 0, up.describe("./tmgwr up failed")
+    tol, low, high = re.search(SET, line).groups()
+    assert float(tol) == want.goal_tolerance
+    if want.bounds is None:
+        assert low == high == ""
+    else:
+        assert np.array_equal(values(low), want.bounds[0])
+        assert np.array_equal(values(high), want.bounds[1])
+    if world != "grid":                  # the worlds the graph lacked them in before
+        assert want.goal_tolerance > 0.0 and want.bounds is not None
+
+    from rosbags.highlevel import AnyReader
+    with AnyReader(mcap_files(bag)) as reader:
+        got = {c.topic: [reader.deserialize(raw, c.msgtype)
+                         for c2, _t, raw in reader.messages(connections=[c])]
+               for c in reader.connections if c.topic in ("/world_senses", "/feature_senses")}
+    assert set(got) == {"/world_senses", "/feature_senses"}
+    feature = got["/feature_senses"][-1]
+    assert feature.goal_tolerance == want.goal_tolerance
+    assert feature.gain == agent.preprocessor.gain
+    assert got["/world_senses"][-1].gain == 1.0
