@@ -57,7 +57,6 @@ def test_the_graphs_estimator_has_the_in_process_goal_region_and_range(world, ro
     up, bag = up_world(world, MAZE, tmp_path, ros_domain)
     with up:
         line = up.wait_for_line(SET, timeout=150)
-        print(line)
         ctrl_c(up)
     assert up.proc.returncode == 0, up.describe("./tmgwr up failed")
     tol, low, high = re.search(SET, line).groups()
