@@ -8,6 +8,8 @@ real DDS (``./tmgwr up --world W``, own ROS_DOMAIN_ID) maze_sim declares them
 and the motivation estimator sets them on its core before it solves a step: the estimator
 then holds exactly the in-process agent's goal tolerance and bounds, for each world the
 graph hosts and the same maze. Both declarations are recorded, so a replay carries them.
+Told the same, the composed graph walks the in-process agent's cells step for step in
+MiniGrid and PointMaze (it parted from them within a few steps when it was not told).
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ MAZE = """\
 #.1...#
 #######
 """
+STEPS = {"minigrid": 2000, "pointmaze": 2000}
 # the estimator's line when it sets the world's declaration on its core
 SET = (r"\[motivation_estimator\].*step 0 \(run \d+\): the world's senses set: goal "
        r"tolerance (\S+), sensor's range \[(.*)\] \.\. \[(.*)\] \(feature units\)")
@@ -79,3 +82,37 @@ def test_the_graphs_estimator_has_the_in_process_goal_region_and_range(world, ro
     assert feature.goal_tolerance == want.goal_tolerance
     assert feature.gain == agent.preprocessor.gain
     assert got["/world_senses"][-1].gain == 1.0
+
+
+@pytest.mark.parametrize("world", ["minigrid", "pointmaze"])
+@pytest.mark.timeout(400)
+def test_the_graph_walks_the_in_process_agents_cells(world, ros_domain, tmp_path):
+    """Told the same, the graph's agent (the composed graph) is the in-process agent step
+    for step in a world whose goal region and sensor's range the rules read."""
+    if world == "minigrid":
+        pytest.importorskip("minigrid")
+    else:
+        pytest.importorskip("gymnasium_robotics")
+        pytest.importorskip("mujoco")
+    from ros_helpers import ros2_run
+
+    from tmgwr_agent.experiments.lockstep import read_trajectory, run_reference
+    steps = STEPS[world]
+    maze = tmp_path / "small.txt"
+    maze.write_text(MAZE)
+    traj = tmp_path / "trajectory.txt"
+    graph = ros2_run("tmgwr_agent", "composed", "--ros-args", "-p", f"world:={world}",
+                     "-p", f"maze:={maze}", "-p", "maze_sim:seed:=0",
+                     "-p", "action_selector:seed:=1", "-p", f"max_steps:={steps}",
+                     "-p", "exit_when_done:=true", "-p", f"trajectory_path:={traj}",
+                     "-p", "start_delay:=1.0", domain=ros_domain,
+                     env={"HOME": str(tmp_path), "ROS_HOME": str(tmp_path / ".ros")})
+    with graph:
+        graph.wait(timeout=360)
+    cells, _ = read_trajectory(traj)
+    assert len(cells) == steps
+    ref, _ = run_reference(maze, steps, world_seed=0, agent_seed=1, world_name=world)
+    first = next((i for i, (a, b) in enumerate(zip(cells, ref)) if a != b), None)
+    assert first is None, (f"graph and in-process differ from step {first}: "
+                           f"{cells[first:first + 3]} vs {ref[first:first + 3]}")
+    assert cells[-1][1] >= 3                # episodes ended at the goal: its region acted
