@@ -116,3 +116,39 @@ def test_the_graph_walks_the_in_process_agents_cells(world, ros_domain, tmp_path
     assert first is None, (f"graph and in-process differ from step {first}: "
                            f"{cells[first:first + 3]} vs {ref[first:first + 3]}")
     assert cells[-1][1] >= 3                # episodes ended at the goal: its region acted
+
+
+# A motivation_estimator node told a world's declaration, then handed a checkpoint its core
+# cannot take: prints the refusal and what the core holds after it.
+REFUSED = r"""
+import numpy as np
+import rclpy
+from tmgwr_agent.nodes.motivation_estimator import MotivationEstimatorNode
+from tmgwr_common.checkpoint import Checkpoint, CheckpointError
+from tmgwr_interfaces.msg import SensorInfo
+rclpy.init(args=["--ros-args", "-p", "world:=pointmaze", "-p", "checkpoint_period:=0"])
+node = MotivationEstimatorNode()
+node.core.set_senses(0.05, (np.array([-0.4, -0.2]), np.array([0.4, 0.2])))
+try:
+    node.restore(Checkpoint("motivation_estimator", 3, 1, 0.0, {"bogus": 1}))
+except CheckpointError as exc:
+    print("REFUSED", exc, flush=True)
+c = node.core
+print("CORE", len(c.primitives), c.goal_tolerance, c.bounds[0].tolist(), c.bounds[1].tolist(),
+      flush=True)
+node.destroy_node()
+rclpy.shutdown()
+"""
+
+
+@pytest.mark.timeout(120)
+def test_a_refused_checkpoint_leaves_the_estimator_told_the_world(ros_domain, tmp_path):
+    """The core a refused checkpoint leaves behind keeps the world's primitives, goal
+    region and sensor's range (it was rebuilt from the configuration alone, and failed)."""
+    pytest.importorskip("gymnasium_robotics")
+    from ros_helpers import spawn_python
+    p = spawn_python(REFUSED, domain=ros_domain, name="refused",
+                     env={"HOME": str(tmp_path), "ROS_HOME": str(tmp_path / ".ros")})
+    out = p.wait(timeout=100)
+    assert "REFUSED" in out and "refused" in out, out
+    assert "CORE 4 0.05 [-0.4, -0.2] [0.4, 0.2]" in out, out
