@@ -119,7 +119,8 @@ def test_the_graph_walks_the_in_process_agents_cells(world, ros_domain, tmp_path
 
 
 # A motivation_estimator node told a world's declaration, then handed a checkpoint its core
-# cannot take: prints the refusal and what the core holds after it.
+# cannot take, then declarations it cannot take: prints the refusals, what it kept and what
+# the core holds after them.
 REFUSED = r"""
 import numpy as np
 import rclpy
@@ -133,6 +134,10 @@ try:
     node.restore(Checkpoint("motivation_estimator", 3, 1, 0.0, {"bogus": 1}))
 except CheckpointError as exc:
     print("REFUSED", exc, flush=True)
+for bad in (dict(low=[0.0], high=[1.0]), dict(low=[0.0, 1.0], high=[1.0, 0.0]),
+            dict(goal_tolerance=float("nan"))):
+    node.on_senses(SensorInfo(run_id=1, gain=1.0, **bad))
+print("DECLARATIONS KEPT", node.senses, flush=True)
 c = node.core
 print("CORE", len(c.primitives), c.goal_tolerance, c.bounds[0].tolist(), c.bounds[1].tolist(),
       flush=True)
@@ -144,7 +149,8 @@ rclpy.shutdown()
 @pytest.mark.timeout(120)
 def test_a_refused_checkpoint_leaves_the_estimator_told_the_world(ros_domain, tmp_path):
     """The core a refused checkpoint leaves behind keeps the world's primitives, goal
-    region and sensor's range (it was rebuilt from the configuration alone, and failed)."""
+    region and sensor's range (it was rebuilt from the configuration alone, and failed);
+    a declaration the core cannot take is refused, named, and not kept."""
     pytest.importorskip("gymnasium_robotics")
     from ros_helpers import spawn_python
     p = spawn_python(REFUSED, domain=ros_domain, name="refused",
@@ -152,3 +158,5 @@ def test_a_refused_checkpoint_leaves_the_estimator_told_the_world(ros_domain, tm
     out = p.wait(timeout=100)
     assert "REFUSED" in out and "refused" in out, out
     assert "CORE 4 0.05 [-0.4, -0.2] [0.4, 0.2]" in out, out
+    assert "DECLARATIONS KEPT None" in out, out       # a range of 1 value, low > high, NaN
+    assert out.count("refused a declaration of run 1") == 3, out

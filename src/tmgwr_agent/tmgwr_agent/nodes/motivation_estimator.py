@@ -100,8 +100,9 @@ class MotivationEstimatorNode(Node):
     def __init__(self):
         super().__init__("motivation_estimator", **NODE_OPTIONS)
         config, self.p = declare_parameters(self, MotivationConfig, NODE_SPECS)
-        self.core = MotivationEstimator(config,
-                                        primitives=node_senses(self.p["world"]).primitives)
+        senses = node_senses(self.p["world"])
+        self.dim = senses.dim               # the sensation's (a declared range gives as many)
+        self.core = MotivationEstimator(config, primitives=senses.primitives)
         # the world's sensor declaration in feature units (run id, goal tolerance, bounds):
         # no state is solved before the one of its run has come (a state waits for it)
         self.senses: tuple[int, float, tuple[np.ndarray, np.ndarray] | None] | None = None
@@ -191,12 +192,14 @@ class MotivationEstimatorNode(Node):
         before the next solve; a state that waited for it is computed now."""
         low, high = np_f64(m.low), np_f64(m.high)
         tol = float(m.goal_tolerance)
-        if len(low) != len(high) or np.isnan(low).any() or np.isnan(high).any() or \
-                (low > high).any() or not (math.isfinite(tol) and tol >= 0.0):
+        if len(low) != len(high) or len(low) not in (0, self.dim) or np.isnan(low).any() \
+                or np.isnan(high).any() or (low > high).any() or \
+                not (math.isfinite(tol) and tol >= 0.0):
             self.get_logger().error(
                 f"{topics.FEATURE_SENSES}: refused a declaration of run {m.run_id}: goal "
                 f"tolerance {tol}, range {low.tolist()} .. {high.tolist()} (a finite "
-                "tolerance >= 0, as many low as high values, low <= high)")
+                f"tolerance >= 0; no range, or {self.dim} low and {self.dim} high values, "
+                "low <= high)")
             return
         self.senses = (m.run_id, tol, (low, high) if len(low) else None)
         w, self.unsensed = self.unsensed, None
