@@ -114,7 +114,8 @@ def test_graph_recording_is_complete_and_decodes_everywhere(graph_run, foxglove_
     assert max(steps["/observation"]) > 100
     assert_every_step_answered(steps)
     for topic in ("/maze_grid", "/goal", "/map", "/map_markers", "/maze_events",
-                  "/sensorimotor_snapshot", "/potentials"):
+                  "/sensorimotor_snapshot", "/potentials", "/world_senses",
+                  "/feature_senses"):
         assert counts.get(topic, 0) >= 1, topic
 
     result = foxglove_decoder(files)

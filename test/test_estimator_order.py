@@ -1,16 +1,17 @@
 """The motivation estimator computes the same fields whatever order its inputs arrive in.
 
 A real graph run (``./tmgwr up``, own ROS_DOMAIN_ID) is recorded to MCAP; its
-/sensorimotor_state and /action messages are then fed, as the serialized bytes the
-recorder received, to a fresh ``MotivationEstimatorNode`` (a real rclpy node in its own
-process), twice: in lockstep order (the selector's action of step s - 1 before the state of
-step s), and with the action of step s - 1 late for some steps s whose draw chose the walk:
-the state of step s arrives, then again (the simulator's resend after its ``resend_period``
-without an answer), then the late action. The resent state is solved without the draw;
-when the late action says the draw chose the walk, that solve is undone (the in-process
-agent skipped it). Every later field must be byte for byte the one of the lockstep order:
-the potentials warm-start the next solve, so a solve left in place changes what follows (a
-CI run on an overloaded machine once saw graph and in-process differ from step 1580).
+/sensorimotor_state and /action messages (after the world's latched /feature_senses) are
+then fed, as the serialized bytes the recorder received, to a fresh
+``MotivationEstimatorNode`` (a real rclpy node in its own process), twice: in lockstep
+order (the selector's action of step s - 1 before the state of step s), and with the action
+of step s - 1 late for some steps s whose draw chose the walk: the state of step s arrives,
+then again (the simulator's resend after its ``resend_period`` without an answer), then the
+late action. The resent state is solved without the draw; when the late action says the
+draw chose the walk, that solve is undone (the in-process agent skipped it). Every later
+field must be byte for byte the one of the lockstep order: the potentials warm-start the
+next solve, so a solve left in place changes what follows (a CI run on an overloaded
+machine once saw graph and in-process differ from step 1580).
 """
 
 from __future__ import annotations
@@ -34,7 +35,8 @@ import rclpy
 from mcap.reader import make_reader
 from tmgwr_agent.nodes.motivation_estimator import MotivationEstimatorNode
 from tmgwr_common.cdr import codec
-from tmgwr_interfaces.msg import Action, MotivationField, SensorimotorState
+from tmgwr_interfaces.msg import Action, MotivationField, SensorimotorState, SensorInfo
+from rclpy.serialization import deserialize_message
 
 bag, late, ckpt = Path(sys.argv[1]), set(json.loads(sys.argv[2])), sys.argv[3]
 rclpy.init(args=["--ros-args", "-p", f"checkpoint_dir:={ckpt}", "-p", "checkpoint_period:=0"])
@@ -54,6 +56,8 @@ for f in sorted(bag.glob("*.mcap")):
                 states.setdefault(read_state(message.data).step_id, message.data)
             elif channel.topic == "/action":
                 actions.setdefault(read_action(message.data).step_id, message.data)
+            elif channel.topic == "/feature_senses":    # the world's declaration, latched
+                node.on_senses(deserialize_message(message.data, SensorInfo))
 n = max(states) + 1
 assert sorted(states) == list(range(n)) and all(s in actions for s in range(n - 1)), "gaps"
 walk = {s: read_action(actions[s]).walk_next for s in actions}

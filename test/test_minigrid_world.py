@@ -255,3 +255,4 @@ def test_the_graph_knows_minigrid_senses_by_name():
     built = world_senses(MiniGridWorld(Maze.from_text(SMALL), "G"))
     assert named.dim == built.dim == 4
     np.testing.assert_array_equal(named.primitives, built.primitives)
+    assert named.goal_tolerance == built.goal_tolerance > 0.0

@@ -57,7 +57,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from maze_sim.maze import DEFAULT_MAZE, N_ACTIONS, Maze, MazeError, maze_file
-from maze_sim.worlds import WorldError, make_world
+from maze_sim.worlds import WorldError, declared_sensor, make_world
 from tmgwr_common import topics
 from tmgwr_common.cdr import codec
 from tmgwr_common.checkpoint import CHECKPOINT_SPECS, Checkpoint, Checkpointer, CheckpointError
@@ -75,7 +75,7 @@ from tmgwr_common.node import (
 from tmgwr_common.params import WORLD_PARAM, Param, ParamError
 from tmgwr_common.share import DataFileError
 from tmgwr_common.text import shown
-from tmgwr_interfaces.msg import Action, Observation
+from tmgwr_interfaces.msg import Action, Observation, SensorInfo
 from tmgwr_interfaces.srv import FireEvent, SetCell, SetGoal
 
 FRAME = "maze"
@@ -158,6 +158,7 @@ class MazeSimNode(Node):
         self.goal_pub = self.create_publisher(PointStamped, topics.GOAL, LATCHED_QOS)
         self.pose_pub = self.create_publisher(PoseStamped, topics.AGENT_POSE, SENSOR_QOS)
         self.event_pub = self.create_publisher(String, topics.EVENTS, LATCHED_QOS)
+        self.senses_pub = self.create_publisher(SensorInfo, topics.WORLD_SENSES, LATCHED_QOS)
         subscribe_decoded(self, Action, topics.ACTION, self.on_action, STEP_QOS)
         services = MutuallyExclusiveCallbackGroup()
         for name in (topics.SET_GOAL, topics.SIM_SET_GOAL):   # the graph's goal, and ours
@@ -195,6 +196,7 @@ class MazeSimNode(Node):
                                         {"maze": maze_fingerprint(maze)}, self.get_namespace())
         self.restore(self.checkpoints.resume({"walls": ("b", 2)}, self.check_checkpoint))
 
+        self.publish_senses()
         self.publish_grid()
         self.publish_goal()
         self.create_timer(1.0 / p["pose_rate"], self.publish_pose)
@@ -532,6 +534,20 @@ class MazeSimNode(Node):
     def event(self, text: str):
         self.get_logger().info(text)
         self.event_pub.publish(String(data=text))
+
+    def publish_senses(self):
+        """What the world declares of its sensor (goal region, sensor's range), in sensation
+        units, latched: the agent nodes are told them as the in-process agent is
+        (``Senses``), for this run."""
+        tol, low, high = declared_sensor(self.world)
+        m = SensorInfo()
+        m.header.stamp = self.get_clock().now().to_msg()
+        m.header.frame_id = FRAME
+        m.run_id, m.gain, m.goal_tolerance = self.run_id, 1.0, tol
+        if low is not None:
+            m.low = np.asarray(low, dtype=float).ravel().tolist()
+            m.high = np.asarray(high, dtype=float).ravel().tolist()
+        self.senses_pub.publish(m)
 
     def publish_grid(self):
         rows, cols = self.world.walls.shape

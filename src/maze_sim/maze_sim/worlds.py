@@ -136,3 +136,21 @@ def make_world(name: str, maze: Maze, goal: str | Cell = "G",
         if "unexpected keyword" in str(exc):
             raise WorldError(f"world {spec.name!r}: {exc}") from None
         raise
+
+
+def declared_sensor(world) -> tuple[float, Any, Any]:
+    """What a hosted world declares of its sensor besides its sensations: ``(goal_tolerance,
+    low, high)``: how near the goal sensation a sensation ends an episode at the goal
+    (``goal_tolerance``, sensation units; 0 when the world declares none) and the sensor's
+    range, the bounds of the ``Box`` the sensation lies in (the world's own
+    ``observation_space``: PointMaze; else that of the env it drives, seen through its
+    sensation wrapper: MiniGrid, ``gym:ID``; ``None, None`` when it declares none: the grid
+    world). The agent's ``Senses`` read the same (``tmgwr_agent.world_senses``); the
+    simulator node publishes them for the graph's agent (``SensorInfo``)."""
+    tol = float(getattr(world, "goal_tolerance", 0.0))
+    space = getattr(world, "observation_space", None)
+    if space is None and getattr(world, "env", None) is not None:
+        space = world.env.observation_space
+    if space is None:
+        return tol, None, None
+    return tol, space.low, space.high

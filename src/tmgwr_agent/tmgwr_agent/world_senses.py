@@ -58,12 +58,15 @@ GRAPH_WORLDS = ("grid", "minigrid", "pointmaze")
 def named_world_senses(name: str, **kwargs) -> Senses:
     """The senses of world ``name`` without building it (what the agent nodes are given:
     they host no world): the grid's, MiniGrid's (``(row, col, cos h, sin h)`` and its three
-    native actions, one-hot), or PointMaze's (``velocity``: 4 values)."""
+    native actions, one-hot), or PointMaze's (``velocity``: 4 values). The sensor's range
+    depends on the maze file, so it is not here: the graph's estimator is told it, with the
+    goal tolerance, by the simulator that hosts the world (``SensorInfo`` on
+    ``/world_senses``, docs/graph.md)."""
     if name == "grid":
         return maze_senses()
     if name == "minigrid":
-        from maze_sim.minigrid_world import N_ACTIONS
-        return Senses(4, np.eye(N_ACTIONS))
+        from maze_sim.minigrid_world import N_ACTIONS, PoseSensation
+        return Senses(4, np.eye(N_ACTIONS), PoseSensation.GOAL_TOLERANCE)
     if name == "pointmaze":
         from maze_sim.pointmaze_world import PRIMITIVES, SUCCESS_RADIUS, step_length
         return Senses(4 if kwargs.get("velocity") else 2, PRIMITIVES, SUCCESS_RADIUS,

@@ -35,6 +35,10 @@ GRID = "maze_grid"                    # nav_msgs/msg/OccupancyGrid, latched
 GOAL = "goal"                         # geometry_msgs/msg/PointStamped (x=col, y=row), latched
 AGENT_POSE = "agent_pose"             # geometry_msgs/msg/PoseStamped
 EVENTS = "maze_events"                # std_msgs/msg/String: goal changes, cell/event changes
+# What the world declares of its sensor (goal region, sensor's range), latched: maze_sim's in
+# sensation units, sensory_preprocessor's in feature units (the motivation estimator's input)
+WORLD_SENSES = "world_senses"         # tmgwr_interfaces/msg/SensorInfo, maze_sim, latched
+FEATURE_SENSES = "feature_senses"     # tmgwr_interfaces/msg/SensorInfo, preprocessor, latched
 
 # Services: the graph's goal (relative), then the nodes' own (private, "~/": node/name)
 SET_GOAL = "set_goal"                 # tmgwr_interfaces/srv/SetGoal, maze_sim (the graph's)
@@ -71,7 +75,7 @@ def qualified(name: str, namespace: str = "/", node: str = "") -> str:
 
 TOPIC_KEYS = ("OBSERVATION", "FEATURES", "SENSORIMOTOR_STATE", "MOTIVATION", "ACTION", "MAP",
               "MAP_SNAPSHOT", "POTENTIALS", "MAP_MARKERS", "GRID", "GOAL", "AGENT_POSE",
-              "EVENTS")
+              "EVENTS", "WORLD_SENSES", "FEATURE_SENSES")
 
 
 class GraphNames:

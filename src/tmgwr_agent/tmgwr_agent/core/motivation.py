@@ -338,6 +338,30 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         self._abs_seen: tuple | None = None     # (log, prepare) positions of the last call
         self._closed_none = np.zeros(0, bool)
 
+    def set_senses(self, goal_tolerance: float,
+                   bounds: tuple[np.ndarray, np.ndarray] | None) -> bool:
+        """The world's goal region and sensor's range, as the constructor takes them, told
+        after construction (the graph's estimator hears them from the world, SensorInfo);
+        returns whether they changed. A change leaves V as it is (the next solve starts
+        from it) and has every input derived from them recomputed at the next update."""
+        tol = float(goal_tolerance)
+        if not math.isfinite(tol) or tol < 0.0:
+            raise ValueError(f"the goal tolerance must be a finite distance >= 0, got "
+                             f"{goal_tolerance}")
+        b = None if bounds is None else tuple(np.asarray(x, dtype=float) for x in bounds)
+        same_b = (b is None) == (self.bounds is None) and (
+            b is None or all(np.array_equal(x, y) for x, y in zip(b, self.bounds)))
+        if tol == self.goal_tolerance and same_b:
+            return False
+        self.goal_tolerance, self.bounds = tol, b
+        self._options_key = ()
+        self._retire_incremental()
+        self._R_key = None
+        self._abs_key = ()
+        self._v0_fresh = False
+        self._epoch += 1
+        return True
+
     # ------------------------------------------------------------------ goal
     def set_goal(self, goal_x: np.ndarray) -> None:
         """A new goal state: the potentials restart from 0 (Algorithm 1, line 5)."""

@@ -28,19 +28,29 @@ import numpy as np
 
 from maze_sim.maze import Maze
 from maze_sim.world import GridWorld
+from maze_sim.worlds import make_world
 from tmgwr_agent.core.agent import TMGWRAgent
-from tmgwr_agent.world_senses import maze_senses
+from tmgwr_agent.world_senses import maze_senses, world_senses
 
 
 def run_reference(maze_path: str | Path, steps: int, goal: str | tuple = "G",
                   world_seed: int = 0, agent_seed: int = 0,
                   goal_changes: Sequence[tuple[int, tuple[int, int]]] = (),
                   sensor_noise: float = 0.0, max_episode_steps: int | None = None,
-                  params: Mapping[str, Any] | None = None):
-    """``steps`` observations of the lockstep loop; returns (cells, seconds)."""
+                  params: Mapping[str, Any] | None = None, world_name: str = "grid"):
+    """``steps`` observations of the lockstep loop; returns (cells, seconds). ``world_name``:
+    the world maze_sim hosts (its ``world`` parameter), the agent told its senses
+    (:func:`~tmgwr_agent.world_senses.world_senses`)."""
     maze = Maze.from_file(maze_path)
-    world = GridWorld(maze, goal, sensor_noise, max_episode_steps, seed=world_seed)
-    agent = TMGWRAgent(maze_senses(), np.random.default_rng(agent_seed), params)
+    if world_name == "grid":
+        world = GridWorld(maze, goal, sensor_noise, max_episode_steps, seed=world_seed)
+        senses = maze_senses()
+    else:
+        noise = {"sensor_noise": sensor_noise} if sensor_noise else {}
+        world = make_world(world_name, maze, goal, max_episode_steps, seed=world_seed,
+                           **noise)
+        senses = world_senses(world)
+    agent = TMGWRAgent(senses, np.random.default_rng(agent_seed), params)
     changes = {int(k): tuple(c) for k, c in goal_changes}
     cells: list[tuple[int, int, int, int]] = []
     agent.set_goal(world.goal, world.goal_observation())

@@ -26,6 +26,13 @@ before it: solved, as the in-process agent solves its first step. A field not so
 carries the winner's links without options, potentials 0, goal node -1 and 0 sweeps, and
 no ``/potentials`` goes out for it.
 
+What the world declares of its sensor, its goal region (``goal_tolerance``) and its
+sensor's range (the bounds no option leads outside), reaches this node in feature units as
+``SensorInfo`` on ``/feature_senses`` (latched; maze_sim declares them, the preprocessor
+scales them), and is set on the core (:meth:`MotivationEstimator.set_senses`) as the
+in-process agent's estimator is built with them. A state of a run whose declaration has not
+arrived is held (logged) and computed when it does: no step is solved without them.
+
 The goal reaches this node only as the goal sensation of the observations: ``/set_goal``
 is the simulator's (``maze_sim``), which answers from its own check, so "accepted" means
 applied (issue 24; this node hosted it once and answered before the simulator had
@@ -35,6 +42,7 @@ checked reachability).
 from __future__ import annotations
 
 import copy
+import math
 
 import numpy as np
 from rclpy.node import Node
@@ -75,6 +83,7 @@ from tmgwr_interfaces.msg import (
     Potentials,
     SensorimotorSnapshot,
     SensorimotorState,
+    SensorInfo,
 )
 
 FIELD = codec(MotivationField)        # the per-step messages go serialized (tmgwr_common.cdr)
@@ -91,8 +100,16 @@ class MotivationEstimatorNode(Node):
     def __init__(self):
         super().__init__("motivation_estimator", **NODE_OPTIONS)
         config, self.p = declare_parameters(self, MotivationConfig, NODE_SPECS)
-        self.core = MotivationEstimator(config,
-                                        primitives=node_senses(self.p["world"]).primitives)
+        senses = node_senses(self.p["world"])
+        self.dim = senses.dim               # the sensation's (a declared range gives as many)
+        self.core = MotivationEstimator(config, primitives=senses.primitives)
+        # the world's sensor declaration in feature units (run id, goal tolerance, bounds):
+        # no state is solved before the one of its run has come (a state waits for it)
+        self.senses: tuple[int, float, tuple[np.ndarray, np.ndarray] | None] | None = None
+        self.unsensed = None                # a state waiting for it
+        self.applied = None                 # the declaration last set on the core
+        self.create_subscription(SensorInfo, topics.FEATURE_SENSES, self.on_senses,
+                                 LATCHED_QOS)
         self._ids = np.zeros(0, dtype=np.int32)
         pub = self.create_publisher(MotivationField, topics.MOTIVATION, STEP_QOS)
         self.lockstep = Lockstep(pub, logger=self.get_logger(), what="state")
@@ -170,7 +187,51 @@ class MotivationEstimatorNode(Node):
             return False
         return True
 
+    def on_senses(self, m):
+        """The world's sensor declaration (feature units) of a run: kept, set on the core
+        before the next solve; a state that waited for it is computed now."""
+        low, high = np_f64(m.low), np_f64(m.high)
+        tol = float(m.goal_tolerance)
+        if len(low) != len(high) or len(low) not in (0, self.dim) or np.isnan(low).any() \
+                or np.isnan(high).any() or (low > high).any() or \
+                not (math.isfinite(tol) and tol >= 0.0):
+            self.get_logger().error(
+                f"{topics.FEATURE_SENSES}: refused a declaration of run {m.run_id}: goal "
+                f"tolerance {tol}, range {low.tolist()} .. {high.tolist()} (a finite "
+                f"tolerance >= 0; no range, or {self.dim} low and {self.dim} high values, "
+                "low <= high)")
+            return
+        self.senses = (m.run_id, tol, (low, high) if len(low) else None)
+        w, self.unsensed = self.unsensed, None
+        if w is not None:
+            self.on_state(w)
+
+    def sensed(self, s) -> bool:
+        """Whether the world's declaration of the run of state ``s`` has come (set on the
+        core); else ``s`` waits for it (the newest state waiting)."""
+        if self.senses is not None and self.senses[0] == s.run_id:
+            if self.applied is not self.senses:     # its first state: set on the core
+                self.applied = self.senses
+                self.core.set_senses(*self.senses[1:])
+                c = self.core
+                lo, hi = ([], []) if c.bounds is None else (b.tolist() for b in c.bounds)
+                self.get_logger().info(
+                    f"step {s.step_id} (run {s.run_id}): the world's senses set: goal "
+                    f"tolerance {c.goal_tolerance!r}, sensor's range {lo} .. {hi} "
+                    "(feature units)")
+            return True
+        if self.unsensed is None or (self.unsensed.run_id, self.unsensed.step_id) != \
+                (s.run_id, s.step_id):
+            self.get_logger().warning(
+                f"step {s.step_id} (run {s.run_id}): waiting for the world's sensor "
+                f"declaration on {topics.FEATURE_SENSES} (from maze_sim through the "
+                "sensory_preprocessor)", throttle_duration_sec=5.0)
+        self.unsensed = s
+        return False
+
     def on_state(self, s):
+        if s.run_id and not self.sensed(s):
+            return                          # held until the world's declaration came
         resent = (s.run_id, s.step_id) == (self.lockstep.run_id, self.lockstep.last_step)
         if s.run_id and not resent and self.awaits_action(s):
             return                          # held until the previous step's action came
@@ -297,7 +358,9 @@ class MotivationEstimatorNode(Node):
         try:
             self.core.load_state_dict(joined_state(ck))
         except (KeyError, TypeError, ValueError, IndexError) as exc:
-            self.core = type(self.core)(self.core.config)     # nothing half loaded
+            core = self.core                                  # nothing half loaded
+            self.core = type(core)(core.config, primitives=core.primitives,
+                                   goal_tolerance=core.goal_tolerance, bounds=core.bounds)
             raise CheckpointError(f"{ck.path}: {exc!r}: refused") from None
 
     def on_shutdown(self):

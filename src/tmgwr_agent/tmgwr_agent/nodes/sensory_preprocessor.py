@@ -2,10 +2,16 @@
 
 Wraps :class:`~tmgwr_agent.core.preprocessor.SensoryPreprocessor`: ``x = preprocessor(sensors,
 episode_start)`` and the goal sensation in feature space; passes the lockstep context
-(executed action, bump, terminal flags) on to the map learner.
+(executed action, bump, terminal flags) on to the map learner. What the world declares of its
+sensor (``SensorInfo`` on ``/world_senses``, latched: the goal region and the sensor's range,
+in sensation units) goes on in feature units, scaled by the same gain, on
+``/feature_senses`` (latched): the motivation estimator's, as the in-process agent scales
+them (:class:`~tmgwr_agent.core.agent.TMGWRAgent`).
 """
 
 from __future__ import annotations
+
+import math
 
 from rclpy.node import Node
 
@@ -15,6 +21,7 @@ from tmgwr_common import topics
 from tmgwr_common.cdr import codec
 from tmgwr_common.lockstep import Lockstep
 from tmgwr_common.node import (
+    LATCHED_QOS,
     NODE_OPTIONS,
     STEP_QOS,
     declare_parameters,
@@ -23,7 +30,7 @@ from tmgwr_common.node import (
     subscribe_decoded,
 )
 from tmgwr_common.params import WORLD_PARAM
-from tmgwr_interfaces.msg import Features, Observation
+from tmgwr_interfaces.msg import Features, Observation, SensorInfo
 
 FEATURES = codec(Features)
 
@@ -36,6 +43,9 @@ class SensoryPreprocessorNode(Node):
         pub = self.create_publisher(Features, topics.FEATURES, STEP_QOS)
         self.lockstep = Lockstep(pub, logger=self.get_logger(), what="observation")
         subscribe_decoded(self, Observation, topics.OBSERVATION, self.on_observation, STEP_QOS)
+        self.senses_pub = self.create_publisher(SensorInfo, topics.FEATURE_SENSES, LATCHED_QOS)
+        self.create_subscription(SensorInfo, topics.WORLD_SENSES, self.on_world_senses,
+                                 LATCHED_QOS)
         self.get_logger().info(f"sensory_preprocessor ready: {config.as_dict()}")
 
     def on_observation(self, m):
@@ -50,6 +60,21 @@ class SensoryPreprocessorNode(Node):
             gain=float(self.core.gain), episode_start=m.episode_start, action=m.action,
             motor=m.motor, bumped=m.bumped, goal_reached=m.goal_reached,
             terminal=m.terminal, truncated=m.truncated))
+
+    def on_world_senses(self, m: SensorInfo):
+        """The world's sensor declaration in feature units (this node's gain per sensation
+        unit: the message's own ``gain`` is 1, its units the sensation's)."""
+        if not (m.gain > 0.0 and math.isfinite(m.gain)) or len(m.low) != len(m.high):
+            self.get_logger().error(f"{topics.WORLD_SENSES}: refused a declaration with gain "
+                                    f"{m.gain}, {len(m.low)} low and {len(m.high)} high "
+                                    "values (a gain > 0 and as many of each)")
+            return
+        g = float(self.core.gain) / m.gain
+        out = SensorInfo(header=m.header, run_id=m.run_id, gain=m.gain * g,
+                         goal_tolerance=g * m.goal_tolerance)
+        out.low = (g * np_f64(m.low)).tolist()
+        out.high = (g * np_f64(m.high)).tolist()
+        self.senses_pub.publish(out)
 
     def on_shutdown(self):
         print(f"sensory_preprocessor: {self.lockstep.timer.summary()}", flush=True)
