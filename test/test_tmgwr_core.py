@@ -966,7 +966,8 @@ def test_defaults_are_declared_once_in_the_config_dataclasses():
                 SensoryPreprocessor):
         for name, par in inspect.signature(cls).parameters.items():
             assert name in ("rng", "dim", "action_dim", "config", "primitives",
-                            "n_actions", "goal_tolerance", "resolution"), (cls, name)  # the senses
+                            "n_actions", "goal_tolerance", "resolution", "bounds"), \
+                (cls, name)                                                     # the senses
 
 
 # ---------------------------------------------------------------- behaviour on mazes
