@@ -48,6 +48,7 @@ class Stray:
     fields: dict
     times: int = 1                  # published this many times in a row (10 Hz)
     subscribers: int = 1            # ring subscribers to wait for (`ros2 topic pub -w`)
+    latched: bool = False           # offered transient-local, as its subscribers request
 
     def __str__(self) -> str:
         return f"{self.topic} {json.dumps(self.fields)} x{self.times}"
@@ -80,6 +81,15 @@ def strays(run: int) -> list[Stray]:
                   {"run_id": U64_MAX, "step_id": 1}, times=5, subscribers=2),
             Stray("/motivation", "tmgwr_interfaces/msg/MotivationField",
                   {"run_id": run, "step_id": 999999999}, times=5)]
+    # the world's sensor declaration (latched): another run's, on both legs, and a second
+    # one of the current run; the one the ring was started with stays in force
+    info = "tmgwr_interfaces/msg/SensorInfo"
+    out += [Stray("/world_senses", info, {"run_id": U64_MAX, "gain": 1.0,
+                                          "goal_tolerance": 3.0}, latched=True),
+            Stray("/feature_senses", info, {"run_id": U64_MAX, "gain": 1.0,
+                                            "goal_tolerance": 3.0}, latched=True),
+            Stray("/feature_senses", info, {"run_id": run, "gain": 1.0,
+                                            "goal_tolerance": 3.0}, latched=True)]
     return out
 
 
@@ -87,6 +97,7 @@ def publish(domain: int, stray: Stray) -> str:
     """``ros2 topic pub`` the stray (after its subscribers matched); its output."""
     args = ["topic", "pub", "-w", str(stray.subscribers)]
     args += ["--once"] if stray.times == 1 else ["--times", str(stray.times), "-r", "10"]
+    args += ["--qos-durability", "transient_local"] if stray.latched else []
     p = ros2_cli(*args, stray.topic, stray.type, json.dumps(stray.fields), domain=domain,
                  name=f"ros2 topic pub {stray.topic}")
     with p:

@@ -1,11 +1,13 @@
 """No message moves a node ahead of the simulator for good (issue 24, point 1).
 
 The real ``ros2 topic pub`` sends strays on each of the five per-step topics (huge, zero
-and other-run ids, once and repeated: ``strays.strays``) into a running graph. After each,
-the ring must make at least 200 steps within 30 s: a liveness floor that a ring answered
-only after each resend (about 1 step/s, what one stray action once caused for good) cannot
-meet, and loose for a loaded machine (the ring makes about 100 steps/s). The rate after /
-before each stray is measured by ``test/measure_strays.py``, never asserted here.
+and other-run ids, once and repeated) and on the world's latched sensor declaration
+(another run's, a second one of the current run: ``strays.strays``) into a running graph.
+After each, the ring must make at least 200 steps within 30 s: a liveness floor that a ring
+answered only after each resend (about 1 step/s, what one stray action once caused for
+good) cannot meet, and loose for a loaded machine (the ring makes about 100 steps/s). The
+rate after / before each stray is measured by ``test/measure_strays.py``, never asserted
+here.
 """
 
 from __future__ import annotations

@@ -77,6 +77,7 @@ from tmgwr_common.node import (
     subscribe_decoded,
 )
 from tmgwr_common.params import WORLD_PARAM, Param
+from tmgwr_common.text import shown
 from tmgwr_interfaces.msg import (
     Action,
     MotivationField,
@@ -86,6 +87,8 @@ from tmgwr_interfaces.msg import (
     SensorInfo,
 )
 
+#: Runs whose sensor declarations are kept (see ``on_senses``).
+SENSES_RUNS = 8
 FIELD = codec(MotivationField)        # the per-step messages go serialized (tmgwr_common.cdr)
 
 NODE_SPECS = (
@@ -105,7 +108,10 @@ class MotivationEstimatorNode(Node):
         self.core = MotivationEstimator(config, primitives=senses.primitives)
         # the world's sensor declaration in feature units (run id, goal tolerance, bounds):
         # no state is solved before the one of its run has come (a state waits for it)
-        self.senses: tuple[int, float, tuple[np.ndarray, np.ndarray] | None] | None = None
+        # per run id, the newest SENSES_RUNS runs and the one being stepped (a declaration
+        # of another run, a stray included, never evicts the current run's: the latched
+        # original does not come again)
+        self.senses: dict[int, tuple[float, tuple[np.ndarray, np.ndarray] | None]] = {}
         self.unsensed = None                # a state waiting for it
         self.applied = None                 # the declaration last set on the core
         self.create_subscription(SensorInfo, topics.FEATURE_SENSES, self.on_senses,
@@ -197,11 +203,24 @@ class MotivationEstimatorNode(Node):
                 not (math.isfinite(tol) and tol >= 0.0):
             self.get_logger().error(
                 f"{topics.FEATURE_SENSES}: refused a declaration of run {m.run_id}: goal "
-                f"tolerance {tol}, range {low.tolist()} .. {high.tolist()} (a finite "
+                f"tolerance {tol}, range {shown(str(low.tolist()))} .. "
+                f"{shown(str(high.tolist()))} (a finite "
                 f"tolerance >= 0; no range, or {self.dim} low and {self.dim} high values, "
                 "low <= high)")
             return
-        self.senses = (m.run_id, tol, (low, high) if len(low) else None)
+        kept = self.senses.get(m.run_id)
+        if kept is not None:                    # a run's first declaration stands
+            if kept[0] != tol or (kept[1] is None) != (not len(low)) or (
+                    kept[1] is not None and not (np.array_equal(kept[1][0], low)
+                                                 and np.array_equal(kept[1][1], high))):
+                self.get_logger().warning(
+                    f"{topics.FEATURE_SENSES}: ignored another declaration of run "
+                    f"{m.run_id} (its first stands)", throttle_duration_sec=5.0)
+            return
+        self.senses[m.run_id] = (tol, (low, high) if len(low) else None)
+        for old in [r for r, d in self.senses.items() if d is not self.applied][
+                :max(0, len(self.senses) - SENSES_RUNS)]:
+            del self.senses[old]                # the oldest, never the one being stepped
         w, self.unsensed = self.unsensed, None
         if w is not None:
             self.on_state(w)
@@ -209,10 +228,11 @@ class MotivationEstimatorNode(Node):
     def sensed(self, s) -> bool:
         """Whether the world's declaration of the run of state ``s`` has come (set on the
         core); else ``s`` waits for it (the newest state waiting)."""
-        if self.senses is not None and self.senses[0] == s.run_id:
-            if self.applied is not self.senses:     # its first state: set on the core
-                self.applied = self.senses
-                self.core.set_senses(*self.senses[1:])
+        declared = self.senses.get(s.run_id)
+        if declared is not None:
+            if self.applied is not declared:        # its first state: set on the core
+                self.applied = declared
+                self.core.set_senses(*declared)
                 c = self.core
                 lo, hi = ([], []) if c.bounds is None else (b.tolist() for b in c.bounds)
                 self.get_logger().info(

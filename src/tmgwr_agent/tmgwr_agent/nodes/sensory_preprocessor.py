@@ -33,6 +33,8 @@ from tmgwr_common.params import WORLD_PARAM
 from tmgwr_interfaces.msg import Features, Observation, SensorInfo
 
 FEATURES = codec(Features)
+#: Runs whose sensor declarations are kept (see ``on_world_senses``).
+SENSES_RUNS = 8
 
 
 class SensoryPreprocessorNode(Node):
@@ -44,11 +46,17 @@ class SensoryPreprocessorNode(Node):
         self.lockstep = Lockstep(pub, logger=self.get_logger(), what="observation")
         subscribe_decoded(self, Observation, topics.OBSERVATION, self.on_observation, STEP_QOS)
         self.senses_pub = self.create_publisher(SensorInfo, topics.FEATURE_SENSES, LATCHED_QOS)
+        # the declarations per run id (the newest SENSES_RUNS and the run being stepped), and
+        # the run whose declaration is latched: the run of the newest observation
+        self.senses: dict[int, SensorInfo] = {}
+        self.senses_run: int | None = None
         self.create_subscription(SensorInfo, topics.WORLD_SENSES, self.on_world_senses,
                                  LATCHED_QOS)
         self.get_logger().info(f"sensory_preprocessor ready: {config.as_dict()}")
 
     def on_observation(self, m):
+        if m.run_id != self.senses_run and m.run_id in self.senses:
+            self.publish_senses(m.run_id)       # the latched declaration follows the run
         self.lockstep.on_step(m.run_id, m.step_id, lambda: self.features(m))
 
     def features(self, m) -> bytes:
@@ -74,7 +82,19 @@ class SensoryPreprocessorNode(Node):
                          goal_tolerance=g * m.goal_tolerance)
         out.low = (g * np_f64(m.low)).tolist()
         out.high = (g * np_f64(m.high)).tolist()
-        self.senses_pub.publish(out)
+        self.senses.pop(m.run_id, None)
+        self.senses[m.run_id] = out
+        for old in [r for r in self.senses if r != self.senses_run][
+                :max(0, len(self.senses) - SENSES_RUNS)]:
+            del self.senses[old]                # the oldest, never the run being stepped
+        if self.senses_run in (None, m.run_id):
+            self.publish_senses(m.run_id)
+
+    def publish_senses(self, run: int):
+        """Latch run ``run``'s declaration on /feature_senses (its depth is one: a node that
+        joins later reads the declaration of the run being stepped, not a stray's)."""
+        self.senses_run = run
+        self.senses_pub.publish(self.senses[run])
 
     def on_shutdown(self):
         print(f"sensory_preprocessor: {self.lockstep.timer.summary()}", flush=True)
