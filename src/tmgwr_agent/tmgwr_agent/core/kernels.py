@@ -46,27 +46,33 @@ def merge_distance_argmin(w, c, alive, n, x, C, alpha_c):
     return best, best_d
 
 
+@njit(cache=True, inline="always")
+def pair_distance(w, c, i, j, alpha_c):
+    """The merge's distance between nodes i and j,
+    ``(1 - alpha_c)|w_i - w_j|^2 + alpha_c |c_i - c_j|^2`` (sensorimotor_map.py)."""
+    dx = 0.0
+    dc = 0.0
+    for k in range(w.shape[1]):
+        t = w[i, k] - w[j, k]
+        dx += t * t
+        u = c[i, k] - c[j, k]
+        dc += u * u
+    return (1.0 - alpha_c) * dx + alpha_c * dc
+
+
 @njit(cache=True)
 def close_pair(w, c, alive, n, rows, alpha_c, r2):
     """The nearest pair (i, j), i in ``rows``, of live nodes closer than the GWR's matching
     radius, ``d_ij = (1 - alpha_c)|w_i - w_j|^2 + alpha_c |c_i - c_j|^2 < r2``
     (sensorimotor_map.py, the merge); (-1, -1) when none."""
     bi, bj, best = -1, -1, r2
-    dim = w.shape[1]
     for i in rows:
         if i < 0 or i >= n or not alive[i]:
             continue
         for j in range(n):
             if j == i or not alive[j]:
                 continue
-            dx = 0.0
-            dc = 0.0
-            for k in range(dim):
-                t = w[i, k] - w[j, k]
-                dx += t * t
-                u = c[i, k] - c[j, k]
-                dc += u * u
-            d = (1.0 - alpha_c) * dx + alpha_c * dc
+            d = pair_distance(w, c, i, j, alpha_c)
             if d < best:
                 bi, bj, best = i, j, d
     return bi, bj
@@ -256,7 +262,6 @@ def indexed_close_pair(w, c, alive, n, rows, alpha_c, r2, head, node, geom, shap
     if shape[3] == 0 or alpha_c >= 1.0:
         return close_pair(w, c, alive, n, rows, alpha_c, r2)
     bi, bj, bq, best = -1, -1, -1, r2
-    dim = w.shape[1]
     reach = math.sqrt(r2 / (1.0 - alpha_c)) * geom[3] * (1.0 + 1e-9)   # in cell widths
     gy = shape[1]
     for q in range(len(rows)):
@@ -276,14 +281,7 @@ def indexed_close_pair(w, c, alive, n, rows, alpha_c, r2, head, node, geom, shap
                 j = head[ix * gy + iy]
                 while j >= 0:
                     if j != i and j < n and alive[j]:
-                        dx = 0.0
-                        dc = 0.0
-                        for k in range(dim):
-                            t = w[i, k] - w[j, k]
-                            dx += t * t
-                            u = c[i, k] - c[j, k]
-                            dc += u * u
-                        d = (1.0 - alpha_c) * dx + alpha_c * dc
+                        d = pair_distance(w, c, i, j, alpha_c)
                         if d < best or (d == best and (q < bq or (q == bq and j < bj))):
                             bi, bj, bq, best = i, j, q, d
                     j = node[0, j]
