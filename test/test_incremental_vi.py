@@ -469,3 +469,83 @@ def test_the_median_link_length_is_numpys_to_the_bit(dim):
         np.einsum("ij,ij->i", d, d))))
     m.out = np.full_like(out, -1)
     assert MotivationEstimator.link_scale(m) == 0.0
+
+
+def test_a_change_below_the_stopping_rule_moves_no_value():
+    """On the default maze, trained and solved to the fixed point, a link's E lowered by a
+    fraction of the stopping rule (motivation.sweep_tolerance) is not propagated: the
+    incremental solve leaves every V as it was, and every node still meets the rule."""
+    from maze_sim.maze import Maze
+    from tmgwr_agent.core.motivation import V_FLOOR, sweep_tolerance
+    from tmgwr_agent.experiments.agent_factory import make_agent
+    from tmgwr_agent.experiments.runner import Caps, make_world, run_episode, set_goal
+    from tmgwr_agent.experiments.scenarios import DEFAULT_MAZE
+
+    maze = Maze.from_file(DEFAULT_MAZE)
+    world = make_world(maze, "G", Caps.for_maze(maze))
+    agent = make_agent("tmgwr", maze, np.random.default_rng(0))
+    set_goal(world, agent, "G")
+    for _ in range(3):
+        run_episode(world, agent, max_steps=3000)
+    m, mot = agent.map, agent.motivation
+    mot.update(m)
+    n, R, absorbing = m.n, mot.R, mot._absorbing(m, m.n)
+    assert mot._inc is not None and mot.goal_node >= 0
+    kernels.value_iteration(m.out, m.E, R, mot.V, n, mot.beta, mot.gamma, 1e-13, V_FLOOR,
+                            10**6, absorbing, m.alive, mot.U[:n], mot.rho[:n],
+                            mot.osucc[:n], mot.onb[:n], mot.ong[:n])
+
+    def target(i):
+        return kernels.node_target(i, m.out, m.E, R, mot.V, mot.gamma, absorbing, m.alive,
+                                   mot.U, mot.rho, mot.osucc, mot.onb, mot.ong)
+
+    s = sweep_tolerance(mot.vi_tol, mot.beta)
+    # the node of the largest value whose target rests on one of its links
+    for i in np.argsort(-mot.V[:n]):
+        if absorbing[i] or R[i] > 0.0 or not m.alive[i]:
+            continue
+        ev = np.where(m.out[i] >= 0, m.E[i] * mot.V[m.out[i]], 0.0)
+        k = int(np.argmax(ev))
+        if np.isclose(R[i] + mot.gamma * ev[k], target(i), rtol=1e-12):
+            break
+    before = target(i)
+    m.E[i, k] *= 1.0 - 0.25 * s
+    m.log.touch(int(i))
+    change = (before - target(i)) / before
+    assert 0.1 * s < change < 0.5 * s        # above the old sweep's vi_tol (1 - gamma)
+    V = mot.V.copy()
+    incremental = mot.solves["incremental"]
+    mot.update(m)
+    assert mot.solves["incremental"] == incremental + 1
+    assert np.array_equal(mot.V, V)
+    T = np.array([target(j) for j in range(n)])
+    assert (np.abs(mot.beta * (T - mot.V[:n])) <= mot.vi_tol * mot.V[:n] + V_FLOOR).all()
+
+
+def test_an_option_worth_less_is_invalidated():
+    """kernels.changed_options flags ``lost`` (invalidate, then an ordered solve) when an
+    option's rho or U is lowered though the row keeps options, not when they rise."""
+    rng = np.random.default_rng(2)
+    n, P = 20, 4
+    *_, o = random_map(rng, n)
+    o.rho[5] = [0.5, 0.5, 0.0, 0.0]
+    copy = [a.copy() for a in o]
+    seeds = np.empty(n, np.int64)
+    rows = np.array([5], dtype=np.int64)
+
+    def changed():
+        return kernels.changed_options(rows, 1, o.rho, o.U, o.osucc, o.onb, o.ong,
+                                       copy[1], copy[0], copy[2], copy[3], copy[4], seeds, 0)
+
+    o.rho[5, 0] = 0.6
+    c, lost, _ = changed()
+    assert c == 1 and not lost
+    o.rho[5, 0] = 0.2
+    c, lost, _ = changed()
+    assert c == 1 and lost
+    o.U[5, 1] *= 0.5
+    c, lost, _ = changed()
+    assert c == 1 and lost
+    o.U[5, 1] *= 3.0
+    c, lost, _ = changed()
+    assert c == 1 and not lost

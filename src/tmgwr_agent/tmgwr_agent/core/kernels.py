@@ -1230,31 +1230,35 @@ def changed_options(rows, n_rows, rho, U, osucc, onb, ong, rho0, U0, osucc0, onb
     """:func:`changed_rows` for the options of Eq. 5' of the nodes ``rows[:n_rows]`` (those
     recomputed since the last solve): the rows that differ from the copy are appended to
     ``seeds`` from ``c`` and the copy brought up to date. Returns (count, lost, relinked):
-    ``lost`` when a row lost its last option (it may have been a node's only source),
-    ``relinked`` when an option's successor or a wall exit changed (the predecessors must
-    be rebuilt, :func:`predecessors`)."""
+    ``lost`` when an option may be worth less than in the copy (its rho, U or a wall
+    exit's discount lowered, its successor or an exit changed, a row's last option gone:
+    the nodes whose value rested on it would be swept down only geometrically where two
+    of them hold each other up), ``relinked`` when an option's successor or a wall exit
+    changed (the predecessors must be rebuilt, :func:`predecessors`)."""
     P, B = rho.shape[1], onb.shape[2]
     lost = False
     relinked = False
     for k in range(n_rows):
         i = rows[k]
         diff = False
-        had = False
-        has = False
         for a in range(P):
-            had = had or rho0[i, a] > 0.0
-            has = has or rho[i, a] > 0.0
             if rho[i, a] != rho0[i, a] or U[i, a] != U0[i, a]:
                 diff = True
+                if rho[i, a] < rho0[i, a] or (rho[i, a] > 0.0 and U[i, a] < U0[i, a]):
+                    lost = True
             if osucc[i, a] != osucc0[i, a]:
                 diff = relinked = True
+                if rho[i, a] > 0.0:
+                    lost = True
             for b in range(B):
                 if onb[i, a, b] != onb0[i, a, b]:
                     diff = relinked = True
+                    if rho[i, a] > 0.0:
+                        lost = True
                 elif ong[i, a, b] != ong0[i, a, b]:
                     diff = True
-        if had and not has:
-            lost = True
+                    if rho[i, a] > 0.0 and ong[i, a, b] < ong0[i, a, b]:
+                        lost = True
         if diff:
             seeds[c] = i
             c += 1

@@ -21,33 +21,34 @@ sweeps; a new goal restarts from V = 0 (Algorithm 1 line 5).
 **Incremental solution** (``vi_incremental``, on by default; off: the synchronous solve
 every step). A converged step changes almost nothing (the traversed link's E, a node's
 weights, sometimes an option), yet a sweep visits every node. So between full solves the
-estimator keeps a copy of the last solve's inputs and solves by prioritized sweeping
-(Moore & Atkeson 1993, :func:`kernels.prioritized_sweep`): the rows whose links, reward,
-absorbing flag or options differ from the copy are queued, each queued node's V is set to
-the right-hand side of Eq. 4-5' (:func:`kernels.node_target`), largest change first, and
-the nodes that read it are queued when their own residual exceeds ``vi_tol (1 - gamma)
-V``; it stops when nothing above that is left. Every node then meets the synchronous
-solve's stopping rule, and V is as close to the fixed point as the synchronous solve's
-(test_incremental_vi.py). A change that may lower values (a link removed, an E, R or
-last option gone, a node made absorbing) is not swept down: V = 0 is reached only
-geometrically where two nodes hold each other up (a region cut off its sources), so the
-nodes whose value rested on the change are first set to 0 (:func:`kernels.invalidate`,
-LPA*'s under-consistent nodes) and solved again from there in order of value. A goal
-change, a new map size and a sweep over its budget solve every node from V = 0 in order
-of value (:func:`kernels.ordered_solve`): with R = 0 a node is worth at most gamma times
-its best successor, so largest first (Dijkstra's order) settles most nodes at their first
-update, where synchronous sweeps from 0 take about as many rounds as the map is wide, and
-the goal and its neighbours (a 2-cycle converging by gamma^2 a round) are solved among
-themselves first; the synchronous solve remains as the fallback of the fallback. Those
-rows are not searched for: the map
-keeps a log of the rows each step changed (:class:`~tmgwr_agent.core.sensorimotor_map.
-RowLog`; a replica, of the slots each change wrote), and the copy, the frame coordinates,
-the rewards, the goal node and the absorbing masks are brought up to date on those rows
-alone; whatever changes R or the masks on other rows (a full recompute of R, the closed
-cells, the goal made terminal) bumps ``_epoch`` and the next solve compares every row.
-Both are solutions within ``vi_tol``, not the same bits: where two of a node's links are
-worth the same within that tolerance Eq. 6 may choose the other one, and the trajectory
-goes on differently from there.
+estimator keeps a copy of the last solve's inputs and solves by prioritized sweeping (Moore
+& Atkeson 1993, :func:`kernels.prioritized_sweep`): the rows whose links, reward, absorbing
+flag or options differ from the copy are queued, each queued node's V is set to the
+right-hand side of Eq. 4-5' (:func:`kernels.node_target`), largest change first, and the
+nodes that read it are queued when their own residual exceeds the synchronous solve's
+stopping rule (:func:`sweep_tolerance`); it stops when nothing above that is left. Every
+node then meets that rule, and V is within ``vi_tol / (beta (1 - gamma))`` of the fixed
+point, the synchronous solve's own bound (test_incremental_vi.py). A change below the rule
+is not propagated: a traversed link's E creeping towards 1 would otherwise move every value
+upstream of it by a tiny fraction, over the whole map. A change that may lower values (a
+link removed, an E, R or last option gone, an option worth less, a node made absorbing) is
+not swept down: V = 0 is reached only geometrically where two nodes hold each other up (a
+region cut off its sources), so the nodes whose value rested on the change are first set to
+0 (:func:`kernels.invalidate`, LPA*'s under-consistent nodes) and solved again from there
+in order of value. A goal change, a new map size and a sweep over its budget solve every
+node from V = 0 in order of value (:func:`kernels.ordered_solve`): with R = 0 a node is
+worth at most gamma times its best successor, so largest first (Dijkstra's order) settles
+most nodes at their first update, where synchronous sweeps from 0 take about as many rounds
+as the map is wide, and the goal and its neighbours (a 2-cycle converging by gamma^2 a
+round) are solved among themselves first; the synchronous solve remains as the fallback of
+the fallback. Those rows are not searched for: the map keeps a log of the rows each step
+changed (:class:`~tmgwr_agent.core.sensorimotor_map.RowLog`; a replica, of the slots each
+change wrote), and the copy, the frame coordinates, the rewards, the goal node and the
+absorbing masks are brought up to date on those rows alone; whatever changes R or the masks
+on other rows (a full recompute of R, the closed cells, the goal made terminal) bumps
+``_epoch`` and the next solve compares every row. Both are solutions within ``vi_tol``, not
+the same bits: where two of a node's links are worth the same within that tolerance Eq. 6
+may choose the other one, and the trajectory goes on differently from there.
 
 **Exactly 0 without a route.** Before the sweeps a reverse breadth-first search from the
 sources (nodes with R > 0, or with an option below) over the links with E > 0 finds the
@@ -164,6 +165,15 @@ class MotivationConfig(Config):
 OptionTerms = tuple
 
 
+
+
+def sweep_tolerance(vi_tol: float, beta: float) -> float:
+    """The relative residual ``s`` the incremental solve leaves a node (``|T(i) - V(i)|
+    <= s T(i)``, :func:`kernels.prioritized_sweep`; ``T``: :func:`kernels.node_target`):
+    the largest that still meets the synchronous solve's stopping rule ``|beta (T(i) -
+    V(i))| <= vi_tol V(i)``. From ``T <= V + s T``: ``beta |T - V| <= beta s / (1 - s)
+    V``, at most ``vi_tol V`` when ``s = vi_tol / (beta + vi_tol)``."""
+    return vi_tol / (beta + vi_tol)
 
 
 class IncrementalState:
@@ -669,7 +679,7 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         log = getattr(m, "log", None)
         logged = log.since(inc.log_pos) if log is not None and log is inc.log and \
             inc.epoch == self._epoch else None       # None: compare every row
-        tol = self.vi_tol * (1.0 - self.gamma)
+        tol = sweep_tolerance(self.vi_tol, self.beta)
         # with no option rows to compare, a change that needs nothing more is swept at once
         c, lost, relinked, swept, done = kernels.changed_rows_sweep(
             m.out, m.E, R, absorbing, inc.out0, inc.E0, inc.R0, inc.abs0, n, inc.seeds,
