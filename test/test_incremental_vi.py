@@ -526,7 +526,7 @@ def test_an_option_worth_less_is_invalidated():
     """kernels.changed_options flags ``lost`` (invalidate, then an ordered solve) when an
     option's rho or U is lowered though the row keeps options, not when they rise."""
     rng = np.random.default_rng(2)
-    n, P = 20, 4
+    n = 20
     *_, o = random_map(rng, n)
     o.rho[5] = [0.5, 0.5, 0.0, 0.0]
     copy = [a.copy() for a in o]
