@@ -3,7 +3,8 @@ convergence, for every agent alike. The CLI refuses a bad value (exit 2, naming 
 option); ``--event-delay 0`` is today's protocol, JSON for JSON; several delays keep each
 delay's run whole under ``delays`` (each equal to the run at that delay alone), with
 ``settled_steps`` (the mean steps of the K episodes) when K > 0; the results tables read
-the layout back with a delay column and the settled table."""
+the layout back with a delay column and the settled table, the figure one panel per
+delay."""
 
 import json
 
@@ -13,6 +14,7 @@ from test_experiments import cli
 
 from tmgwr_agent.experiments import results
 from tmgwr_agent.experiments.env_change import delay_views, parse_delays
+from tmgwr_agent.experiments.plots import plot
 
 AGENTS = "tmgwr,q_learning"
 SUITE = "blocking:1"
@@ -85,6 +87,8 @@ def test_delay_zero_is_todays_protocol_and_several_delays_keep_each_run(small_ma
                "--trials", 2, "--jobs", 1, "--event-delay", "0,3", "--json",
                tmp_path / "again.json", "--quiet").stdout
     assert "event delay 3: event a" in text and "settled_steps" in text
+    plot(both, tmp_path / "both.png")              # one panel per delay
+    assert (tmp_path / "both.png").stat().st_size > 0
 
 
 @pytest.mark.slow
@@ -106,6 +110,8 @@ def test_suite_delays_layout_and_tables(tmp_path):
             + sorted(m["agents"][a]["settled_steps"]["values"])[1] / 2
             / m["shortest_before"])
     assert "settled_ratio" not in views[0][1]["suite"]["overall"]
+    plot(both, tmp_path / "both.png")
+    assert (tmp_path / "both.png").stat().st_size > 0
     # the results tables read the layout back: a delay column, one row set per delay
     (tmp_path / "results").mkdir()
     doc = {"name": "x", "command": "./tmgwr experiment env-change ...", "commit": "0" * 40,
