@@ -63,6 +63,12 @@ def register(subparsers) -> None:
     p.add_argument("--event", default="a", help="maze event (env-change, timing; default a)")
     p.add_argument("--goal", default="G",
                    help="goal of the env-change / timing training (default G)")
+    p.add_argument("--event-delay", default=None, metavar="K[,K...]",
+                   help="env-change: every agent runs K more learning episodes after "
+                        "convergence before the event (default 0: the event right at "
+                        "convergence); several K (e.g. 0,4,8) run the whole scenario at "
+                        "each and the JSON holds each K's figures under 'delays'; with "
+                        "K > 0 'settled_steps' is the mean steps of those K episodes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--params", action="append", default=None, metavar="FILE|AGENT=FILE",
                    help="parameter overrides from a ROS 2 parameter file such as tune "
@@ -223,7 +229,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
                               args.goal, args.jobs, progress=not args.quiet,
                               overrides=overrides, params_files=params_files,
                               sensor=args.sensor, world=args.world,
-                              world_kwargs=args.world_kwargs)
+                              world_kwargs=args.world_kwargs, delays=args.event_delay)
     except UsageError as exc:
         return _fail(str(exc))
     write_json(result, args.json)
@@ -266,14 +272,15 @@ def _cmd_suite(args: argparse.Namespace) -> int:
                            args.episodes, args.jobs, progress=not args.quiet,
                            maze_dir=maze_dir, overrides=overrides,
                            params_files=params_files, sensor=args.sensor,
-                           world=args.world, world_kwargs=args.world_kwargs)
+                           world=args.world, world_kwargs=args.world_kwargs,
+                           delays=args.event_delay)
     except UsageError as exc:
         return _fail(str(exc))
     write_json(result, args.json)
     if args.plot:
-        from tmgwr_agent.experiments.plots import plot_suite
+        from tmgwr_agent.experiments.plots import plot
         Path(args.plot).parent.mkdir(parents=True, exist_ok=True)
-        plot_suite(result, args.plot)
+        plot(result, args.plot)
     if args.json and args.json != "-":
         print(table(result))
         print(f"mazes: {maze_dir}/")

@@ -21,6 +21,24 @@ Protocol, per agent and trial (a fresh agent, its generator from the trial's see
 (:func:`.runner.learning_steps`): what an episode costs once learnt, exploration and any
 re-testing included, against ``shortest_before``.
 
+Event delay (``--event-delay K[,K...]``, default 0): between steps 1 and 2 every agent
+runs ``K`` more learning episodes from S (learning and exploration on, as in training),
+so the event falls ``K`` episodes after convergence instead of right at it. An agent whose
+behaviour runs in a cycle of episodes (R-max forgetting its walls every ``forget_after``
+episodes) meets the event in another phase of it at each ``K``. The training up to
+convergence is the same for every ``K`` (the same trial seed), so the delays compare the
+same trained agent. With ``K > 0`` each trial also reports ``settled_steps``: the mean
+steps of those ``K`` episodes, the cost of an episode once converged (the re-test tax,
+against ``shortest_before``), which ``learning_steps`` misses when training converges in
+fewer episodes than it averages over. With several delays the JSON holds one body per
+delay (:func:`delay_views` reads either layout):
+
+    {..header.., "event_delays": [K, ...],
+     "delays": [{"event_delay": K, ..the body of a single-K run..}, ...]}
+
+A single ``K > 0`` keeps the single-run layout and adds ``"event_delay": K``; ``K = 0``
+adds nothing (today's JSON).
+
 ``oracle_steps`` (top level): the lower bound of an agent that knows the old maze
 perfectly: it walks a shortest path of the old maze, bumps once into the first blocked
 cell on it, then walks a shortest path of the new maze from where it stands. Over all
@@ -40,7 +58,9 @@ Parameters: ``overrides`` (``experiment --params``) change an agent's declared d
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+import re
+from functools import partial
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -65,9 +85,74 @@ from tmgwr_agent.experiments.stats import stat
 
 #: Per-trial results, each a STAT per agent in the JSON.
 RESULTS = ("steps", "episodes_to_optimal", "train_episodes", "learning_steps")
+#: With an event delay K > 0, also: the mean steps of the K settled episodes.
+DELAYED_RESULTS = RESULTS + ("settled_steps",)
 
 DEFAULT_AGENTS = ("tmgwr", "tmgwr:literal", "tmgwr:credit", "q_learning", "model_based",
                   "dyna_q_plus")
+
+
+class DelayError(ValueError):
+    """An ``--event-delay`` that is not a list of distinct whole numbers >= 0."""
+
+
+def parse_delays(text: str | int | Sequence[int] | None) -> tuple[int, ...]:
+    """``--event-delay``: ``"0,4,8"`` (or ints) -> ``(0, 4, 8)``; None -> ``(0,)``.
+    Raises :class:`DelayError` naming the part that is not a whole number >= 0, or a
+    delay given twice."""
+    if text is None:
+        return (0,)
+    parts = ([p.strip() for p in text.split(",")] if isinstance(text, str)
+             else [str(text)] if isinstance(text, int) else [str(p) for p in text])
+    out: list[int] = []
+    for part in parts:
+        if not re.fullmatch(r"[0-9]+", part):
+            raise DelayError(f"{part!r} is not a whole number of episodes >= 0 "
+                             f"(expected K or K,K,... such as 0,4,8)")
+        if int(part) in out:
+            raise DelayError(f"delay {int(part)} given twice")
+        out.append(int(part))
+    return tuple(out)
+
+
+def results_keys(delay: int) -> tuple[str, ...]:
+    """The per-trial results of a run at event delay ``delay``."""
+    return DELAYED_RESULTS if delay else RESULTS
+
+
+def delay_views(result: dict) -> list[tuple[int, dict]]:
+    """``[(K, result at K)]`` of an env-change JSON in either layout (see the module
+    docstring): each view has the single-run layout, the header fields included."""
+    if "delays" not in result:
+        return [(int(result.get("event_delay", 0)), result)]
+    head = {k: v for k, v in result.items() if k not in ("delays", "event_delays")}
+    return [(d["event_delay"], {**head, **{k: v for k, v in d.items() if k != "event_delay"}})
+            for d in result["delays"]]
+
+
+#: The fields of a run that differ between delays; the others are the same at every K.
+DELAY_BODY = ("agents", "suite")
+
+
+def with_delays(views: Sequence[tuple[int, dict]]) -> dict:
+    """Runs at each delay -> the JSON: a single ``K`` keeps its run's layout (with
+    ``event_delay`` before ``agents`` when ``K > 0``); several keep the fields the same
+    at every ``K`` once at the top and the :data:`DELAY_BODY` of each under ``delays``."""
+    if len(views) == 1:
+        k, body = views[0]
+        if not k:
+            return body
+        out = {}
+        for key, v in body.items():
+            if key == "agents":
+                out["event_delay"] = k
+            out[key] = v
+        return out
+    head = {key: v for key, v in views[0][1].items() if key not in DELAY_BODY}
+    out = {**head, "event_delays": [k for k, _ in views]}
+    out["delays"] = [{"event_delay": k, **{key: body[key] for key in DELAY_BODY
+                                          if key in body}} for k, body in views]
+    return out
 
 
 def oracle_steps(maze: Maze, event: str, goal: str = "G") -> int:
@@ -129,11 +214,14 @@ def event_oracle(world: WorldSpec | None, maze: Maze, event: str, goal: str) -> 
 def trial(spec: str, t: int, seed: np.random.SeedSequence, maze: str | Maze, event: str,
           goal: str, overrides: Mapping[str, Any] | None = None, *,
           to_optimal: bool = True, within: int | None = None,
-          sensor: str = IDENTITY, world_spec: WorldSpec | None = None) -> dict:
+          sensor: str = IDENTITY, world_spec: WorldSpec | None = None,
+          delay: int = 0) -> dict:
     """Steps 1-4 for one agent and trial (``maze``: a file or a Maze); ``to_optimal``
     False stops after step 3 (``episodes_to_optimal`` is then ``None``); ``within`` caps
     step 4 at that many episodes (``None`` beyond them; default the caps of
-    :class:`.runner.Caps`); ``sensor``: the ``--sensor`` spec (:mod:`.sensing`)."""
+    :class:`.runner.Caps`); ``sensor``: the ``--sensor`` spec (:mod:`.sensing`);
+    ``delay``: the learning episodes between convergence and the event (with
+    ``settled_steps``, their mean steps, when > 0)."""
     maze = maze if isinstance(maze, Maze) else Maze.from_file(maze)
     caps = Caps.for_maze(maze)
     world = make_world(maze, goal, caps, sensor, seed, world_spec)
@@ -141,6 +229,7 @@ def trial(spec: str, t: int, seed: np.random.SeedSequence, maze: str | Maze, eve
                        sensed=not world.identity, senses=world.senses)
     set_goal(world, agent, goal)
     conv = train_until_converged(world, agent, caps)
+    settled = [run_episode(world, agent).steps for _ in range(delay)]
     world.fire_event(event)
     d_new = world.shortest_path_length()
     ep = run_episode(world, agent)
@@ -158,21 +247,39 @@ def trial(spec: str, t: int, seed: np.random.SeedSequence, maze: str | Maze, eve
             e = run_episode(world, agent)
             n += 1
             used += e.steps
-    return {"steps": steps, "episodes_to_optimal": episodes,
-            "train_episodes": conv.episodes, "learning_steps": learning_steps(conv.curve)}
+    out = {"steps": steps, "episodes_to_optimal": episodes,
+           "train_episodes": conv.episodes, "learning_steps": learning_steps(conv.curve)}
+    if delay:
+        out["settled_steps"] = sum(settled) / delay
+    return out
+
+
+def trial_at_delay(fn, spec: str, *args, **kwargs) -> dict:
+    """``fn(spec, *args[:-1], delay=args[-1], **kwargs)``: a trial whose delay is its
+    last positional argument (one item of a pool over several delays). Picklable with
+    :func:`functools.partial`."""
+    *args, delay = args
+    return fn(spec, *args, delay=delay, **kwargs)
 
 
 def run(maze_path: str, agents: list[str], trials: int, seed: int, event: str = "a",
         goal: str = "G", jobs: int | None = None, progress: bool = True,
         overrides: Mapping[str, Mapping[str, Any]] | None = None,
-        sensor: str = IDENTITY, world: WorldSpec | None = None) -> dict:
+        sensor: str = IDENTITY, world: WorldSpec | None = None,
+        delays: Sequence[int] = (0,)) -> dict:
     """``overrides``: parameter overrides per agent spec (absent: the defaults);
-    ``sensor``: the normalised ``--sensor`` spec."""
+    ``sensor``: the normalised ``--sensor`` spec; ``delays``: the event delays, each run
+    in full (the JSON layout of :func:`with_delays`)."""
     maze = Maze.from_file(maze_path)
-    fn = scenario_trial(trial, sensor, world)
-    res = agent_trials(with_overrides(fn, overrides), agents, seed, trials,
-                       (maze_path, event, goal), jobs, f"env-change {event}", progress)
-    out = {a: {k: stat(r[k] for r in rs) for k in RESULTS}
-           for a, rs in res.items()}
-    return {"event": event, "goal": goal, **event_oracle(world, maze, event, goal),
-            "agents": out}
+    head = {"event": event, "goal": goal, **event_oracle(world, maze, event, goal)}
+    views = []
+    for k in delays:
+        fn = scenario_trial(trial, sensor, world)
+        fn = partial(fn, delay=k) if k else fn
+        what = f"env-change {event}" + (f" delay {k}" if k else "")
+        res = agent_trials(with_overrides(fn, overrides), agents, seed, trials,
+                           (maze_path, event, goal), jobs, what, progress)
+        views.append((k, {**head, "agents": {a: {key: stat(r[key] for r in rs)
+                                                 for key in results_keys(k)}
+                                             for a, rs in res.items()}}))
+    return with_delays(views)

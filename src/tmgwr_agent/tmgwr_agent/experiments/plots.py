@@ -16,6 +16,9 @@
   ``episodes_to_optimal`` instead (a dashed line at 10 episodes, mazes whose median
   never found the shortcut counted). goal-change: per agent a box of the per-maze mean
   % of episodes ending at the current goal.
+* env-change at several event delays (``--event-delay 0,4,8``, :func:`plot_delays`): one
+  panel per delay K, per agent the values a suite's ``overall`` summary boxes (or, on one
+  maze, every trial's steps), on the same log scale.
 """
 
 from __future__ import annotations
@@ -220,7 +223,59 @@ PLOTS = {"goal-change": plot_goal_change, "env-change": plot_env_change,
          "sample-complexity": plot_sample_complexity, "timing": plot_timing}
 
 
+def plot_delays(result: dict, path: str | Path) -> None:
+    """One panel per event delay K (:func:`.env_change.delay_views`): on a suite, per agent
+    the per-maze values of the ``overall`` summary (oracle ratio after a block, episodes
+    to optimal after an opening); on one maze, every trial's steps after the event."""
+    from tmgwr_agent.experiments.env_change import delay_views
+    views = delay_views(result)
+    fig, axes = plt.subplots(1, len(views), figsize=(4.6 * len(views), 4.2), sharey=True,
+                             squeeze=False)
+    for ax, (k, v) in zip(axes.flat, views):
+        if "suite" in v:
+            opening = v["suite"].get("event") == "open"
+            key = "episodes_to_optimal" if opening else "oracle_ratio"
+            per = v["suite"]["overall"][key]
+            label = ("episodes until the greedy path\nuses the shortcut (median per maze)"
+                     if opening else "median steps / oracle_steps per maze")
+        else:
+            per = {a: d["steps"] for a, d in v["agents"].items()}
+            label = "steps to reach the goal after the event (each trial)"
+        names = list(per)
+        for i, a in enumerate(names):
+            vals = [x for x in per[a]["values"] if x is not None]
+            if vals:
+                ax.boxplot([vals], positions=[i], widths=0.5, showfliers=False,
+                           medianprops={"color": "tab:red"})
+                ax.plot([i] * len(vals), vals, "k.", ms=4, alpha=0.7)
+            missing = len(per[a]["values"]) - len(vals)
+            if missing:
+                ax.text(i, 0.98, f"{missing} never", ha="center", va="top", fontsize=7,
+                        color="tab:red", transform=ax.get_xaxis_transform())
+        ax.set_yscale("log")
+        plain = matplotlib.ticker.FuncFormatter(lambda y, _: f"{y:g}")
+        ax.yaxis.set_major_formatter(plain)
+        lo, hi = ax.get_ylim()
+        if hi / lo < 10:                 # less than a decade: label the minor ticks too
+            ax.yaxis.set_minor_formatter(plain)
+        ax.set_xticks(range(len(names)), names, rotation=20, fontsize=8)
+        ax.set_title(f"event delay K = {k}", fontsize=9)
+        if ax is axes.flat[0]:
+            ax.set_ylabel(label)
+    first = views[0][1]
+    where = (f"suite {first['suite']['spec']} (seed {first['suite']['seed']})"
+             if "suite" in first else Path(str(result.get("maze"))).name)
+    fig.suptitle(f"env-change, {where}, {result['trials']} trials: the event K learning "
+                 f"episodes after convergence", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def plot(result: dict, path: str | Path) -> None:
+    if "delays" in result:
+        plot_delays(result, path)
+        return
     if "suite" in result:
         plot_suite(result, path)
         return

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from tmgwr_agent.experiments.env_change import delay_views
 from tmgwr_agent.experiments.stats import fmt
 
 
@@ -15,17 +16,13 @@ def _table(header: list[str], rows: list[list[str]]) -> str:
 
 
 def table(result: dict) -> str:
-    sc, agents = result["scenario"], result["agents"]
+    sc, agents = result["scenario"], result.get("agents")
     if sc == "goal-change":
         rows = [[a, f"{t['from']}->{t['to']}", fmt(t["previous_pct"]), fmt(t["current_pct"])]
                 for a, d in agents.items() for t in d["transitions"]]
         return _table(["agent", "goals", "% previous", "% current"], rows)
     if sc == "env-change":
-        rows = [[a, fmt(d["steps"]), fmt(d["episodes_to_optimal"])]
-                for a, d in agents.items()]
-        return (f"event {result['event']}: oracle_steps {result['oracle_steps']} "
-                f"(shortest path {result['shortest_before']} -> {result['shortest_after']})\n"
-                + _table(["agent", "steps", "episodes_to_optimal"], rows))
+        return "\n\n".join(_env_change(v, k) for k, v in delay_views(result))
     if sc == "sample-complexity":
         goals = result["goals"]
         rows = [[a] + [fmt(d["goals"][g]["episodes_to_converge"]) for g in goals]
@@ -39,6 +36,17 @@ def table(result: dict) -> str:
             ["agent", "train", f"goal {'->'.join(result['goals'])}",
              f"event {result['event']}"], rows))
     raise ValueError(f"unknown scenario {sc!r}")
+
+
+def _env_change(result: dict, delay: int) -> str:
+    """One delay's env-change table (``settled_steps`` after a delay K > 0)."""
+    rows = [[a, fmt(d["steps"]), fmt(d["episodes_to_optimal"])]
+            + ([fmt(d["settled_steps"])] if delay else []) for a, d in result["agents"].items()]
+    return ((f"event delay {delay}: " if delay else "")
+            + f"event {result['event']}: oracle_steps {result['oracle_steps']} "
+            f"(shortest path {result['shortest_before']} -> {result['shortest_after']})\n"
+            + _table(["agent", "steps", "episodes_to_optimal"]
+                     + (["settled_steps"] if delay else []), rows))
 
 
 def bench_table(result: dict) -> str:

@@ -243,16 +243,31 @@ def _pct(x: float | None) -> str:
     return "-" if x is None else f"{100 * x:.0f} %"
 
 
+def _delays(r: dict) -> tuple[list[tuple[int, dict]], bool]:
+    """An env-change result per event delay, and whether a table shows a delay column
+    (a file run at one delay of 0, today's protocol, does not)."""
+    from tmgwr_agent.experiments.env_change import delay_views
+    views = delay_views(r)
+    return views, len(views) > 1 or views[0][0] != 0
+
+
+def _delay_note(shown: bool) -> str:
+    return ("Event delay K: the learning episodes every agent ran after convergence "
+            "before the event. " if shown else "")
+
+
 def table_suite(root: Path, name: str = "suite_blocks") -> str:
     """Blocks on the suite: per family and agent, the median over mazes of the per-maze
-    median steps / oracle and the worst trial; the first agent's share of mazes won."""
+    median steps / oracle and the worst trial; the first agent's share of mazes won.
+    A file run at several event delays: the rows of each delay, a column naming it."""
     d = load(name, root)
-    r, s = d["result"], d["result"]["suite"]
+    views, shown = _delays(d["result"])
+    r, s = views[0][1], views[0][1]["suite"]
     agents = list(r["agents"])
     first, others = agents[0], agents[1:]
     rows = []
-    for fam, f in _families(s):
-        row = [f"{fam} ({f['mazes']})"]
+    for k, fam, f in ((k, fam, f) for k, v in views for fam, f in _families(v["suite"])):
+        row = ([str(k)] if shown else []) + [f"{fam} ({f['mazes']})"]
         for a in agents:
             ratio, worst = f["oracle_ratio"][a]["median"], f["worst_trial_ratio"][a]
             failed = f["failures"][a]
@@ -261,13 +276,14 @@ def table_suite(root: Path, name: str = "suite_blocks") -> str:
                        + (f" ({failed} failed)" if failed else ""))
         row.append(" / ".join(_pct(f["win_rate"][first].get(b)) for b in others))
         rows.append(row)
-    header = (["family (mazes)"] + [f"`{a}` median / worst" for a in agents]
+    header = ((["event delay K"] if shown else []) + ["family (mazes)"]
+              + [f"`{a}` median / worst" for a in agents]
               + [f"`{first}` beats {' / '.join(f'`{b}`' for b in others)}"])
     return (_md(header, rows)
             + "\n\nSteps of the first episode after the block over `oracle_steps`: the "
             "median over mazes of each maze's median trial, then the worst trial; a maze "
-            "is won when the agent's median steps are strictly fewer. "
-            f"Suite `{s['spec']}`, suite seed {s['seed']}, {r['trials']} trials per maze. "
+            "is won when the agent's median steps are strictly fewer. " + _delay_note(shown)
+            + f"Suite `{s['spec']}`, suite seed {s['seed']}, {r['trials']} trials per maze. "
             + _source(d))
 
 
@@ -294,20 +310,51 @@ def table_suite_goals(root: Path, name: str) -> str:
 
 def table_suite_openings(root: Path, name: str = "suite_openings") -> str:
     """Openings on the suite: per family and agent, the share of trials whose greedy path
-    uses the shortcut within 10 episodes, and ever (within the caps)."""
+    uses the shortcut within 10 episodes, and ever (within the caps). A file run at
+    several event delays: the rows of each delay, a column naming it."""
     d = load(name, root)
-    r, s = d["result"], d["result"]["suite"]
+    views, shown = _delays(d["result"])
+    r, s = views[0][1], views[0][1]["suite"]
     agents = list(r["agents"])
     rows = []
-    for fam, f in _families(s):
-        rows.append([f"{fam} ({f['mazes']})"]
-                    + [f"{_pct(f['optimal_within_10'][a])} / {_pct(f['optimal_found'][a])}"
-                       for a in agents])
-    return (_md(["family (mazes)"] + [f"`{a}` within 10 / ever" for a in agents], rows)
+    for k, v in views:
+        for fam, f in _families(v["suite"]):
+            rows.append(([str(k)] if shown else []) + [f"{fam} ({f['mazes']})"]
+                        + [f"{_pct(f['optimal_within_10'][a])} / "
+                           f"{_pct(f['optimal_found'][a])}" for a in agents])
+    return (_md((["event delay K"] if shown else []) + ["family (mazes)"]
+                + [f"`{a}` within 10 / ever" for a in agents], rows)
             + "\n\nShare of trials whose greedy path uses the new shortcut within 10 "
-            "episodes of the opening, and within the caps. "
+            "episodes of the opening, and within the caps. " + _delay_note(shown)
+            + f"Suite `{s['spec']}`, suite seed {s['seed']}, {r['trials']} trials per maze. "
+            + _source(d))
+
+
+def table_settled(root: Path, name: str) -> str:
+    """The cost of an episode once converged, per event delay K > 0 of a suite file: per
+    family and agent, the median over mazes of each maze's median trial of
+    ``settled_steps`` (the mean steps of the K learning episodes between convergence and
+    the event) over the shortest path."""
+    d = load(name, root)
+    views = [(k, v) for k, v in _delays(d["result"])[0] if k]
+    if not views:
+        raise ResultsError(f"results/{name}.json was run at no event delay > 0 "
+                           f"(record it with --event-delay K, K > 0)")
+    agents = list(views[0][1]["agents"])
+    rows = [[str(k), f"{fam} ({f['mazes']})"]
+            + [_f2(f["settled_ratio"][a]["median"]) for a in agents]
+            for k, v in views for fam, f in _families(v["suite"])]
+    s, r = views[0][1]["suite"], views[0][1]
+    return (_md(["event delay K", "family (mazes)"] + [f"`{a}`" for a in agents], rows)
+            + "\n\nMean steps of the K learning episodes (exploration and any re-testing "
+            "included) that every agent ran after convergence and before the event, over "
+            "the shortest path: the median over mazes of each maze's median trial. "
             f"Suite `{s['spec']}`, suite seed {s['seed']}, {r['trials']} trials per maze. "
             + _source(d))
+
+
+def _f2(v: float | None) -> str:
+    return "never" if v is None else f"{v:.2f}"
 
 
 def table_sample_complexity(root: Path) -> str:

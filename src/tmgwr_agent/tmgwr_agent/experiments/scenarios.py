@@ -195,16 +195,19 @@ def run_scenario(scenario: str, maze_path: str | Path = DEFAULT_MAZE,
                  progress: bool = True,
                  overrides: Mapping[str, Mapping[str, Any]] | None = None,
                  params_files: Sequence[str] = (), sensor: str | None = None,
-                 world: str | None = None, world_kwargs: str | None = None) -> dict:
+                 world: str | None = None, world_kwargs: str | None = None,
+                 delays: str | Sequence[int] | None = None) -> dict:
     """``overrides``: parameter overrides per agent spec (``--params``; None: every agent
     with its declared defaults, and no ``params`` in the JSON); ``params_files``: where
     they came from, recorded beside them; ``sensor``: the ``--sensor`` spec (None:
     identity), recorded normalised as ``sensor``; ``world``, ``world_kwargs``: the
     ``--world`` and its ``--world-kwargs`` JSON (None: the grid), recorded as ``world``
-    (and ``world_kwargs`` when given). A ``gym:ID`` world runs on its own layout (written
+    (and ``world_kwargs`` when given); ``delays``: env-change's ``--event-delay``
+    (:func:`check_delays`). A ``gym:ID`` world runs on its own layout (written
     as a maze file to a temporary folder: ``maze_path`` is not read)."""
     if scenario not in SCENARIOS:
         raise UsageError(f"unknown scenario {scenario!r}; scenarios: {', '.join(SCENARIOS)}")
+    delays = check_delays(delays, scenario)
     d = DEFAULTS[scenario]
     wspec, agents = check_world_spec(world, world_kwargs, agents, d["agents"], scenario,
                                      parse_sensor_spec(sensor))
@@ -213,15 +216,29 @@ def run_scenario(scenario: str, maze_path: str | Path = DEFAULT_MAZE,
         with tempfile.TemporaryDirectory(prefix="tmgwr_gym_") as tmp:
             out = _run_scenario(scenario, gym_maze(wspec, tmp), agents, trials, seed,
                                 goals or ("G",), episodes, event, goal, jobs, progress,
-                                overrides, params_files, sensor, wspec)
+                                overrides, params_files, sensor, wspec, delays)
         out["maze"] = f"{wspec.text} (layout seed {wspec.kwargs.get('layout_seed', 0)})"
         return out
     return _run_scenario(scenario, maze_path, agents, trials, seed, goals, episodes, event,
-                         goal, jobs, progress, overrides, params_files, sensor, wspec)
+                         goal, jobs, progress, overrides, params_files, sensor, wspec, delays)
+
+
+def check_delays(delays: str | Sequence[int] | None, scenario: str) -> tuple[int, ...]:
+    """``--event-delay``: the delays (:func:`.env_change.parse_delays`; None: ``(0,)``),
+    refused as a :class:`UsageError` naming the part, or the scenario when it is not
+    env-change."""
+    try:
+        out = env_change.parse_delays(delays)
+    except env_change.DelayError as exc:
+        raise UsageError(f"--event-delay: {exc}") from None
+    if out != (0,) and scenario != "env-change":
+        raise UsageError(f"--event-delay applies to env-change only, not {scenario}")
+    return out
 
 
 def _run_scenario(scenario, maze_path, agents, trials, seed, goals, episodes, event, goal,
-                  jobs, progress, overrides, params_files, sensor, wspec: WorldSpec) -> dict:
+                  jobs, progress, overrides, params_files, sensor, wspec: WorldSpec,
+                  delays: tuple[int, ...] = (0,)) -> dict:
     d = DEFAULTS[scenario]
     maze = load_maze(maze_path)
     maze_path = maze.source          # the file found (a name resolves to the installed maze)
@@ -245,7 +262,7 @@ def _run_scenario(scenario, maze_path, agents, trials, seed, goals, episodes, ev
         body = goal_change.run(maze_s, agents, trials, seed, goals, episodes, **common)
     elif scenario == "env-change":
         body = env_change.run(maze_s, agents, trials, seed, check_event(maze, event, goal),
-                              goal, **common)
+                              goal, delays=delays, **common)
     elif scenario == "sample-complexity":
         body = sample_complexity.run(maze_s, agents, trials, seed, goals, episodes, **common)
     else:
@@ -259,9 +276,12 @@ def _run_scenario(scenario, maze_path, agents, trials, seed, goals, episodes, ev
         out["world_kwargs"] = dict(wspec.kwargs)
     if declared_probe_tolerance(wspec):
         out["probe_tolerance"] = declared_probe_tolerance(wspec)
-    out.update({k: v for k, v in body.items() if k != "agents"})
+    out.update({k: v for k, v in body.items() if k not in ("agents", "delays")})
     out["caps"] = asdict(Caps.for_maze(maze))
     if overrides is not None:
         out["params"] = params_record(overrides, params_files)
-    out["agents"] = body["agents"]
+    if "delays" in body:                     # several --event-delay values
+        out["delays"] = body["delays"]
+    else:
+        out["agents"] = body["agents"]
     return out

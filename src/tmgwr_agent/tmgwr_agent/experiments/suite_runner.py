@@ -62,6 +62,12 @@ env-change ``SUMMARY`` (over the mazes of the family, or over all of them)::
      "episodes_win_rate": {NAME: {OTHER: as win_rate, on the per-maze median
                                   episodes_to_optimal}}}
 
+With ``--event-delay K`` (K > 0) each maze's agents also hold ``settled_steps`` (the mean
+steps of the K learning episodes between convergence and the event, per trial) and the
+SUMMARY ``settled_ratio`` ({NAME: STAT + "median" over mazes of each maze's median trial
+over ``shortest_before``}); with several delays the JSON holds one ``agents`` and
+``suite`` per delay under ``delays`` (:func:`.env_change.with_delays`).
+
 For an opening the first episode's steps hardly differ from the old path (the oracle):
 the measures that matter are ``optimal_within_10``, ``optimal_found`` and
 ``episodes_win_rate``.
@@ -79,6 +85,7 @@ import math
 import statistics
 import tempfile
 from dataclasses import asdict
+from functools import partial
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -95,6 +102,7 @@ from tmgwr_agent.experiments.runner import (
 from tmgwr_agent.experiments.scenarios import (
     DEFAULTS,
     UsageError,
+    check_delays,
     check_overrides,
     check_sensor_spec,
     check_world_spec,
@@ -154,7 +162,8 @@ def _wins(scores: dict[str, list], higher_better: bool = False) -> dict:
 
 
 # ------------------------------------------------------------------ env-change summaries
-def _env_summary(mazes: list[dict], agents: list[str], trials: int, skipped: int) -> dict:
+def _env_summary(mazes: list[dict], agents: list[str], trials: int, skipped: int,
+                 delay: int = 0) -> dict:
     out: dict = {"mazes": len(mazes), "skipped": skipped, "trials": trials}
     scores = {a: [_median_score(m["agents"][a]["steps"]["values"]) for m in mazes]
               for a in agents}
@@ -182,23 +191,28 @@ def _env_summary(mazes: list[dict], agents: list[str], trials: int, skipped: int
                                  pred) for a in agents}
     out["episodes_win_rate"] = _wins({a: out["episodes_to_optimal"][a]["values"]
                                       for a in agents})
+    if delay:
+        out["settled_ratio"] = {
+            a: _stat_median([statistics.median(m["agents"][a]["settled_steps"]["values"])
+                             / m["shortest_before"] for m in mazes]) for a in agents}
     return out
 
 
 def _env_maze(sm: SuiteMaze, event: str, res: dict[str, list[dict]],
-              world: WorldSpec | None = None) -> dict:
+              world: WorldSpec | None = None, delay: int = 0) -> dict:
     maze = sm.maze()
+    keys = env_change.results_keys(delay)
     return {"event": event, **env_change.event_oracle(world, maze, event, GOAL),
             "caps": asdict(Caps.for_maze(maze)),
-            "agents": {a: {k: stat(r[k] for r in rs) for k in env_change.RESULTS}
+            "agents": {a: {k: stat(r[k] for r in rs) for k in keys}
                        for a, rs in res.items()}}
 
 
-def _env_agents(mazes: list[dict], agents: list[str]) -> dict:
+def _env_agents(mazes: list[dict], agents: list[str], delay: int = 0) -> dict:
     out = {}
     for a in agents:
         d = {k: stat(v for m in mazes for v in m["agents"][a][k]["values"])
-             for k in env_change.RESULTS}
+             for k in env_change.results_keys(delay)}
         d["oracle_ratio"] = stat(None if v is None else v / m["oracle_steps"]
                                  for m in mazes for v in m["agents"][a]["steps"]["values"])
         out[a] = d
@@ -265,13 +279,16 @@ def run_suite(scenario: str, spec: str, agents: Sequence[str] | None = None,
               maze_dir: str | Path | None = None,
               overrides: Mapping[str, Mapping[str, Any]] | None = None,
               params_files: Sequence[str] = (), sensor: str | None = None,
-              world: str | None = None, world_kwargs: str | None = None) -> dict:
+              world: str | None = None, world_kwargs: str | None = None,
+              delays: str | Sequence[int] | None = None) -> dict:
     """Run ``scenario`` on every maze of ``spec``; returns the suite JSON (see above).
     ``maze_dir``: where the maze files go (None: a temporary folder, removed after);
-    ``overrides``, ``params_files``, ``sensor``, ``world``, ``world_kwargs``: as for
-    :func:`.scenarios.run_scenario` (a ``gym:ID`` world has no suite)."""
+    ``overrides``, ``params_files``, ``sensor``, ``world``, ``world_kwargs``, ``delays``:
+    as for :func:`.scenarios.run_scenario` (a ``gym:ID`` world has no suite; several
+    delays: one suite body per delay, :func:`.env_change.with_delays`)."""
     if scenario not in SUITE_SCENARIOS:
         raise UsageError(f"--suite runs {' and '.join(SUITE_SCENARIOS)}, not {scenario}")
+    delays = check_delays(delays, scenario)
     if trials < 1:
         raise UsageError(f"--trials must be >= 1, got {trials}")
     if suite_seed < 0 or first < 0:
@@ -307,45 +324,62 @@ def run_suite(scenario: str, spec: str, agents: Sequence[str] | None = None,
         with tempfile.TemporaryDirectory(prefix="tmgwr_suite_") as tmp:
             return _run(scenario, spec, agents, trials, seed, suite_seed, first, kind,
                         episodes, jobs, progress, Path(tmp), mazes, todo, skipped, params,
-                        sensor, wspec)
+                        sensor, wspec, delays)
     return _run(scenario, spec, agents, trials, seed, suite_seed, first, kind, episodes,
-                jobs, progress, Path(maze_dir), mazes, todo, skipped, params, sensor, wspec)
+                jobs, progress, Path(maze_dir), mazes, todo, skipped, params, sensor, wspec,
+                delays)
 
 
 def _run(scenario, spec, agents, trials, seed, suite_seed, first, kind, episodes, jobs,
          progress, maze_dir: Path, mazes, todo, skipped, params, sensor: str,
-         wspec: WorldSpec) -> dict:
+         wspec: WorldSpec, delays: tuple[int, ...] = (0,)) -> dict:
     for sm in mazes:                      # every maze, skipped ones too: all inspectable
         sm.write(maze_dir)
     seeds = trial_seeds(seed, trials)
     items, owner = [], []
-    for m, (sm, arg) in enumerate(todo):
-        path = str(maze_dir / f"{sm.name}.txt")
-        extra = (path, arg, GOAL) if scenario == "env-change" else (path, arg, episodes)
-        for a in agents:
-            for t in range(trials):
-                items.append((a, t, seeds[t]) + extra)
-                owner.append((m, a))
+    several = len(delays) > 1 or delays[0] != 0
+    for k in delays:
+        for m, (sm, arg) in enumerate(todo):
+            path = str(maze_dir / f"{sm.name}.txt")
+            extra = (path, arg, GOAL) if scenario == "env-change" else (path, arg, episodes)
+            for a in agents:
+                for t in range(trials):
+                    items.append((a, t, seeds[t]) + extra + ((k,) if several else ()))
+                    owner.append((k, m, a))
     fn = env_change.trial if scenario == "env-change" else goal_change.trial
     fn = scenario_trial(fn, sensor, wspec)
+    if several:                           # the delay rides as each item's last argument
+        fn = partial(env_change.trial_at_delay, fn)
     fn = with_overrides(fn, params[0] if params else None)
     # Biggest mazes first (the pool's tail is shorter); results go back in item order.
-    order = sorted(range(len(items)), key=lambda i: -todo[owner[i][0]][0].free_cells)
+    order = sorted(range(len(items)), key=lambda i: -todo[owner[i][1]][0].free_cells)
     done = run_items(fn, [items[i] for i in order], jobs,
                      f"{scenario} suite {spec}", progress)
     flat: list = [None] * len(items)
     for i, r in zip(order, done):
         flat[i] = r
-    res: list[dict[str, list]] = [{a: [] for a in agents} for _ in todo]
-    for (m, a), r in zip(owner, flat):
-        res[m][a].append(r)
+    views = []
+    for k in delays:
+        res: list[dict[str, list]] = [{a: [] for a in agents} for _ in todo]
+        for (kk, m, a), r in zip(owner, flat):
+            if kk == k:
+                res[m][a].append(r)
+        views.append((k, _body(scenario, spec, agents, trials, seed, suite_seed, first,
+                               kind, episodes, mazes, todo, skipped, params, sensor, wspec,
+                               res, k)))
+    return env_change.with_delays(views)
 
+
+def _body(scenario, spec, agents, trials, seed, suite_seed, first, kind, episodes, mazes,
+          todo, skipped, params, sensor: str, wspec: WorldSpec, res: list[dict[str, list]],
+          delay: int) -> dict:
+    """The suite JSON of one delay's results ``res`` (per maze of ``todo``, per agent)."""
     entries, raw = [], {}
     for (sm, arg), r in zip(todo, res):
         entry = {"name": sm.name, "family": sm.family, "index": sm.index,
                  "file": f"{sm.name}.txt", "free_cells": sm.free_cells}
         if scenario == "env-change":
-            entry.update(_env_maze(sm, arg, r, wspec))
+            entry.update(_env_maze(sm, arg, r, wspec, delay))
         else:
             entry.update({"goals": list(arg), "caps": asdict(Caps.for_maze(sm.maze())),
                           "agents": {a: {"transitions": _goal_rows(rs)}
@@ -360,7 +394,7 @@ def _run(scenario, spec, agents, trials, seed, suite_seed, first, kind, episodes
 
     def summary(ms: list[dict], n_skipped: int) -> dict:
         if scenario == "env-change":
-            return _env_summary(ms, agents, trials, n_skipped)
+            return _env_summary(ms, agents, trials, n_skipped, delay)
         return _goal_summary(ms, raw, agents, trials, n_skipped)
 
     fam_summary = {f: summary([e for e in entries if e["family"] == f],
@@ -380,7 +414,7 @@ def _run(scenario, spec, agents, trials, seed, suite_seed, first, kind, episodes
     if params:
         out["params"] = params_record(*params)
     if scenario == "env-change":
-        out["agents"] = _env_agents(entries, agents)
+        out["agents"] = _env_agents(entries, agents, delay)
     else:
         out["agents"] = ({a: {"transitions": _goal_rows(
             [trial for e in entries for trial in raw[e["name"]][a]])} for a in agents}
@@ -401,7 +435,16 @@ def _f(v, digits: int = 2) -> str:
 def table(result: dict) -> str:
     """Per family and agent: median oracle ratio (env-change) or mean % at the current
     goal (goal-change), failures, and win rates against every other agent (on
-    ``episodes_to_optimal`` for openings)."""
+    ``episodes_to_optimal`` for openings); after an event delay K > 0 also the median
+    ``settled_ratio``; several delays: one table per delay."""
+    views = env_change.delay_views(result) if result["scenario"] == "env-change" \
+        else [(0, result)]
+    if len(views) == 1 and not views[0][0]:
+        return _table(result)
+    return "\n\n".join(f"event delay {k}:\n{_table(v, k)}" for k, v in views)
+
+
+def _table(result: dict, delay: int = 0) -> str:
     s = result["suite"]
     agents = list(result["agents"]) or (list(s["mazes"][0]["agents"]) if s["mazes"] else [])
     lines = []
@@ -409,8 +452,8 @@ def table(result: dict) -> str:
     opening = env and s.get("event") == "open"       # steps hardly differ: rank episodes
     wins_key = "episodes_win_rate" if opening else "win_rate"
     header = (["family", "mazes", "agent", "ratio med", "ratio mean", "worst", "failed",
-               "ep-opt med", f"opt<={WITHIN}", "found",
-               "wins vs (episodes)" if opening else "wins vs (steps)"] if env else
+               "ep-opt med", f"opt<={WITHIN}", "found"] + (["settled"] if delay else [])
+              + ["wins vs (episodes)" if opening else "wins vs (steps)"] if env else
               ["family", "mazes", "agent", "% cur med", "worst %", "perfect", "wins vs"])
     rows = []
     for fam, d in list(s["families"].items()) + [("overall", s["overall"])]:
@@ -425,7 +468,9 @@ def table(result: dict) -> str:
                              _f(d["worst_trial_ratio"][a], 1), str(d["failures"][a]),
                              _f(d["episodes_to_optimal"][a]["median"], 1),
                              _f(d[f"optimal_within_{WITHIN}"][a]),
-                             _f(d["optimal_found"][a]), wins])
+                             _f(d["optimal_found"][a])]
+                            + ([_f(d["settled_ratio"][a]["median"])] if delay else [])
+                            + [wins])
             else:
                 c = d["current_pct"][a]
                 rows.append([fam, str(d["mazes"]), a, _f(c["median"], 1),
