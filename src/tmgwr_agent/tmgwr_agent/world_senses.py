@@ -71,6 +71,19 @@ def named_world_senses(name: str, **kwargs) -> Senses:
                      f"{', '.join(GRAPH_WORLDS)}")
 
 
+def named_declaration(name: str) -> tuple[float, None] | None:
+    """The sensor declaration of world ``name`` when its name says it in full, in any units
+    and for any maze: the grid's, which declares neither a goal tolerance nor a range (it
+    has no spaces: ``maze_sim.worlds.declared``), so ``(0.0, None)``. None for a world whose
+    range lies in its maze file (MiniGrid, PointMaze): the graph's agent must be told it
+    (``SensorInfo``). A recording made before the declarations existed carries none; what
+    the graph's agent was told then is exactly the grid's."""
+    if name == "grid":
+        senses = maze_senses()
+        return senses.goal_tolerance, None
+    return None
+
+
 def drawn_at(name: str, sensation) -> tuple[float, float]:
     """Where a sensation of world ``name`` lies in the simulator's ``maze`` frame (its map
     markers, its /agent_pose): the grid's (row, col) at x = col, y = row; PointMaze's
