@@ -2,6 +2,7 @@
 >= 0.8). Not a test (pytest does not collect it): a measurement, run by hand::
 
     source tools/env.sh && python test/measure_strays.py [--window 10] [--json OUT] [--match T]
+        [--repeat N]
 
 Starts the five nodes and the simulator as ``ros2 run`` does (a free ROS_DOMAIN_ID of its
 own), a step monitor on ``/observation``, then for each stray of ``strays.strays``: the
@@ -9,7 +10,9 @@ ring's rate over ``--window`` s, the stray (real ``ros2 topic pub``), the rate o
 ``--window`` s; before each, a control pair of windows with no stray between them (how
 much the rate moves by itself: the agent's phase, the machine's load); and in each window
 the longest stall (the newest step unchanged), which a resend-paced ring shows as ~1 s.
-Prints one line per stray and the ratios; needs the ``ros2`` command.
+Prints one line per stray and the ratios; needs the ``ros2`` command. ``--repeat N``
+measures each stray N times in a row: on a loaded machine the control ratio of a single
+pair of windows spreads widely, so a ratio is judged against the controls' spread.
 """
 
 from __future__ import annotations
@@ -48,8 +51,9 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--window", type=float, default=10.0, help="seconds per rate")
     ap.add_argument("--json", help="write the figures here")
-    ap.add_argument("--match", default="", help="only the strays whose description holds "
-                    "this text (e.g. /motivation)")
+    ap.add_argument("--match", nargs="+", default=[""], help="only the strays whose "
+                    "description holds one of these texts (e.g. /motivation)")
+    ap.add_argument("--repeat", type=int, default=1, help="measurements of each stray")
     args = ap.parse_args()
     domain = allocate_domain()
     with tempfile.TemporaryDirectory() as tmp:
@@ -62,7 +66,8 @@ def main() -> int:
             monitor.wait_for_line("MONITOR READY", timeout=60)
             while (newest_step(monitor, run) or 0) < 500:      # past the start
                 time.sleep(0.5)
-            for stray in [s for s in strays(run) if args.match in str(s)]:
+            chosen = [s for s in strays(run) if any(m in str(s) for m in args.match)]
+            for stray in [s for s in chosen for _ in range(args.repeat)]:
                 # a control pair first (no stray between two windows, a pause as long as
                 # the last publication took): how much the rate moves by itself
                 first, _ = rate(monitor, run, args.window)

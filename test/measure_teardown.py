@@ -79,6 +79,13 @@ def ctrl_c(proc: subprocess.Popen, log: Path, wait: float, i: int, tmp: Path,
                     print(f"  stop {i}: {name} (pid {pid}) alive {catch_after:.1f} s after "
                           "the Ctrl-C: native stack", flush=True)
                     native_stack(pid, tmp / f"stack_{i}_{name}_{pid}.txt")
+            # every node gone and the launch still there: the launch process hangs
+            if proc.pid not in caught and time.monotonic() - t_int > 2 * catch_after and \
+                    not any(alive(pid) for pid in pids.values()):
+                caught.add(proc.pid)
+                print(f"  stop {i}: every node ended, the launch (pid {proc.pid}) alive "
+                      f"{2 * catch_after:.1f} s after the Ctrl-C: native stack", flush=True)
+                native_stack(proc.pid, tmp / f"stack_{i}_launch_{proc.pid}.txt")
         time.sleep(0.05)
     took = time.monotonic() - t_int
     if proc.poll() is None:

@@ -160,3 +160,96 @@ def test_a_refused_checkpoint_leaves_the_estimator_told_the_world(ros_domain, tm
     assert "CORE 4 0.05 [-0.4, -0.2] [0.4, 0.2]" in out, out
     assert "DECLARATIONS KEPT {}" in out, out       # a range of 1 value, low > high, NaN
     assert out.count("refused a declaration of run 1") == 3, out
+
+
+# what a recording made before the declarations existed lacks: both of them
+OLD_RECORDING = r"exclude:=^/(world|feature)_senses$"
+# the simulator waits for the recorder (started apart, it joins like any subscriber)
+LATE_START = "maze_sim:\n  ros__parameters:\n    start_delay: 3.0\n"
+STATES = 300
+
+
+@pytest.mark.timeout(400)
+def test_a_recording_without_the_declarations_replays_on_the_grid(ros_domain, tmp_path):
+    """A grid run recorded without ``/world_senses`` and ``/feature_senses`` (a recording
+    made before they existed), its states and actions replayed (``./tmgwr replay``) into a
+    motivation estimator (``ros2 run``, real DDS): the estimator takes the grid's
+    declaration, which the world's name says in full, and answers the replayed states (it
+    held every one of them for good before, waiting for a declaration the recording cannot
+    bring)."""
+    from ros_helpers import ROOT, RosProcess, ros2_run, ros_env
+    from test_recorder import start_recorder, tmgwr_cli
+    params = tmp_path / "late.yaml"
+    params.write_text(LATE_START)
+    bag = tmp_path / "old"
+    recorder = start_recorder(ros_domain, bag, OLD_RECORDING, "discovery_period:=0.1")
+    with recorder:
+        recorder.wait_for_line(r"recording .* to ", timeout=60)
+        up = RosProcess([str(ROOT / ".venv/bin/python"), "-m", "tmgwr_agent.cli", "up",
+                         "--seed", "1", "--max-steps", str(STATES), "--params-file",
+                         str(params), "--no-record", "--quiet", "--domain-id",
+                         str(ros_domain)], ros_env(ros_domain), name="up")
+        with up:
+            up.wait(timeout=240)
+        recorder.stop()
+    from rosbags.highlevel import AnyReader
+    with AnyReader(mcap_files(bag)) as reader:
+        recorded = {c.topic for c in reader.connections}
+        states = [reader.deserialize(raw, c.msgtype).step_id for c, _t, raw in
+                  reader.messages([c for c in reader.connections
+                                   if c.topic == "/sensorimotor_state"])]
+    assert "/sensorimotor_state" in recorded and len(set(states)) >= STATES - 1, recorded
+    assert not recorded & {"/world_senses", "/feature_senses"}, recorded
+
+    home = {"HOME": str(tmp_path), "ROS_HOME": str(tmp_path / ".ros")}
+    estimator = ros2_run("tmgwr_agent", "motivation_estimator", "--ros-args", "-p",
+                         "checkpoint_period:=0", domain=ros_domain, env=home)
+    with estimator:
+        estimator.wait_for_line(r"motivation_estimator ready", timeout=90)
+        replay = tmgwr_cli("replay", str(bag), "--topics", "/sensorimotor_state", "/action",
+                           "--wait-subscribers", "1", "--delay", "0.5", domain=ros_domain,
+                           timeout=180)
+        assert replay.returncode == 0, replay.stdout + replay.stderr
+        line = estimator.wait_for_line(r"the world's senses set", timeout=30)
+        estimator.stop()
+    assert "goal tolerance 0.0, sensor's range [] .. []" in line, line
+    assert "the grid world's, which its name says in full" in line, line
+    solved = re.search(r"motivation_estimator: (\d+) step callbacks", estimator.output)
+    assert solved, estimator.describe("no summary at the stop")
+    assert int(solved[1]) >= 0.9 * len(set(states)), estimator.describe(
+        f"{solved[1]} of {len(set(states))} replayed states answered")
+
+
+# A pointmaze motivation_estimator handed states of a run whose declaration never comes:
+# prints what it logged (its patience shortened for the test).
+UNDECLARED = r"""
+import time
+import rclpy
+import tmgwr_agent.nodes.motivation_estimator as me
+from tmgwr_interfaces.msg import SensorimotorState
+me.SENSES_PATIENCE = 0.5
+rclpy.init(args=["--ros-args", "-p", "world:=pointmaze", "-p", "checkpoint_period:=0"])
+node = me.MotivationEstimatorNode()
+for step in range(4):
+    node.on_state(SensorimotorState(run_id=5, step_id=step))
+    time.sleep(0.3)
+print("WAITING", node.unsensed.step_id, flush=True)
+node.destroy_node()
+rclpy.shutdown()
+"""
+
+
+@pytest.mark.timeout(120)
+def test_an_estimator_without_a_declaration_says_which_topic_lacks_it(ros_domain, tmp_path):
+    """In a world whose range lies in the maze file (PointMaze) the estimator cannot take a
+    default: a run whose declaration does not come is reported once, as an error naming
+    the missing topics, and its newest state keeps waiting."""
+    pytest.importorskip("gymnasium_robotics")
+    from ros_helpers import spawn_python
+    p = spawn_python(UNDECLARED, domain=ros_domain, name="undeclared",
+                     env={"HOME": str(tmp_path), "ROS_HOME": str(tmp_path / ".ros")})
+    out = p.wait(timeout=100)
+    assert "WAITING 3" in out, out
+    assert out.count("no sensor declaration of this run on feature_senses") == 1, out
+    assert "pointmaze world's range lies in its maze file" in out, out
+    assert "maze_sim publishes it on world_senses" in out, out

@@ -20,7 +20,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from importlib import import_module
-from typing import Any
+from typing import Any, NamedTuple
 
 from maze_sim.maze import Cell, Maze
 
@@ -138,19 +138,53 @@ def make_world(name: str, maze: Maze, goal: str | Cell = "G",
         raise
 
 
-def declared_sensor(world) -> tuple[float, Any, Any]:
-    """What a hosted world declares of its sensor besides its sensations: ``(goal_tolerance,
-    low, high)``: how near the goal sensation a sensation ends an episode at the goal
-    (``goal_tolerance``, sensation units; 0 when the world declares none) and the sensor's
-    range, the bounds of the ``Box`` the sensation lies in (the world's own
-    ``observation_space``: PointMaze; else that of the env it drives, seen through its
-    sensation wrapper: MiniGrid, ``gym:ID``; ``None, None`` when it declares none: the grid
-    world). The agent's ``Senses`` read the same (``tmgwr_agent.world_senses``); the
-    simulator node publishes them for the graph's agent (``SensorInfo``)."""
+class Declared(NamedTuple):
+    """What a hosted world declares to an agent besides its sensations (:func:`declared`)."""
+
+    #: how near the goal sensation a sensation ends an episode at the goal (sensation
+    #: units; 0 when the world declares none: the goal is one sensation)
+    goal_tolerance: float
+    #: the sensor's resolution step (sensation units; 1 when the world declares none)
+    resolution: float
+    #: the ``Box`` the sensation lies in, its bounds the sensor's range (``None``: the grid
+    #: world, which declares no spaces)
+    observation_space: Any
+    #: the ``Discrete`` actions and their motor vectors (``None``: one-hot)
+    action_space: Any
+    primitives: Any
+
+
+def env_spaces(env) -> tuple[Any, Any, Any]:
+    """A Gymnasium env's declared spaces: ``(observation_space, action_space, primitives)``,
+    the motor vectors being the unwrapped env's ``primitive_vectors`` when it has them."""
+    return (env.observation_space, env.action_space,
+            getattr(env.unwrapped, "primitive_vectors", None))
+
+
+def declared(world) -> Declared:
+    """What a hosted world declares: its ``goal_tolerance`` and ``sensor_resolution``, and
+    the spaces it declares itself (``observation_space``, ``action_space``,
+    ``primitive_vectors``: PointMaze), else those of the Gymnasium env it drives (``env``,
+    seen through its sensation wrapper: MiniGrid, ``gym:ID``), else none (the grid world).
+    The one place that decides which ``Box`` holds the sensor's range: the in-process
+    agent's ``Senses`` (``tmgwr_agent.world_senses``) and the simulator node's
+    ``SensorInfo`` (:func:`declared_sensor`) both read it here."""
     tol = float(getattr(world, "goal_tolerance", 0.0))
-    space = getattr(world, "observation_space", None)
-    if space is None and getattr(world, "env", None) is not None:
-        space = world.env.observation_space
-    if space is None:
-        return tol, None, None
-    return tol, space.low, space.high
+    res = float(getattr(world, "sensor_resolution", 1.0))
+    if getattr(world, "observation_space", None) is not None:
+        return Declared(tol, res, world.observation_space, world.action_space,
+                        getattr(world, "primitive_vectors", None))
+    if getattr(world, "env", None) is not None:
+        return Declared(tol, res, *env_spaces(world.env))
+    return Declared(tol, res, None, None, None)
+
+
+def declared_sensor(world) -> tuple[float, Any, Any]:
+    """What a hosted world declares of its sensor (:func:`declared`), as the simulator
+    node publishes it for the graph's agent (``SensorInfo``): ``(goal_tolerance, low,
+    high)``, the range being the bounds of the sensation's ``Box`` (``None, None`` when the
+    world declares none: the grid world)."""
+    d = declared(world)
+    if d.observation_space is None:
+        return d.goal_tolerance, None, None
+    return d.goal_tolerance, d.observation_space.low, d.observation_space.high

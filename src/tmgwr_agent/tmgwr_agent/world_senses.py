@@ -7,8 +7,10 @@ its sensation as ``observation_space``, its actions as ``action_space`` and thei
 vectors as ``primitive_vectors`` (:func:`world_senses`), and how near the goal sensation
 a sensation must be for it to end an episode at the goal as ``goal_tolerance`` (sensation
 units; 0 when absent: the goal is one sensation), and its sensor's resolution step as
-``sensor_resolution`` (sensation units; 1 when absent). This is the one place outside the
-simulator that says so; the core is handed the result and knows nothing of mazes.
+``sensor_resolution`` (sensation units; 1 when absent). Which of them a world declares is
+read in one place, ``maze_sim.worlds.declared`` (the simulator node publishes the same for
+the graph's agent); this module turns it into ``Senses``: the core is handed the result and
+knows nothing of mazes.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from maze_sim.maze import ACTION_VECTORS
+from maze_sim.worlds import declared, env_spaces
 from tmgwr_agent.core.senses import Senses
 
 
@@ -27,28 +30,21 @@ def maze_senses(dim: int = 2) -> Senses:
 
 def env_senses(env, goal_tolerance: float = 0.0, resolution: float = 1.0) -> Senses:
     """The senses of a Gymnasium env: its spaces, and its declared motor primitives
-    (``primitive_vectors`` of the unwrapped env) when it has them; ``goal_tolerance`` and
-    ``resolution``: what the world that drives it declares."""
-    return Senses.from_spaces(env.observation_space, env.action_space,
-                              getattr(env.unwrapped, "primitive_vectors", None),
-                              goal_tolerance, resolution)
+    (``maze_sim.worlds.env_spaces``); ``goal_tolerance`` and ``resolution``: what the world
+    that drives it declares."""
+    return Senses.from_spaces(*env_spaces(env), goal_tolerance, resolution)
 
 
 def world_senses(world) -> Senses:
-    """The senses of a world hosted by name (``maze_sim.worlds``): those a world declares
-    itself (``observation_space``, ``action_space``, ``primitive_vectors``: PointMaze),
-    else those of the Gymnasium env it drives (``env``, seen through its sensation
-    wrapper: MiniGrid, ``gym:ID``), else the grid world's (:func:`maze_senses`); each with
-    the world's declared ``goal_tolerance`` (0 when it declares none) and
-    ``sensor_resolution`` (1 when it declares none)."""
-    tol = float(getattr(world, "goal_tolerance", 0.0))
-    res = float(getattr(world, "sensor_resolution", 1.0))
-    if hasattr(world, "observation_space"):
-        return Senses.from_spaces(world.observation_space, world.action_space,
-                                  getattr(world, "primitive_vectors", None), tol, res)
-    if getattr(world, "env", None) is not None:
-        return env_senses(world.env, tol, res)
-    return maze_senses()
+    """The senses of a world hosted by name (``maze_sim.worlds``): what it declares
+    (``maze_sim.worlds.declared``: its own spaces, else those of the Gymnasium env it
+    drives, with its goal tolerance and resolution), else the grid world's
+    (:func:`maze_senses`)."""
+    d = declared(world)
+    if d.observation_space is None:
+        return maze_senses()
+    return Senses.from_spaces(d.observation_space, d.action_space, d.primitives,
+                              d.goal_tolerance, d.resolution)
 
 
 #: The worlds the ROS graph hosts (the agent nodes know their senses by name).
@@ -73,6 +69,19 @@ def named_world_senses(name: str, **kwargs) -> Senses:
                       step_length())
     raise ValueError(f"unknown world {name!r}; worlds the graph hosts: "
                      f"{', '.join(GRAPH_WORLDS)}")
+
+
+def named_declaration(name: str) -> tuple[float, None] | None:
+    """The sensor declaration of world ``name`` when its name says it in full, in any units
+    and for any maze: the grid's, which declares neither a goal tolerance nor a range (it
+    has no spaces: ``maze_sim.worlds.declared``), so ``(0.0, None)``. None for a world whose
+    range lies in its maze file (MiniGrid, PointMaze): the graph's agent must be told it
+    (``SensorInfo``). A recording made before the declarations existed carries none; what
+    the graph's agent was told then is exactly the grid's."""
+    if name == "grid":
+        senses = maze_senses()
+        return senses.goal_tolerance, None
+    return None
 
 
 def drawn_at(name: str, sensation) -> tuple[float, float]:

@@ -31,7 +31,14 @@ sensor's range (the bounds no option leads outside), reaches this node in featur
 ``SensorInfo`` on ``/feature_senses`` (latched; maze_sim declares them, the preprocessor
 scales them), and is set on the core (:meth:`MotivationEstimator.set_senses`) as the
 in-process agent's estimator is built with them. A state of a run whose declaration has not
-arrived is held (logged) and computed when it does: no step is solved without them.
+arrived is held (logged) and computed when it does: no step is solved without them. The one
+exception is a world whose name says its declaration in full, the grid (no goal tolerance,
+no range: :func:`~tmgwr_agent.world_senses.named_declaration`): its states are solved with
+that until the run's own declaration comes, so a recording made before the declarations
+existed (it lacks ``/world_senses`` and ``/feature_senses``) replays on the grid as it ran.
+For MiniGrid or PointMaze such a recording cannot be solved (the range lies in the maze
+file): after ``SENSES_PATIENCE`` seconds of waiting the node says so, once per run, naming
+the missing topic, and keeps waiting.
 
 The goal reaches this node only as the goal sensation of the observations: ``/set_goal``
 is the simulator's (``maze_sim``), which answers from its own check, so "accepted" means
@@ -53,7 +60,7 @@ from tmgwr_agent.core.sensorimotor_map import Links, survivor
 from tmgwr_agent.map_replica import APPLIED, GAP, Replica
 from tmgwr_agent.nodes.preload import load_cached_kernels
 from tmgwr_agent.nodes.step_messages import change_of, outcome_of
-from tmgwr_agent.world_senses import node_senses
+from tmgwr_agent.world_senses import named_declaration, node_senses
 from tmgwr_common import topics
 from tmgwr_common.cdr import codec
 from tmgwr_common.checkpoint import (
@@ -89,6 +96,8 @@ from tmgwr_interfaces.msg import (
 
 #: Runs whose sensor declarations are kept (see ``on_senses``).
 SENSES_RUNS = 8
+#: Seconds a run's states wait for its declaration before the node reports it missing.
+SENSES_PATIENCE = 10.0
 FIELD = codec(MotivationField)        # the per-step messages go serialized (tmgwr_common.cdr)
 
 NODE_SPECS = (
@@ -113,6 +122,10 @@ class MotivationEstimatorNode(Node):
         # original does not come again)
         self.senses: dict[int, tuple[float, tuple[np.ndarray, np.ndarray] | None]] = {}
         self.unsensed = None                # a state waiting for it
+        # what this world's name says of its declaration (the grid's: all of it), used
+        # until a run's own declaration comes; the run waiting for one and since when
+        self.named = named_declaration(self.p["world"])
+        self.missing: tuple[int, float] | None = None
         self.applied = None                 # the declaration last set on the core
         self.create_subscription(SensorInfo, topics.FEATURE_SENSES, self.on_senses,
                                  LATCHED_QOS)
@@ -228,7 +241,7 @@ class MotivationEstimatorNode(Node):
     def sensed(self, s) -> bool:
         """Whether the world's declaration of the run of state ``s`` has come (set on the
         core); else ``s`` waits for it (the newest state waiting)."""
-        declared = self.senses.get(s.run_id)
+        declared = self.senses.get(s.run_id, self.named)
         if declared is not None:
             if self.applied is not declared:        # its first state: set on the core
                 self.applied = declared
@@ -238,8 +251,12 @@ class MotivationEstimatorNode(Node):
                 self.get_logger().info(
                     f"step {s.step_id} (run {s.run_id}): the world's senses set: goal "
                     f"tolerance {c.goal_tolerance!r}, sensor's range {lo} .. {hi} "
-                    "(feature units)")
+                    "(feature units)" + ("" if s.run_id in self.senses else
+                                         f"; the {self.p['world']} world's, which its name "
+                                         f"says in full (none came on "
+                                         f"{topics.FEATURE_SENSES} yet)"))
             return True
+        self.report_missing(s)
         if self.unsensed is None or (self.unsensed.run_id, self.unsensed.step_id) != \
                 (s.run_id, s.step_id):
             self.get_logger().warning(
@@ -248,6 +265,22 @@ class MotivationEstimatorNode(Node):
                 "sensory_preprocessor)", throttle_duration_sec=5.0)
         self.unsensed = s
         return False
+
+    def report_missing(self, s) -> None:
+        """Say once per run, after ``SENSES_PATIENCE`` seconds of waiting, that the run's
+        declaration has not come: why no step is solved, and which topic lacks it."""
+        now = self.get_clock().now().nanoseconds * 1e-9
+        if self.missing is None or self.missing[0] != s.run_id:
+            self.missing = (s.run_id, now)
+        elif now - self.missing[1] >= SENSES_PATIENCE:
+            self.missing = (s.run_id, math.inf)     # said for this run
+            self.get_logger().error(
+                f"step {s.step_id} (run {s.run_id}): no sensor declaration of this run on "
+                f"{topics.FEATURE_SENSES} in {SENSES_PATIENCE:g} s: no step is solved "
+                f"without it (the {self.p['world']} world's range lies in its maze file). "
+                f"maze_sim publishes it on {topics.WORLD_SENSES} at the start of a run; a "
+                "recording made before the declarations existed lacks both topics and "
+                "cannot drive this world's agent")
 
     def on_state(self, s):
         if s.run_id and not self.sensed(s):
