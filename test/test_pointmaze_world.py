@@ -244,6 +244,30 @@ def test_the_resolution_is_the_move_and_the_map_tells_places_apart():
     assert places(Senses(2, PRIMITIVES, SUCCESS_RADIUS, 2.0 * CELL_SIZE)) < 7
 
 
+def test_in_an_open_room_the_map_holds_one_node_a_cell():
+    # a random walk over an open room, bumps into its walls included: the point rests at
+    # the centres of the cells it visits, and the agent's map holds one node for each (with
+    # half-cell moves it rested on edges and corners too, and held a node for each)
+    from tmgwr_agent.core.agent import TMGWRAgent
+    from tmgwr_agent.world_senses import world_senses
+
+    w = PointMazeWorld(Maze.from_text(OPEN), "G")
+    ag = TMGWRAgent(world_senses(w), np.random.default_rng(0))
+    obs, _ = w.reset()
+    ag.begin_episode(obs)
+    rng = np.random.default_rng(7)
+    visited = {w.cell}
+    for _ in range(120):
+        obs, _, terminated, _, info = w.step(int(rng.integers(4)))
+        ag.observe(obs, info)
+        visited.add(w.cell)
+        if terminated:
+            obs, _ = w.reset()
+            ag.begin_episode(obs)
+    assert len(visited) >= 8
+    assert int(ag.map.alive[:ag.map.n].sum()) == len(visited)
+
+
 def test_make_world_by_name():
     m = Maze.from_text(SMALL)
     assert isinstance(make_world("pointmaze", m, "G", 10), PointMazeWorld)
