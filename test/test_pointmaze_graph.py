@@ -58,13 +58,14 @@ def test_the_graph_runs_on_pointmaze_and_the_bag_reads_back(ros_domain, tmp_path
     grids, markers = msgs["/maze_grid"], msgs["/map_markers"]
     xy = np.array(sensed)
     assert xy.shape[1] == 2
-    # inside the free cells of the maze (x in [-2.5, 2.5], y in [-1.5, 1.5]), off the
-    # integer lattice of the grid world but on PointMaze's move lattice (half a metre)
+    # inside the free cells of the maze (x in [-2.5, 2.5], y in [-1.5, 1.5]), metres about
+    # the maze's centre (not the grid world's (row, col)), on PointMaze's move lattice (the
+    # cells' centres, a move apart)
     assert (xy[:, 0] > -2.5).all() and (xy[:, 0] < 2.5).all()
     assert (xy[:, 1] > -1.5).all() and (xy[:, 1] < 1.5).all()
-    assert np.abs(xy - np.round(xy)).max() > 0.1
+    assert (xy < 0).any()
     step = step_length()
-    assert np.abs(xy / step - np.round(xy / step)).max() * step < 5e-3
+    assert step == 1.0 and np.abs(xy - np.round(xy)).max() < 5e-3
     # the preprocessor node was told the world's resolution: one move, one feature step
     assert {m.gain for m in msgs["/features"]} == {0.1 / step}
     g = grids[-1]

@@ -10,6 +10,7 @@ pytest.importorskip("mujoco")
 
 from maze_sim.maze import Maze, MazeError  # noqa: E402
 from maze_sim.pointmaze_world import (  # noqa: E402
+    CELL_SIZE,
     PRIMITIVES,
     SUCCESS_RADIUS,
     PointMazeWorld,
@@ -58,26 +59,28 @@ def test_walls_and_cells_at_the_documented_coordinates(world):
         assert np.allclose(pos, world.xy((r, c)))
 
 
-def test_step_length_and_k_are_derived_from_the_physics():
-    # the largest cell / n within sqrt 2 * 0.45: half a cell
-    assert step_length() == 0.5
-    assert step_length(1.0, 0.8) == 1.0
-    k_push, k_brake, force = primitive_steps(0.5)
+def test_step_length_and_k_are_derived_from_the_physics(world):
+    # one cell of the maze, the env's maze_size_scaling
+    assert step_length() == CELL_SIZE == world.step_length == 1.0
+    assert world.per_cell == 1
+    assert step_length(2.5) == 2.5
+    k_push, k_brake, force = primitive_steps(1.0)
+    assert (world.k_push, world.k_brake, world.force) == (k_push, k_brake, force)
     assert k_push > 0 and k_brake > 0 and 0.0 < force <= 1.0
-    # a longer move needs a longer push
-    assert primitive_steps(1.0)[0] > k_push
+    # a shorter move needs a shorter push
+    assert primitive_steps(0.5)[0] < k_push
 
 
-def test_a_primitive_moves_half_a_cell_and_ends_at_rest(world):
+def test_a_primitive_moves_one_cell_and_ends_at_rest(world):
     obs, info = world.reset()
     assert np.allclose(obs, world.xy((1, 1))) and info["cell"] == (1, 1)
     obs, _, _, _, info = world.step(RIGHT)
-    assert obs[0] - world.xy((1, 1))[0] == pytest.approx(0.5, abs=1e-3)   # exactly the step
-    assert obs[1] == pytest.approx(world.xy((1, 1))[1], abs=1e-6)
+    assert np.abs(obs - world.xy((1, 2))).max() < 1e-3          # the next cell's centre
     assert np.abs(world.data.qvel[:2]).max() < 1e-2
-    assert not info.bumped
-    obs, _, _, _, info = world.step(RIGHT)
     assert world.cell == (1, 2) and not info.bumped
+    obs, _, _, _, info = world.step(RIGHT)
+    assert world.cell == (1, 3) and not info.bumped
+    assert np.abs(obs - world.xy((1, 3))).max() < 1e-3
 
 
 def test_a_wall_ahead_bumps_a_wall_alongside_does_not(world):
@@ -99,30 +102,35 @@ def test_a_bumped_move_returns_to_where_it_started():
     assert np.abs(w.data.qvel[:2]).max() <= 1e-3
 
 
-def test_the_point_stays_on_the_move_lattice():
-    # every primitive moves exactly one step or, bumped, returns: after a random walk with
-    # bumps every resting place is a point of the half-metre lattice (a bumped move left
-    # against the wall rested a point radius, 0.1 m, off it, and every move after kept it)
-    w = PointMazeWorld(Maze.from_text(SMALL), "G")
+@pytest.mark.parametrize("text", [SMALL, OPEN])
+def test_the_point_rests_only_at_the_cells_centres(text):
+    # every primitive moves exactly one cell or, bumped, returns: after a random walk with
+    # bumps every resting place is a cell's centre (a bumped move left against the wall
+    # rested a point radius, 0.1 m, off it, and every move after kept it), also the goal's
+    w = PointMazeWorld(Maze.from_text(text), "G")
     w.reset()
     rng = np.random.default_rng(3)
-    bumps, worst = 0, 0.0
-    for _ in range(150):
+    bumps, ends, worst = 0, 0, 0.0
+    for _ in range(300):
+        before = w.sense()
         obs, _, terminated, _, info = w.step(int(rng.integers(4)))
         bumps += info.bumped
-        off = obs / w.step_length
-        worst = max(worst, float(np.abs(off - np.round(off)).max()) * w.step_length)
+        if info.bumped:
+            assert np.abs(obs - before).max() < 5e-3
+        worst = max(worst, float(np.abs(obs - w.xy(w.cell)).max()))
         if terminated:
+            assert w.cell == w.goal
+            ends += 1
             w.reset()
-    assert bumps >= 10
+    assert bumps >= 10 and ends >= 1
     assert worst < 5e-3
 
 
 def test_the_goal_is_reached_by_the_envs_success_test():
     w = PointMazeWorld(Maze.from_text(SMALL), "G")
-    w.reset(start=(1, 4))
+    w.reset(start=(1, 3))
     obs, reward, terminated, _, info = w.step(RIGHT)
-    assert not terminated                        # half way: 0.5 m from the goal's centre
+    assert not terminated                        # the goal's neighbour: 1 m from its centre
     obs, reward, terminated, _, info = w.step(RIGHT)
     assert terminated and info.reached_goal and reward == 1.0
     assert np.linalg.norm(obs - w.goal_observation()) <= SUCCESS_RADIUS
@@ -130,12 +138,10 @@ def test_the_goal_is_reached_by_the_envs_success_test():
 
 
 def test_the_move_into_the_goal_region_runs_to_its_end():
-    # the test holds 0.45 m from the centre, a few centimetres into the move from the
-    # lattice point 0.5 m away; the move still comes to rest, at the goal's centre, far
-    # from that lattice point (a place of its own in the agent's map)
+    # the test holds 0.45 m from the centre, 0.55 m into the move from the neighbour's
+    # centre; the move still comes to rest, at the goal's centre (a place of the lattice)
     w = PointMazeWorld(Maze.from_text(SMALL), "G")
-    w.reset(start=(1, 4))
-    before, *_ = w.step(RIGHT)
+    before, _ = w.reset(start=(1, 4))
     obs, _, terminated, _, info = w.step(RIGHT)
     assert terminated and info.reached_goal
     assert np.linalg.norm(before - w.goal_observation()) > SUCCESS_RADIUS
@@ -145,16 +151,17 @@ def test_the_move_into_the_goal_region_runs_to_its_end():
 
 
 def test_oracle_by_the_scripted_controller(world):
-    # S (1,1) to G (1,5): 4 m straight right, half a metre a primitive; the success test
-    # holds 0.45 m from the goal's centre, within the eighth move: as many as RIGHT takes
+    # S (1,1) to G (1,5): 4 m straight right, a cell a primitive; the success test holds
+    # within the fourth move: as many as RIGHT takes, the cells of a shortest path
     n = world.shortest_path_length()
-    assert n == 8
+    assert n == 4 == world.maze.shortest_path_length((1, 1), (1, 5))
     world.reset()
     for k in range(1, 9):
         if world.step(RIGHT)[2]:
             break
     assert k == n
-    assert world.shortest_path_length((1, 4), (1, 5)) == 2
+    assert world.shortest_path_length((1, 4), (1, 5)) == 1
+    assert world.shortest_path_length((3, 1), (1, 5)) == 6
     before = world.data.qpos.copy()
     world.shortest_path_length((3, 1), (1, 5))
     assert np.array_equal(world.data.qpos, before)   # the point is put back
@@ -169,14 +176,14 @@ def test_an_event_rebuilds_the_model_and_the_oracle_follows():
     w.fire_event("a")
     assert w.model is not old_model and np.array_equal(w.data.qpos, here)
     assert w.walls[1, 3] and "block_1_3" in w.env._model_names.geom_name2id
-    # round by row 3: 2 + 4 + 2 = 8 cells, two primitives a cell
-    assert w.shortest_path_length() == 16
+    # round by row 3: 2 + 4 + 2 = 8 cells, a primitive a cell
+    assert w.shortest_path_length() == 8
     # the point cannot enter the new wall
     w.reset(start=(1, 2))
     _, _, _, _, info = w.step(RIGHT)
-    _, _, _, _, info = w.step(RIGHT)
     assert info.bumped and w.cell == (1, 2)
-    assert w.event_oracle_steps("a") >= w.shortest_path_length()
+    # the grid's bound, driven: S to (1, 2), the bump, back to S and round by row 3
+    assert w.event_oracle_steps("a") == 1 + 1 + 1 + 8
 
 
 def test_edits_are_refused_as_in_the_grid_world():
@@ -193,8 +200,8 @@ def test_set_goal_moves_the_target_and_the_goal_sensation():
     assert w.set_goal((3, 1)) == (3, 1)
     assert np.allclose(w.env.goal, w.xy((3, 1)))
     assert np.allclose(w.goal_observation(), w.xy((3, 1)))
-    assert w.goal_state == (2 * 3, 2 * 1)       # the goal sensation discretised
-    assert 3 <= w.shortest_path_length() <= 4
+    assert w.goal_state == (3, 1)               # the goal sensation discretised
+    assert w.shortest_path_length() == 2
 
 
 def test_senses_from_the_world():
@@ -221,19 +228,44 @@ def test_the_resolution_is_the_move_and_the_map_tells_places_apart():
         Senses(2, PRIMITIVES, 0.0, 0.0)
 
     def places(senses):
-        # S to the goal's neighbour along the corridor, one place per move: 7 places
+        # S down the corridor and along row 3 to (3, 5), one cell per move: 7 places
         ag = TMGWRAgent(senses, np.random.default_rng(0))
         obs, _ = w.reset()
         ag.begin_episode(obs)
-        for _ in range(6):
-            obs, _, _, _, info = w.step(RIGHT)
+        for a in (DOWN, DOWN, RIGHT, RIGHT, RIGHT, RIGHT):
+            obs, _, _, _, info = w.step(a)
+            assert not info.bumped
             ag.observe(obs, info)
         return int(ag.map.alive[:ag.map.n].sum())
 
-    assert places(world_senses(w)) == 7
-    # the resolution left at one metre: neighbouring places lie within the map's matching
+    assert places(world_senses(w)) == 7                     # one node a cell
+    # declared coarser than the move: neighbouring places lie within the map's matching
     # radius, and one node stands for several of them
-    assert places(Senses(2, PRIMITIVES, SUCCESS_RADIUS)) < 7
+    assert places(Senses(2, PRIMITIVES, SUCCESS_RADIUS, 2.0 * CELL_SIZE)) < 7
+
+
+def test_in_an_open_room_the_map_holds_one_node_a_cell():
+    # a random walk over an open room, bumps into its walls included: the point rests at
+    # the centres of the cells it visits, and the agent's map holds one node for each (with
+    # half-cell moves it rested on edges and corners too, and held a node for each)
+    from tmgwr_agent.core.agent import TMGWRAgent
+    from tmgwr_agent.world_senses import world_senses
+
+    w = PointMazeWorld(Maze.from_text(OPEN), "G")
+    ag = TMGWRAgent(world_senses(w), np.random.default_rng(0))
+    obs, _ = w.reset()
+    ag.begin_episode(obs)
+    rng = np.random.default_rng(7)
+    visited = {w.cell}
+    for _ in range(120):
+        obs, _, terminated, _, info = w.step(int(rng.integers(4)))
+        ag.observe(obs, info)
+        visited.add(w.cell)
+        if terminated:
+            obs, _ = w.reset()
+            ag.begin_episode(obs)
+    assert len(visited) >= 8
+    assert int(ag.map.alive[:ag.map.n].sum()) == len(visited)
 
 
 def test_make_world_by_name():
@@ -349,11 +381,11 @@ def _walk(w, steps, seed):
 @pytest.mark.parametrize("velocity", [False, True])
 def test_the_tabular_state_is_the_sensation_at_the_declared_resolution(velocity):
     # the tables key on the lattice point the sensed position rests on, in resolution steps
-    # from cell (0, 0)'s centre: the places inside one cell are states of their own (keyed
-    # on the cell, up to four resting places of a cell were one state)
+    # from cell (0, 0)'s centre: the point rests only at the cells' centres, one state a
+    # cell, and the state is the sensation's, not the true cell read from the world
     w = PointMazeWorld(Maze.from_text(OPEN), "G", velocity=velocity)
     obs, info = w.reset()
-    assert info["state"] == w.state == w.discretise(obs) == (2 * 1, 2 * 1)
+    assert info["state"] == w.state == w.discretise(obs) == (1, 1)
     res, origin = w.sensor_resolution, w.xy((0, 0))
     states_of_cell: dict = {}
     for obs, state, info, cell in _walk(w, 200, 5):
@@ -361,23 +393,27 @@ def test_the_tabular_state_is_the_sensation_at_the_declared_resolution(velocity)
         on_lattice = origin + res * np.array([state[1], -state[0]])
         assert np.abs(obs[:2] - on_lattice).max() < 5e-3        # the nearest lattice point
         states_of_cell.setdefault(cell, set()).add(state)
-    assert max(len(s) for s in states_of_cell.values()) >= 3
+    assert len(states_of_cell) >= 8
+    assert all(s == {cell} for cell, s in states_of_cell.items())
+    # a sensation off the centres is discretised to the nearest one
+    assert w.discretise(w.xy((2, 3)) + (0.45, -0.45)) == (2, 3)
+    assert w.discretise(w.xy((2, 3)) + (0.55, 0.0)) == (2, 4)
 
 
 def test_the_goal_state_is_reached_exactly_when_the_env_reports_success():
     w = PointMazeWorld(Maze.from_text(OPEN), "G")
-    assert w.goal_state == w.discretise(w.goal_observation()) == (2 * 1, 2 * 4)
+    assert w.goal_state == w.discretise(w.goal_observation()) == (1, 4)
     walk = _walk(w, 600, 11)
     reached = [info.reached_goal for _, _, info, _ in walk]
     assert sum(reached) >= 2
     assert reached == [state == w.goal_state for _, state, _, _ in walk]
     w.set_goal((3, 1))                            # the goal's state follows the goal
-    assert w.goal_state == (2 * 3, 2 * 1)
+    assert w.goal_state == (3, 1)
 
 
 def test_the_tables_in_pointmaze_key_on_the_lattice():
     # Q-learning run by the experiments' loop in the hosted world: the keys it learnt are
-    # lattice points (several in a cell), its goal the goal sensation's
+    # lattice points (one a cell), its goal the goal sensation's
     from tmgwr_agent.experiments.agent_factory import make_agent
     from tmgwr_agent.experiments.runner import run_episode, set_goal
     from tmgwr_agent.experiments.sensing import HostedWorld
@@ -389,8 +425,8 @@ def test_the_tables_in_pointmaze_key_on_the_lattice():
     assert agent.goal == w.goal_state
     for _ in range(3):
         run_episode(w, agent)
-    assert next(iter(agent.sensed)) == w.discretise(w.xy(w.maze.start)) == (2, 2)
-    assert len(agent.sensed) > len(w.maze.free_cells())     # more states than cells
+    assert next(iter(agent.sensed)) == w.discretise(w.xy(w.maze.start)) == (1, 1)
+    assert set(agent.sensed) <= set(w.maze.free_cells())    # one state a cell
 
 
 def test_the_sensor_range_is_declared_and_no_option_leads_outside_it():
@@ -420,7 +456,7 @@ def test_the_sensor_range_is_declared_and_no_option_leads_outside_it():
         obs, _ = w.reset()
         ag.begin_episode(obs)
         seen = {}
-        for a in (DOWN, DOWN, DOWN, DOWN, UP, UP, UP, UP, RIGHT, LEFT):
+        for a in (DOWN, DOWN, UP, UP, RIGHT, LEFT):
             if np.allclose(obs, w.xy((2, 1))):
                 seen["(2, 1)"] = obs
             obs, _, _, _, info = w.step(a)

@@ -29,16 +29,21 @@ the next primitive starts from rest and the position alone tells where the point
 (without the brake the point, damped by 1 N s/m for its 4.2 kg, would glide on for seconds
 and a position would not tell what a force does next).
 
-The move's length is the largest ``S / n`` not longer than ``sqrt 2`` times the success
-radius (half a cell here): with this length some point of the move lattice (the cells'
-centres, the midpoints of their edges and their corners) always lies within the success
-radius of the goal's centre. (Now that a move is exact and a bump returns, the point rests
-only on the lattice through the cells' centres, the goal's centre among them, so a whole
-cell would reach the goal too: the rule is kept, and with it four places a cell in the
-open, places between the centres that a one-cell discretisation does not tell apart.)
-``K_push``, the force and ``K_brake`` are derived from the
-world by :func:`primitive_steps`, measured once per process on the env's point model in
-free space (no walls, the same XML): the point at rest pushed at full force for ``n``
+The move's length is one cell, ``S`` (:func:`step_length`, a fact of the maze): every
+primitive is exact and a bumped one returns (below), so the point rests only on the
+cells' centres, one place a cell, and every place a primitive reaches is a place of the
+grid world's lattice. The goal's centre is one of them: a move from a neighbouring centre
+into the goal cell passes the env's success test on the way (the success radius is less
+than a cell) and comes to rest at the goal's centre, and no other centre lies within the
+success radius. (A shorter move, ``S / n``, only adds resting places between the
+centres, on the edges between free cells and at the corners where four meet: with half a
+cell, about four a cell in the open, each a node of the agent's map and a state of a
+discretisation at the move's resolution. The half-cell move was chosen while a move still
+overshot and a bump left the point against the wall, so that some resting place always
+lay within the success radius of the goal; exact moves and guarded bumps made that
+reason moot.) ``K_push``, the force and ``K_brake`` are derived from the world by
+:func:`primitive_steps`, measured once per process on the env's point model in free space
+(no walls, the same XML): the point at rest pushed at full force for ``n``
 steps and braked to rest travels ``d(n)``; ``K_push`` is the fewest ``n`` with ``d(n)`` at
 least that length, the force the share of full force at which ``K_push`` steps travel it
 exactly (bisection), ``K_brake`` the steps the brake took, plus :data:`BRAKE_MARGIN`. The
@@ -57,9 +62,9 @@ cell held dozens of them, and a wall bumped from one of them was open from the n
 Resolution (``sensor_resolution``, told to the agent through its ``Senses`` as
 ``resolution``): the move's length. The agent's preprocessor scales one resolution step to
 one feature step, as one cell is in the grid world, so its map's matching radius (the GWR
-activity threshold) separates neighbouring places of the lattice. (Measured in metres as one
-cell, a half-metre move lies within that radius, about half a metre: the map merged
-neighbouring places into one node.)
+activity threshold) separates neighbouring places of the lattice and no more: a cell's
+centre is one place, as a cell is in the grid world. (Declared coarser than the move,
+neighbouring places lie within that radius and the map merges them into one node.)
 
 Sensor's range (the bounds of ``observation_space``, told to the agent through its
 ``Senses`` as ``low``, ``high``): the positions the point's centre can take, per axis the
@@ -78,14 +83,11 @@ is within 60 degrees of the push direction; a wall slid along does not count). A
 as reached by the env's own success test (``PointMazeEnv.compute_terminated`` of an
 episodic env: within 0.45 m of the goal), checked after every physics step: a primitive
 during which it held ends the episode at the goal. The primitive itself runs to its end,
-as every primitive does, and the episode's last sensation is where it came to rest. (Were
-the sensation taken at the physics step the test first held, the region's edge, 0.45 m
-from the goal's centre, it would lie a few centimetres from the move lattice's points
-just outside the region, half a metre from the centre, where a primitive that does not
-enter the region rests: no map of half-metre places could tell the two apart, and an
-agent that came to such a point from a side where the next move does not enter the region
-took it for the goal. Run to its end, a move into the region from the lattice comes to rest
-at the goal's centre, a place of its own.)
+as every primitive does, and the episode's last sensation is where it came to rest: the
+goal's centre, a place of the lattice. (Were the sensation taken at the physics step the
+test first held, the region's edge, it would be a place where no primitive rests and a
+different one from each side the region is entered, each a node of the map that stands
+for the goal.)
 
 Tabular state (``info.cell``, :attr:`PointMazeWorld.state`, ``goal_state``: what
 Q-learning and Dyna-Q+ key on): the sensed position discretised at the world's declared
@@ -94,12 +96,13 @@ resolution (:meth:`PointMazeWorld.discretise`), the point of the lattice of spac
 steps from the centre of cell (0, 0) as ``(down, right)`` (``floor(d / resolution + 1/2)``
 per axis, ``d`` the offset in metres; the velocity of a ``velocity`` sensation is left out:
 at rest it is zero). So the tables are told what TMGWR is told (the sensation, at the
-resolution its preprocessor scales by), never an index the point cannot sense: the
-places inside one cell are states of their own (the cell's centre is ``(n r, n c)`` with
-``n`` moves a cell), where a discretisation at one cell would alias up to four resting
-places into one state. The goal's state is that of the goal sensation (the goal cell's
-centre); a move into the success region comes to rest there (below) and no other lattice
-point lies within the success radius (the lattice's spacing exceeds it), so the tables
+resolution its preprocessor scales by), never an index the point cannot sense. With the
+move one cell, this is one state a cell, the cell's centre ``(r, c)`` (the discretisation
+at one cell that users of PointMaze reach for), and it stays the sensation's: the point
+rests only at the centres, so no two resting places share a state. The goal's state is
+that of the goal sensation (the goal cell's centre); a move into the success region comes
+to rest there (Outcome) and no other lattice point lies within the success radius (the
+lattice's spacing exceeds it), so the tables
 reach the goal's state exactly when the env's success test ends the episode there. The
 true cell (:attr:`PointMazeWorld.cell`) stays the experimenter's, for the oracle, the
 ROS graph's pose and the book-keeper.
@@ -108,8 +111,10 @@ Oracle (:meth:`PointMazeWorld.shortest_path_length`): the primitive steps a scri
 controller takes on the same physics: the point at rest at the start cell's centre, each
 step it applies the primitive towards the next cell of a BFS shortest path from the cell it
 is in, until the env's success test holds. Measured once per layout and goal (cached).
-Being a controller's route rather than a proven shortest one, the convergence probe counts
-a greedy route as short as it, or shorter, as converged (:data:`PROBE_TOLERANCE`).
+A primitive moves the point one cell or, bumped, none, so no route takes fewer primitives
+than the breadth-first distance in cells, and the controller's route takes exactly that
+many: the measurement checks the physics rather than finds a bound. The convergence probe
+counts a greedy route as short as it, or shorter, as converged (:data:`PROBE_TOLERANCE`).
 
 Goal region (``goal_tolerance``, told to the agent through its ``Senses``): the success
 radius, in metres of the position sensation.
@@ -156,11 +161,8 @@ RETURN_SPEED = 2.0
 RETURN_TOL = 1e-6
 RETURN_STEPS = 400
 #: The share of the oracle's primitive steps by which a greedy probe's route may exceed
-#: them and still count as converged (``probe_tolerance``, experiments/runner.py). 0: no
-#: share can be derived from the world, and one chosen after seeing a trial's routes would
-#: be fit to that trial; a breadth-first search over the physics (states to 1 cm) found the
-#: scripted controller's route shortest on the maze where it was checked. A route shorter
-#: than the oracle's counts as converged whatever the share.
+#: them and still count as converged (``probe_tolerance``, experiments/runner.py). 0: the
+#: oracle is the fewest primitives any route takes (module doc, Oracle).
 PROBE_TOLERANCE = 0.0
 
 
@@ -197,10 +199,9 @@ def _brake_gain(model) -> np.ndarray:
     return mass / (gear * model.opt.timestep)
 
 
-def step_length(cell: float = CELL_SIZE, radius: float = SUCCESS_RADIUS) -> float:
-    """The distance a primitive moves the point from rest: the largest ``cell / n`` not
-    longer than ``sqrt 2 * radius`` (module doc)."""
-    return cell / math.ceil(cell / (math.sqrt(2.0) * radius))
+def step_length(cell: float = CELL_SIZE) -> float:
+    """The distance a primitive moves the point from rest: one cell (module doc)."""
+    return float(cell)
 
 
 def _free_move(model, data, env, n: int, force: float) -> tuple[float, int]:
