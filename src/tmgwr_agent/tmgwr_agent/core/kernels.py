@@ -2115,9 +2115,11 @@ def changed_rows_sweep(out, E, R, absorbing, out0, E0, R0, absorbing0, n, seeds,
 
 
 # ---------------------------------------------------------------- the on-disk cache
-#: Every kernel, by name (what the warm-up must compile).
+#: Every kernel, by name (what the warm-up must compile); those numba inlines into their
+#: callers (``inline="always"``) are never compiled on their own.
 KERNELS = {name: obj for name, obj in list(globals().items())
-           if hasattr(obj, "py_func") and hasattr(obj, "signatures")}
+           if hasattr(obj, "py_func") and hasattr(obj, "signatures")
+           and obj.targetoptions.get("inline", "never") != "always"}
 #: About how long compiling all of them takes on one free core (seconds).
 COMPILE_SECONDS = 15
 _announced = False
