@@ -792,18 +792,16 @@ class OptionRules:
         on the nodes ``rows``. The mean forward model cannot place their successor, so no
         rule that looks a place up applies (a known node there, a wall's exits, the untried
         chain, a closed cell). A primitive never taken from i has an option into unknown
-        space, ``rho = rho_new`` and ``U = V* gamma^h``, h the lower bound of
-        :meth:`_steps_to_goal` on the moves from x to the goal sensation: ``x`` the
-        successor the local forward model predicts (:meth:`_predicted`); the larger of
-        ``|x - x_g| / l``, ``l`` the root mean square step of the longest-moving primitive
-        (a path of k moves covers about k l at most: the triangle inequality, in the
-        sensation's own norm) and the same count per coordinate, so h does not
-        overestimate the steps from a rightly predicted successor to the goal (the A*
+        space, ``rho = rho_new`` and ``U = V* gamma^h``, ``h = |x - x_g| / l``: ``x`` the
+        successor the local forward model predicts (:meth:`_predicted`), ``l`` the root
+        mean square step of the longest-moving primitive (a path of k moves covers about
+        k l at most: the triangle inequality, in the sensation's own norm, so h does not
+        overestimate the steps from a rightly predicted successor to the goal, the A*
         argument of the module docstring); ``h = 0`` when x lies in the goal region
         (within ``goal_tolerance`` of x_g), and no option when it lies in a terminal
         region (:meth:`_terminal_regions`: the move is predicted to end the episode short
-        of the goal, worth its R = 0). Before the primitive has moved anywhere, h is the
-        bound from i itself less one move.
+        of the goal, worth its R = 0). Before the primitive has moved anywhere, ``h =
+        max(0, |w_i - x_g| / l - 1)``, the bound from i itself.
 
         Why the local model: the mean displacement of a primitive whose effect depends on
         where it is taken (MiniGrid's forward, by the heading) predicts nothing, and with
@@ -824,9 +822,8 @@ class OptionRules:
         live = m.alive[rows][:, None]
         untried = ~self.tried[r, a] & live
         step = math.sqrt(max(float(self.delta_sq.max()), 0.0))
-        reach = self._move_reach(m)
-        h = np.maximum(self._steps_to_goal(m.w[rows], step, reach) - 1.0, 0.0) \
-            if step > 0.0 else np.zeros(len(rows))
+        gap = np.sqrt(np.einsum("ij,ij->i", m.w[rows] - self.goal_x, m.w[rows] - self.goal_x))
+        h = np.maximum(gap / step - 1.0, 0.0) if step > 0.0 else np.zeros(len(rows))
         h = np.repeat(h[:, None], len(prims), axis=1)
         rho_u = np.full(h.shape, self.rho_new)
         for c, p in enumerate(prims):
@@ -836,8 +833,7 @@ class OptionRules:
                 continue
             dx = x - self.goal_x
             gx = np.sqrt(np.einsum("ij,ij->i", dx, dx))
-            h[q, c] = np.where(gx <= self.goal_tolerance, 0.0,
-                               self._steps_to_goal(x, step, reach))
+            h[q, c] = np.where(gx <= self.goal_tolerance, 0.0, gx / step)
             if len(self._region_x):
                 d = x[:, None, :] - self._region_x[None, :, :]
                 ends = (np.einsum("ijk,ijk->ij", d, d) <= self.goal_tolerance ** 2).any(axis=1)
@@ -862,53 +858,17 @@ class OptionRules:
         x = m.w[:n, None, :] + self.delta[None, :, :]
         return ((x < lo) | (x > hi)).any(axis=-1) & self.lattice
 
-    def _moves_made(self, m: SensorimotorMap, a: int) -> tuple[np.ndarray, np.ndarray]:
-        """The live nodes k whose last try of primitive a moved it, and where it led,
-        ``j = succ[k, a]`` (alive, another node)."""
-        n = m.n
-        k = np.flatnonzero(m.alive[:n] & self.tried[:n, a] & (self.bump_t[:n, a] < 0))
-        j = self.succ[k, a]
-        ok = (j >= 0) & (j != k) & (j < n)
-        k, j = k[ok], j[ok]
-        return k[m.alive[j]], j[m.alive[j]]
-
-    def _move_reach(self, m: SensorimotorMap) -> np.ndarray:
-        """Per sensation coordinate, the most one move of any primitive was seen to change
-        it, ``max |w_j - w_k|`` over the moves remembered (:meth:`_moves_made`; 0 for a
-        coordinate no move changed)."""
-        reach = np.zeros(m.w.shape[1])
-        for p in range(self.n_primitives):
-            k, j = self._moves_made(m, p)
-            if len(k):
-                reach = np.maximum(reach, np.abs(m.w[j] - m.w[k]).max(axis=0))
-        return reach
-
-    def _steps_to_goal(self, x: np.ndarray, step: float, reach: np.ndarray) -> np.ndarray:
-        """A lower bound on the moves from the sensations ``x`` to the goal sensation: the
-        larger of ``|x - x_g| / l`` (``l = step``: the triangle inequality in the
-        sensation's norm) and ``max_c |x_c - x_g,c| / r_c`` over the coordinates c a move
-        was seen to change (``r = reach``, :meth:`_move_reach`: k moves change coordinate
-        c by at most k r_c). Each bounds the moves from below, so the larger one does too.
-
-        Why per coordinate: ``l`` is the step of the primitive that moves farthest in the
-        whole sensation, and where primitives change different coordinates (MiniGrid: a
-        turn changes the heading by ``sqrt 2``, a forward move the cell by 1) the norm
-        bound counts every move as that one: unknown space looked up to ``sqrt 2`` times
-        nearer the goal than it is, and after a block the agent searched a dead-end room
-        beside the known way round before taking it."""
-        dx = x - self.goal_x
-        h = np.sqrt(np.einsum("ij,ij->i", dx, dx)) / step
-        c = reach > 0.0
-        if c.any():
-            h = np.maximum(h, (np.abs(dx[:, c]) / reach[c]).max(axis=1))
-        return h
-
     def _predicted(self, m: SensorimotorMap, rows: np.ndarray, a: int) -> np.ndarray | None:
         """The successors of primitive a from the nodes ``rows`` as the local forward model
         predicts them: ``w_i + (w_j - w_k)``, k the node nearest i (in weights) whose last
         try of a moved it, to j = ``succ[k, a]`` (a move does from a place what it did from
         the place most like it); None before a has moved from any live node."""
-        k, j = self._moves_made(m, a)
+        n = m.n
+        k = np.flatnonzero(m.alive[:n] & self.tried[:n, a] & (self.bump_t[:n, a] < 0))
+        j = self.succ[k, a]
+        ok = (j >= 0) & (j != k) & (j < n)
+        k, j = k[ok], j[ok]
+        k, j = k[m.alive[j]], j[m.alive[j]]
         if not len(k):
             return None
         wr, wk = m.w[rows], m.w[k]
