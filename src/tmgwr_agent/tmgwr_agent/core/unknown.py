@@ -731,7 +731,8 @@ class OptionRules:
                               self._origin, self.V, self.sel, self.chain,
                               self.U, self.rho, self.osucc, self.onb, self.ong)
         if not self.lattice.all():
-            self._unplaced_options(m, rows[rows < n], np.flatnonzero(~self.lattice))
+            self._unplaced_options(m, rows[rows < n], np.flatnonzero(~self.lattice),
+                                   rho_max if stuck else 0.0, clock, T)
         if self.bounds is not None:
             self.outside_options(m, n)
 
@@ -786,8 +787,8 @@ class OptionRules:
                                         self.stale_horizon, stuck, untried, rows)
         return rows[:c]
 
-    def _unplaced_options(self, m: SensorimotorMap, rows: np.ndarray,
-                          prims: np.ndarray) -> None:
+    def _unplaced_options(self, m: SensorimotorMap, rows: np.ndarray, prims: np.ndarray,
+                          doubt: float = 0.0, clock: int = 0, T: float = 0.0) -> None:
         """The options of the primitives ``prims`` that make no lattice step (frame.py),
         on the nodes ``rows``. The mean forward model cannot place their successor, so no
         rule that looks a place up applies (a known node there, a wall's exits, the untried
@@ -809,6 +810,14 @@ class OptionRules:
         as one into the goal, and one into an old goal's cell (no node of the region there
         yet) as good as any: the agent walked off its route into the old goal.
 
+        While stuck (:meth:`stuck`; ``doubt`` = the wall prior, ``clock`` and ``T`` of
+        :meth:`stuck_clock`), a remembered wall is doubted as on a lattice
+        (:func:`kernels.option_values`): ``rho = doubt (1 - exp(-tau / (T + e)))``, ``tau``
+        the steps since its bump, ``e`` those it had been known closed before it, and its
+        successor is valued as an untried move's. Without it a remembered wall had no
+        option without a lattice: a block that left only a way through a wall that had
+        opened was passed only when a random walk, every potential 0, hit the opening.
+
         A primitive whose last try from i moved it to ``j = succ[i, a]`` while the map
         has since deleted that link (it aged out: :mod:`~tmgwr_agent.core.
         sensorimotor_map`) has an option into j with ``rho = 1``, as on a lattice
@@ -821,13 +830,19 @@ class OptionRules:
         r, a = rows[:, None], prims[None, :]
         live = m.alive[rows][:, None]
         untried = ~self.tried[r, a] & live
+        bump = self.bump_t[r, a]
+        wall = live & self.tried[r, a] & (bump >= 0) & (bump < clock) & (doubt > 0.0) \
+            & (T > 0.0)
+        known_for = np.where(self.closed_t[r, a] >= 0, bump - self.closed_t[r, a], 0)
+        rho_w = np.where(wall, doubt * (1.0 - np.exp(-(clock - bump) / (T + known_for))), 0.0)
+        unknown = untried | wall
         step = math.sqrt(max(float(self.delta_sq.max()), 0.0))
         gap = np.sqrt(np.einsum("ij,ij->i", m.w[rows] - self.goal_x, m.w[rows] - self.goal_x))
         h = np.maximum(gap / step - 1.0, 0.0) if step > 0.0 else np.zeros(len(rows))
         h = np.repeat(h[:, None], len(prims), axis=1)
-        rho_u = np.full(h.shape, self.rho_new)
+        rho_u = np.where(wall, rho_w, self.rho_new)
         for c, p in enumerate(prims):
-            q = np.flatnonzero(untried[:, c])
+            q = np.flatnonzero(unknown[:, c])
             x = self._predicted(m, rows[q], int(p)) if len(q) and step > 0.0 else None
             if x is None:
                 continue
@@ -845,8 +860,8 @@ class OptionRules:
         if lost.any():
             d = m.w[jc] - m.w[rows][:, None, :]
             lost &= np.einsum("ijk,ijk->ij", d, d) <= (2.0 * step) ** 2
-        self.rho[r, a] = np.where(untried, rho_u, np.where(lost, 1.0, 0.0))
-        self.U[r, a] = np.where(untried & (rho_u > 0.0), self.v_star * self.gamma ** h, 0.0)
+        self.rho[r, a] = np.where(unknown, rho_u, np.where(lost, 1.0, 0.0))
+        self.U[r, a] = np.where(unknown & (rho_u > 0.0), self.v_star * self.gamma ** h, 0.0)
         self.osucc[r, a] = np.where(lost, j, -1)
 
     def _outside(self, m: SensorimotorMap, n: int) -> np.ndarray:
