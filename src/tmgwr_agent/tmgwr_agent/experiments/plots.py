@@ -155,6 +155,17 @@ def plot_timing(result: dict, path: str | Path) -> None:
     plt.close(fig)
 
 
+def plain_log_y(ax) -> None:
+    """A log y axis labelled with plain numbers (minor ticks too when the axis spans less
+    than a decade)."""
+    ax.set_yscale("log")
+    plain = matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}")
+    ax.yaxis.set_major_formatter(plain)
+    lo, hi = ax.get_ylim()
+    if hi / lo < 10:
+        ax.yaxis.set_minor_formatter(plain)
+
+
 def plot_suite(result: dict, path: str | Path) -> None:
     """One panel per family (the families of the suite JSON, see :mod:`.suite_runner`)."""
     s = result["suite"]
@@ -197,12 +208,7 @@ def plot_suite(result: dict, path: str | Path) -> None:
             ax.set_ylabel("episodes until the greedy path\nuses the shortcut (median)")
         elif env:
             ax.axhline(1.0, color="k", ls="--", lw=0.8)
-            ax.set_yscale("log")
-            plain = matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}")
-            ax.yaxis.set_major_formatter(plain)
-            lo, hi = ax.get_ylim()
-            if hi / lo < 10:             # less than a decade: label the minor ticks too
-                ax.yaxis.set_minor_formatter(plain)
+            plain_log_y(ax)
             ax.set_ylabel("median steps / oracle_steps per maze")
         else:
             ax.set_ylabel("% episodes at the current goal per maze")
@@ -252,12 +258,7 @@ def plot_delays(result: dict, path: str | Path) -> None:
             if missing:
                 ax.text(i, 0.98, f"{missing} never", ha="center", va="top", fontsize=7,
                         color="tab:red", transform=ax.get_xaxis_transform())
-        ax.set_yscale("log")
-        plain = matplotlib.ticker.FuncFormatter(lambda y, _: f"{y:g}")
-        ax.yaxis.set_major_formatter(plain)
-        lo, hi = ax.get_ylim()
-        if hi / lo < 10:                 # less than a decade: label the minor ticks too
-            ax.yaxis.set_minor_formatter(plain)
+        plain_log_y(ax)
         ax.set_xticks(range(len(names)), names, rotation=20, fontsize=8)
         ax.set_title(f"event delay K = {k}", fontsize=9)
         if ax is axes.flat[0]:
