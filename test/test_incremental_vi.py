@@ -13,6 +13,23 @@ NONE = np.zeros(0, dtype=np.int64)    # no row list: changed_rows compares every
 GAMMA, BETA, TOL, FLOOR = 0.97, 0.8, 1e-4, 1e-150
 
 
+def trained_on_default_maze(episodes):
+    """(world, agent): the default agent on the default maze, goal G, trained for
+    ``episodes`` episodes (seed 0)."""
+    from maze_sim.maze import Maze
+    from tmgwr_agent.experiments.agent_factory import make_agent
+    from tmgwr_agent.experiments.runner import Caps, make_world, run_episode, set_goal
+    from tmgwr_agent.experiments.scenarios import DEFAULT_MAZE
+
+    maze = Maze.from_file(DEFAULT_MAZE)
+    world = make_world(maze, "G", Caps.for_maze(maze))
+    agent = make_agent("tmgwr", maze, np.random.default_rng(0))
+    set_goal(world, agent, "G")
+    for _ in range(episodes):
+        run_episode(world, agent, max_steps=3000)
+    return world, agent
+
+
 def random_map(rng, n, K=4, P=4):
     out = np.where(rng.random((n, K)) < 0.6, rng.integers(0, n, (n, K)), -1)
     E = np.where(out >= 0, rng.uniform(0.3, 1.0, (n, K)), 0.0)
@@ -384,18 +401,10 @@ def test_the_greedy_probes_potentials_after_a_goal_change_are_exact():
     the route reading) restarts from 0 and is solved in order of value
     (kernels.ordered_solve): within vi_tol of the exact fixed point, as the synchronous
     solve it replaces there."""
-    from maze_sim.maze import Maze
     from tmgwr_agent.core.motivation import V_FLOOR
-    from tmgwr_agent.experiments.agent_factory import make_agent
-    from tmgwr_agent.experiments.runner import Caps, make_world, run_episode, set_goal
-    from tmgwr_agent.experiments.scenarios import DEFAULT_MAZE
+    from tmgwr_agent.experiments.runner import run_episode, set_goal
 
-    maze = Maze.from_file(DEFAULT_MAZE)
-    world = make_world(maze, "G", Caps.for_maze(maze))
-    agent = make_agent("tmgwr", maze, np.random.default_rng(0))
-    set_goal(world, agent, "G")
-    for _ in range(4):
-        run_episode(world, agent, max_steps=3000)
+    world, agent = trained_on_default_maze(4)
     mot, m = agent.motivation, agent.map
     for goal in ("3", "G"):
         set_goal(world, agent, goal)
@@ -419,17 +428,9 @@ def test_a_goal_change_writes_over_the_retired_copy_and_solves_the_same():
     that starts from fresh ones, at the change and in the episode after it."""
     import copy
 
-    from maze_sim.maze import Maze
-    from tmgwr_agent.experiments.agent_factory import make_agent
-    from tmgwr_agent.experiments.runner import Caps, make_world, run_episode, set_goal
-    from tmgwr_agent.experiments.scenarios import DEFAULT_MAZE
+    from tmgwr_agent.experiments.runner import run_episode, set_goal
 
-    maze = Maze.from_file(DEFAULT_MAZE)
-    world = make_world(maze, "G", Caps.for_maze(maze))
-    agent = make_agent("tmgwr", maze, np.random.default_rng(0))
-    set_goal(world, agent, "G")
-    for _ in range(4):
-        run_episode(world, agent, max_steps=3000)
+    world, agent = trained_on_default_maze(4)
     world2, agent2 = copy.deepcopy((world, agent))
     fresh = agent2.motivation
     fresh._retire_incremental = lambda: setattr(fresh, "_inc", None)   # nothing kept
@@ -475,18 +476,9 @@ def test_a_change_below_the_stopping_rule_moves_no_value():
     """On the default maze, trained and solved to the fixed point, a link's E lowered by a
     fraction of the stopping rule (motivation.sweep_tolerance) is not propagated: the
     incremental solve leaves every V as it was, and every node still meets the rule."""
-    from maze_sim.maze import Maze
     from tmgwr_agent.core.motivation import V_FLOOR, sweep_tolerance
-    from tmgwr_agent.experiments.agent_factory import make_agent
-    from tmgwr_agent.experiments.runner import Caps, make_world, run_episode, set_goal
-    from tmgwr_agent.experiments.scenarios import DEFAULT_MAZE
 
-    maze = Maze.from_file(DEFAULT_MAZE)
-    world = make_world(maze, "G", Caps.for_maze(maze))
-    agent = make_agent("tmgwr", maze, np.random.default_rng(0))
-    set_goal(world, agent, "G")
-    for _ in range(3):
-        run_episode(world, agent, max_steps=3000)
+    world, agent = trained_on_default_maze(3)
     m, mot = agent.map, agent.motivation
     mot.update(m)
     n, R, absorbing = m.n, mot.R, mot._absorbing(m, m.n)
