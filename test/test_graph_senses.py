@@ -164,8 +164,9 @@ def test_a_refused_checkpoint_leaves_the_estimator_told_the_world(ros_domain, tm
 
 # what a recording made before the declarations existed lacks: both of them
 OLD_RECORDING = r"exclude:=^/(world|feature)_senses$"
-# the simulator waits for the recorder (started apart, it joins like any subscriber)
-LATE_START = "maze_sim:\n  ros__parameters:\n    start_delay: 3.0\n"
+# the simulator waits for the recorder (started apart): its first step waits for the word that
+# the recorder has matched every ring publisher
+LATE_START = "maze_sim:\n  ros__parameters:\n    await_recorder: true\n"
 STATES = 300
 
 

@@ -384,3 +384,33 @@ def test_a_stop_with_messages_still_queued_writes_them_all(ros_domain, tmp_path)
     meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     gaps = json.loads(meta["custom_data"]["step_gaps"])
     assert gaps["/observation"]["7"]["missing"] == 0
+
+
+def test_a_ring_told_to_await_the_recorder_starts_only_when_it_has_every_topic(
+        ros_domain, tmp_path):
+    """A graph started before its recorder (``up --no-record``, maze_sim's ``await_recorder``
+    on) takes no step until the recorder, started seconds later, has matched a publisher on
+    every ring topic: the bag then holds step 0 on all five. (Without the wait a reliable
+    volatile reader matched late gets nothing of what went before: a recorder discovering
+    the last-started node after the ring turned lost its first steps.)"""
+    from tmgwr_common import topics
+    params = tmp_path / "await.yaml"
+    params.write_text("maze_sim:\n  ros__parameters:\n    await_recorder: true\n")
+    up = RosProcess([str(ROOT / ".venv/bin/python"), "-m", "tmgwr_agent.cli", "up",
+                     "--seed", "1", "--max-steps", "200", "--params-file", str(params),
+                     "--no-record", "--domain-id", str(ros_domain)],
+                    ros_env(ros_domain), name="up")
+    bag = tmp_path / "late"
+    with up:
+        up.wait_for_line(r"waiting for a recorder on '/recorder_ready'", timeout=120)
+        recorder = start_recorder(ros_domain, bag)
+        with recorder:
+            recorder.wait_for_line(r"matched a publisher on every expected topic \(5\)",
+                                   timeout=60)
+            up.wait_for_line(r"the recorder is ready", timeout=60)
+            up.wait(timeout=240)
+            recorder.stop()
+    for name in topics.STEP_TOPICS:
+        steps = read_step_ids(mcap_files(bag), "/" + name)
+        assert steps and min(steps) == 0 and set(range(150)) <= set(steps), \
+            (name, sorted(set(steps))[:5])

@@ -81,6 +81,7 @@ from tmgwr_interfaces.srv import FireEvent, SetCell, SetGoal
 FRAME = "maze"
 OBSERVATION = codec(Observation)      # the per-step messages go serialized (tmgwr_common.cdr)
 WARMUP_STEPS = 200    # the SUMMARY's steady rate leaves out discovery and the first steps
+RECORDER_WAIT_LOG = 5.0  # seconds between two "waiting for a recorder" lines
 JOIN_RESEND = 0.25    # resend period while a run starts or a node joins (matching settles)
 # Who publishes each ring topic (named in the warning when nobody does).
 RING = ((topics.FEATURES, "sensory_preprocessor"), (topics.SENSORIMOTOR_STATE, "map_learner"),
@@ -114,6 +115,9 @@ SPECS = (
           "goal changes to this file at exit (empty = do not write)"),
     Param("start_delay", 0.0, "seconds to wait after start before the first observation",
           low=0.0, high=3600.0),
+    Param("await_recorder", False, "publish the first observation only once a recorder said "
+          "on 'recorder_ready' that it has matched every per-step publisher (and start_delay "
+          "has passed), so the bag holds step 0 on every topic"),
     *CHECKPOINT_SPECS,
 )
 
@@ -201,7 +205,14 @@ class MazeSimNode(Node):
         self.publish_goal()
         self.create_timer(1.0 / p["pose_rate"], self.publish_pose)
         self.create_timer(min(0.1, p["resend_period"]), self.check_resend)
-        self._start_timer = self.create_timer(max(p["start_delay"], 0.01), self.start)
+        # the first observation waits for start_delay and, when asked, for the recorder
+        self.delay_over = False
+        self.recorder_ready = not p["await_recorder"]
+        if p["await_recorder"]:
+            self.create_subscription(String, topics.RECORDER_READY, self.on_recorder_ready,
+                                     LATCHED_QOS)
+            self._waiting_timer = self.create_timer(RECORDER_WAIT_LOG, self.say_waiting)
+        self._start_timer = self.create_timer(max(p["start_delay"], 0.01), self.on_delay_over)
         self.t_ready = time.monotonic()
         self.get_logger().info(
             f"maze_sim ready: run {self.run_id}, world {p['world']}, maze {path} "
@@ -209,8 +220,29 @@ class MazeSimNode(Node):
             f"seed {p['seed']}, max_steps {p['max_steps'] or 'none'}")
 
     # ------------------------------------------------------------------ the ring
-    def start(self):
+    def on_delay_over(self):
         self._start_timer.cancel()
+        self.delay_over = True
+        self.start()
+
+    def on_recorder_ready(self, msg: String):
+        if not self.recorder_ready:
+            self.recorder_ready = True
+            self._waiting_timer.cancel()
+            self.get_logger().info(f"the recorder is ready ({shown(msg.data)})")
+            self.start()
+
+    def say_waiting(self):
+        self.get_logger().warning(
+            f"waiting for a recorder on '{self.resolve_topic_name(topics.RECORDER_READY)}' "
+            f"before the first observation (await_recorder is true; "
+            f"{time.monotonic() - self.t_ready:.0f} s so far)")
+
+    def start(self):
+        """The ring's first observation, once start_delay passed and the recorder (when
+        awaited) is ready; once."""
+        if self.t_start is not None or not (self.delay_over and self.recorder_ready):
+            return
         self.t_start = time.perf_counter()
         self.start_episode(first=True)
 

@@ -203,6 +203,8 @@ def graph_nodes(context, watch: ExitWatch):
     actions = [LogInfo(msg=f"tmgwr: maps and checkpoints in {run_dir} (continue this run: "
                            f"resume:={run_dir})")]
     if true_argument(context, "record"):
+        # the ring's first step waits until the recorder has matched every ring publisher
+        overrides["maze_sim"]["await_recorder"] = True
         output_dir = LaunchConfiguration("output_dir").perform(context)
         again = {**respawn, "respawn": respawn["respawn"] and not output_dir}
         actions.append(Node(package="tmgwr_agent", executable="recorder", name="recorder",

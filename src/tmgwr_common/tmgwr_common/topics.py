@@ -39,6 +39,10 @@ EVENTS = "maze_events"                # std_msgs/msg/String: goal changes, cell/
 # sensation units, sensory_preprocessor's in feature units (the motivation estimator's input)
 WORLD_SENSES = "world_senses"         # tmgwr_interfaces/msg/SensorInfo, maze_sim, latched
 FEATURE_SENSES = "feature_senses"     # tmgwr_interfaces/msg/SensorInfo, preprocessor, latched
+# The recorder's word that it has matched a publisher on every per-step topic it records (the
+# bag's directory), latched: a simulator told to wait for it (maze_sim's await_recorder) starts
+# the ring only then, so step 0 is in the bag on every topic (docs/graph.md, Recording)
+RECORDER_READY = "recorder_ready"     # std_msgs/msg/String, recorder, latched
 
 # Services: the graph's goal (relative), then the nodes' own (private, "~/": node/name)
 SET_GOAL = "set_goal"                 # tmgwr_interfaces/srv/SetGoal, maze_sim (the graph's)

@@ -347,8 +347,9 @@ def graph_specs(maze: str | None = None, seed: int | None = None, goal: str | No
             if goal is not None:
                 params["goal"] = str(goal)
             if record_dir is not None:
-                # the recorder discovers topics every 0.5 s: let it subscribe to the
-                # Observation topic before the first step is published
+                # the first step waits until the recorder has matched every ring publisher
+                # (recorder_ready), then start_delay lets the ring's nodes match each other
+                params["await_recorder"] = True
                 params["start_delay"] = 1.0
         if exe == "map_learner" and run_dir is not None:
             params["map_dir"] = str(run_dir.resolve())             # the run's own maps

@@ -22,6 +22,14 @@ The latched whole-map snapshots (``/sensorimotor_snapshot``) and potentials
 local, a recorder that joins late still records the newest whole map, which the per-step
 map changes of ``/sensorimotor_state`` build on (``./tmgwr report`` rebuilds the map).
 
+Ready: once every expected topic it records has a matched publisher, the recorder says so,
+latched, on ``recorder_ready`` (std_msgs/String: the bag's directory; not recorded itself).
+A simulator started with ``await_recorder`` publishes its first observation only then:
+``./tmgwr up`` and the launch file set it whenever they record, so no step of the ring
+goes by before the recorder could take it (a reliable volatile reader matched late gets
+nothing of what was published before). A graph node that starts after the recorder's
+discovery of the others is the race this closes.
+
 Gaps: on the per-step topics (``gap_topics``: the ring's five, and the same names and types
 in any namespace below the recorder's, each topic on its own) every message's (run_id,
 step_id) is read from its bytes (:mod:`tmgwr_agent.bag.gaps`); a step id that jumps ahead
@@ -47,13 +55,14 @@ from pathlib import Path
 
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from std_msgs.msg import String
 
 from tmgwr_agent.bag import definitions
 from tmgwr_agent.bag import qos as bag_qos
 from tmgwr_agent.bag.gaps import StepGaps
 from tmgwr_agent.bag.writer import COMPRESSIONS, BagWriter, TopicInfo
 from tmgwr_common import topics
-from tmgwr_common.node import NODE_OPTIONS, declare_parameters, run
+from tmgwr_common.node import LATCHED_QOS, NODE_OPTIONS, declare_parameters, run
 from tmgwr_common.params import Param
 
 _BIG = 2 ** 62
@@ -138,6 +147,9 @@ class Recorder(Node):
         self.early_types: dict[str, str] = {}
         self._warned: set[str] = set()
         self.gaps = StepGaps()
+        self.ready_pub = self.create_publisher(String, topics.RECORDER_READY, LATCHED_QOS)
+        self.ready_topic = self.resolve_topic_name(topics.RECORDER_READY)
+        self.ready = False
         self.gap_topics = {self.resolve_topic_name(t) for t in p["gap_topics"] if t}
         # their types (from ``expect``): the same name in a nested namespace is checked too
         self.gap_types = {t: type_name for t, type_name in p["expect"].items()
@@ -188,6 +200,8 @@ class Recorder(Node):
 
     # ------------------------------------------------------------------ discovery
     def _wanted(self, topic: str) -> bool:
+        if topic == self.ready_topic:                      # the recorder's own word
+            return False
         if self.topic_list:
             return topic in self.topic_list
         if any(part.startswith("_") for part in topic.split("/")):   # hidden topics
@@ -197,6 +211,7 @@ class Recorder(Node):
         return not (self.exclude and self.exclude.search(topic))
 
     def discover(self) -> None:
+        self._say_ready()
         for topic, types in self.get_topic_names_and_types():
             if topic in self.early and self.received[topic] == 0:
                 self._check_early(topic, types)
@@ -212,6 +227,18 @@ class Recorder(Node):
                 self._subscribe(topic, types[0], infos)
             except definitions.DefinitionError as exc:
                 self._warn_once(topic, f"{topic} not recorded: {exc}")
+
+    def _say_ready(self) -> None:
+        """Once every expected topic subscribed early has a matched publisher: publish the
+        bag's directory on ``recorder_ready`` (latched) and log it."""
+        if self.ready or any(self.subscriptions_by_topic[t].get_publisher_count() == 0
+                             for t in self.early):
+            return
+        self.ready = True
+        where = str(self.writer.directory.resolve())
+        self.ready_pub.publish(String(data=where))
+        self.get_logger().info(f"matched a publisher on every expected topic "
+                               f"({len(self.early)}): said so on {self.ready_topic}")
 
     def _checks_gaps(self, topic: str, type_name: str) -> bool:
         """Whether ``topic``'s step ids are checked: a ``gap_topics`` name, or the same
