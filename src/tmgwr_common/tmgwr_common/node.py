@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import array
 import faulthandler
+import gc
 import math
 import os
 import sys
@@ -479,7 +480,6 @@ def freeze_startup_objects() -> None:
     long-lived startup objects out of collections). A full collection of a node's ~70,000
     startup objects took 50-70 ms here, a stall of the whole lockstep ring each time one
     ran; after the freeze a collection visits only what was made since."""
-    import gc
     gc.collect()
     gc.freeze()
 
@@ -542,6 +542,10 @@ def run(factory: Callable[[], Any], name: str, args=None,
         if node is not None:
             wait_for_acknowledgments(node)
             node.destroy_node()
+        # A node whose constructor raised (a refused start) still holds its DDS entities
+        # until a collection: destroyed here, under the guard and before the context
+        # shuts down, not later by the interpreter's exit, where nothing bounds a hang.
+        gc.collect()
         rclpy.try_shutdown()
         disarm()
         stop.ignore_from_now()

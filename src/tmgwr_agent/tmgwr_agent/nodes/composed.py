@@ -30,6 +30,7 @@ and saves its map; the recorder finishes its bag last).
 from __future__ import annotations
 
 import argparse
+import gc
 import sys
 from typing import Any, Callable
 
@@ -38,6 +39,7 @@ from tmgwr_common.node import (
     STOP,
     end_node,
     freeze_startup_objects,
+    guard_teardown,
     make_executor,
     params_files,
     spin_until,
@@ -175,7 +177,10 @@ def run_composed(record: bool, executor_kind: str | None, args: list[str]) -> in
                       flush=True)
                 code = code or 1
             node.destroy_node()
+        disarm = guard_teardown(NAME, code)
+        gc.collect()        # a node whose constructor raised, as tmgwr_common.node.run does
         rclpy.try_shutdown()
+        disarm()
         stop.ignore_from_now()
     return code
 
