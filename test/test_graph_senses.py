@@ -207,9 +207,11 @@ def test_a_recording_without_the_declarations_replays_on_the_grid(ros_domain, tm
                          "checkpoint_period:=0", domain=ros_domain, env=home)
     with estimator:
         estimator.wait_for_line(r"motivation_estimator ready", timeout=90)
+        # a tenth of the recorded pace: the replay is not lockstep, and a reader of the
+        # ring's keep-last history loses states when starved of CPU for STEP_DEPTH of them
         replay = tmgwr_cli("replay", str(bag), "--topics", "/sensorimotor_state", "/action",
-                           "--wait-subscribers", "1", "--delay", "0.5", domain=ros_domain,
-                           timeout=180)
+                           "--wait-subscribers", "1", "--delay", "0.5", "--rate", "0.1",
+                           domain=ros_domain, timeout=240)
         assert replay.returncode == 0, replay.stdout + replay.stderr
         line = estimator.wait_for_line(r"the world's senses set", timeout=30)
         estimator.stop()
