@@ -57,6 +57,23 @@ def test_the_basis_waits_for_a_direction_and_keeps_within_an_episode():
     assert f.version == v + 1
 
 
+@pytest.mark.parametrize("shape", [(4, 2, 2), (2, 2, 2), (3, 3, 3), (3, 3, 2), (6, 4, 4),
+                                   (4, 1, 2)])
+def test_the_forward_model_in_the_frame_is_numpys_product_to_the_bit(shape):
+    """kernels.frame_delta (frame.py's forward model in frame coordinates, for a matrix
+    product: two primitives or more, two basis vectors or more) gives the bits of numpy's
+    ``delta @ T.T``, so that replacing one by the other moves no trajectory; over
+    magnitudes where the order of rounding shows."""
+    from tmgwr_agent.core import kernels
+    P, dim, k = shape
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        delta = rng.normal(size=(P, dim)) * 10.0 ** rng.uniform(-3, 2, size=(P, 1))
+        T = rng.normal(size=(k, dim))
+        np.testing.assert_array_equal(kernels.frame_delta(delta, T, np.empty((P, k))),
+                                      delta @ T.T)
+
+
 def test_frames_by_name():
     assert isinstance(make_frame("learnt"), LearntFrame)
     assert isinstance(make_frame("grid"), SensorFrame) and make_frame("none").complete

@@ -199,8 +199,11 @@ class LearntFrame:
         if self._goal_key != (self.version, goal.tobytes()):
             self._goal_key = (self.version, goal.tobytes())
             self._goal = np.ascontiguousarray(T @ goal)
-        return Frame(x, self._goal,
-                     np.ascontiguousarray(delta @ T.T), 1.0)
+        # numpy's product of two matrices, in a kernel (a BLAS call costs microseconds);
+        # one row or one basis vector is a vector product, whose sums go otherwise
+        d = kernels.frame_delta(delta, T, np.empty((len(delta), len(T)))) \
+            if len(delta) > 1 and len(T) > 1 else np.ascontiguousarray(delta @ T.T)
+        return Frame(x, self._goal, d, 1.0)
 
 
 def make_frame(unknown: str) -> SensorFrame | LearntFrame:
