@@ -437,9 +437,10 @@ def _fma(typingctx, a, b, c):
 @njit(cache=True)
 def frame_delta(delta, T, out):
     """The forward model in frame coordinates, ``out = delta T^T`` (frame.py), each sum
-    accumulated as numpy's BLAS product does it here: the first product, then one fused
-    multiply-add per further term (the same bits as ``delta @ T.T``, without a BLAS call
-    of microseconds for a few products; test_frame.py)."""
+    accumulated as a BLAS matrix product whose kernels fuse multiply-adds does it: the
+    first product, then one fused multiply-add per further term in order (the bits of
+    numpy's ``delta @ T.T`` on such a BLAS, which ``frame.forward_model`` probes before
+    it uses this; test_frame.py)."""
     for p in range(delta.shape[0]):
         for r in range(T.shape[0]):
             s = delta[p, 0] * T[r, 0]
