@@ -10,7 +10,7 @@ import pytest
 from maze_sim import GridWorld, Maze
 from maze_sim.maze import ACTION_VECTORS, maze_file
 from tmgwr_agent.core.agent import TMGWRAgent
-from tmgwr_agent.core.frame import LearntFrame, SensorFrame, make_frame
+from tmgwr_agent.core.frame import LearntFrame, SensorFrame, forward_model, make_frame
 from tmgwr_agent.world_senses import maze_senses
 
 
@@ -55,6 +55,20 @@ def test_the_basis_waits_for_a_direction_and_keeps_within_an_episode():
     assert f.version == v
     f.refresh(delta, np.array([0, 2, 0, 1]), L=0.1)      # a new episode: re-estimated
     assert f.version == v + 1
+
+
+@pytest.mark.parametrize("shape", [(4, 2, 2), (2, 2, 2), (3, 3, 3), (3, 3, 2), (6, 4, 4),
+                                   (4, 1, 2), (4, 2, 1), (1, 2, 2), (5, 6, 6)])
+def test_the_forward_model_in_the_frame_is_numpys_product_to_the_bit(shape):
+    """frame.forward_model (kernels.frame_delta where it sums as this machine's BLAS does)
+    gives the bits of numpy's ``delta @ T.T``, so that it moves no trajectory; over
+    magnitudes where the order of rounding shows."""
+    P, dim, k = shape
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        delta = rng.normal(size=(P, dim)) * 10.0 ** rng.uniform(-3, 2, size=(P, 1))
+        T = rng.normal(size=(k, dim))
+        np.testing.assert_array_equal(forward_model(delta, T), delta @ T.T)
 
 
 def test_frames_by_name():

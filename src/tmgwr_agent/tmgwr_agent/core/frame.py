@@ -53,6 +53,37 @@ import numpy as np
 from tmgwr_agent.core import kernels
 
 _NO_ROWS = np.zeros(0, dtype=np.int64)
+#: Sensations of at most this many values have their forward model mapped by a kernel
+#: (:func:`forward_model`), where it sums as numpy's product does (probed: :func:`_same_sums`).
+KERNEL_DIM = 4
+_same: bool | None = None
+
+
+def _same_sums() -> bool:
+    """Whether :func:`kernels.frame_delta` gives the bits of numpy's matrix product on this
+    machine (its BLAS sums a product's terms in order with fused multiply-adds): checked
+    once, on random matrices of 2 to 8 rows and 2 to ``KERNEL_DIM`` columns, where sums
+    rounded otherwise differ."""
+    global _same
+    if _same is None:
+        rng = np.random.default_rng(0)
+        _same = True
+        for P in range(2, 9):
+            for dim in range(2, KERNEL_DIM + 1):
+                for k in range(2, dim + 1):
+                    d, T = rng.normal(size=(P, dim)), rng.normal(size=(k, dim))
+                    _same &= np.array_equal(kernels.frame_delta(d, T, np.empty((P, k))),
+                                            d @ T.T)
+    return _same
+
+
+def forward_model(delta: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """``delta T^T``, the forward model in frame coordinates: numpy's product, by a kernel
+    of the same bits where one is known (a BLAS call for a few products costs more than
+    most kernels of a step); a vector product (one row or one basis vector) is numpy's."""
+    if 1 < len(delta) and 1 < len(T) and delta.shape[1] <= KERNEL_DIM and _same_sums():
+        return kernels.frame_delta(delta, T, np.empty((len(delta), len(T))))
+    return np.ascontiguousarray(delta @ T.T)
 
 
 class Frame(NamedTuple):
@@ -199,8 +230,7 @@ class LearntFrame:
         if self._goal_key != (self.version, goal.tobytes()):
             self._goal_key = (self.version, goal.tobytes())
             self._goal = np.ascontiguousarray(T @ goal)
-        return Frame(x, self._goal,
-                     np.ascontiguousarray(delta @ T.T), 1.0)
+        return Frame(x, self._goal, forward_model(delta, T), 1.0)
 
 
 def make_frame(unknown: str) -> SensorFrame | LearntFrame:

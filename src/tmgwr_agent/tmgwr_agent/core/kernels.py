@@ -22,7 +22,8 @@ import os
 import sys
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.core.extending import intrinsic
 
 
 @njit(cache=True)
@@ -423,6 +424,30 @@ def nearest_weight_among(w, alive, x, best, rows, k):
         if d < best_d or (d == best_d and i < best):
             best, best_d = i, d
     return best
+
+
+@intrinsic
+def _fma(typingctx, a, b, c):
+    """``a * b + c`` rounded once (a fused multiply-add, LLVM's ``llvm.fma``)."""
+    def codegen(context, builder, signature, args):
+        return builder.fma(*args)
+    return types.float64(types.float64, types.float64, types.float64), codegen
+
+
+@njit(cache=True)
+def frame_delta(delta, T, out):
+    """The forward model in frame coordinates, ``out = delta T^T`` (frame.py), each sum
+    accumulated as a BLAS matrix product whose kernels fuse multiply-adds does it: the
+    first product, then one fused multiply-add per further term in order (the bits of
+    numpy's ``delta @ T.T`` on such a BLAS, which ``frame.forward_model`` probes before
+    it uses this; test_frame.py)."""
+    for p in range(delta.shape[0]):
+        for r in range(T.shape[0]):
+            s = delta[p, 0] * T[r, 0]
+            for c in range(1, T.shape[1]):
+                s = _fma(delta[p, c], T[r, c], s)
+            out[p, r] = s
+    return out
 
 
 @njit(cache=True)

@@ -578,7 +578,7 @@ class SensorimotorMap:
         that stayed (:meth:`stayed`) merges its two winners, one place (the module
         docstring); returns the winner's id after the merges."""
         a, d = outcome.action, x - self.x_prev
-        if not np.isfinite(d).all():
+        if not all(map(math.isfinite, d.tolist())):     # (a few values: no numpy call)
             return winner
         if a >= len(self.motion):           # (a map made or loaded without primitives)
             self.motion = np.concatenate([self.motion,
