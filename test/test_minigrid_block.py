@@ -66,3 +66,49 @@ def test_a_block_that_leaves_only_an_opened_wall_is_passed_in_few_steps():
              for t, s in enumerate(trial_seeds(0, 6))]
     assert None not in steps, steps
     assert statistics.median(steps) <= 4 * oracle, (steps, oracle)
+
+
+def _stuck_after_the_block(maze_text: str, seed: int):
+    """An agent trained on ``maze_text`` until its route is learnt, then walked after
+    event a until it is stuck (the known route broke and no link leads to the goal)."""
+    world = MiniGridWorld(Maze.from_text(maze_text), "G", max_episode_steps=3000)
+    agent = TMGWRAgent(world_senses(world), np.random.default_rng(seed))
+    agent.set_goal(world.goal, world.goal_observation())
+    for _ in range(6):
+        run_episode(world, agent)
+    world.fire_event("a")
+    obs, _ = world.reset()
+    agent.begin_episode(obs)
+    for _ in range(200):
+        obs, _, terminated, _, info = world.step(agent.act())
+        agent.observe(obs, info)
+        if agent.motivation._stuck or terminated:
+            break
+    assert agent.motivation._stuck
+    return agent
+
+
+def test_while_stuck_walls_known_before_the_break_are_doubted_alike():
+    """Every remembered wall bumped before the route broke is as doubtful as any other
+    (the wall prior; before: less the more recent its bump, so the walls nearest the
+    opening, bumped last in training, were re-tested last), and a wall whose cell lies
+    beyond the places the map and the goal span (the maze's outer wall) is not doubted
+    (before: re-tested as unknown space as near the goal as the opening)."""
+    agent = _stuck_after_the_block(GAPS, 0)
+    mo, m = agent.motivation, agent.map
+    n, prior = m.n, mo.wall_prior()
+    lo, hi = mo._known_extent(m)
+    step = float(np.sqrt(mo.delta_sq.max()))
+    before = beyond = 0
+    for i in np.flatnonzero(m.alive[:n]):
+        for a in range(mo.n_primitives):
+            if not (mo.tried[i, a] and 0 <= mo.bump_t[i, a] < mo.break_t):
+                continue
+            x = mo._predicted(m, np.array([i]), a)[0]
+            if ((x < lo - 0.5 * step) | (x > hi + 0.5 * step)).any():
+                beyond += 1
+                assert mo.rho[i, a] == 0.0, (i, a, x)
+            else:
+                before += 1
+                assert mo.rho[i, a] == prior, (i, a, mo.rho[i, a], prior)
+    assert before > 0 and beyond > 0

@@ -302,6 +302,7 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         self.wall_tests = 0           # actions at a pair known closed, ever
         self.wall_opened = 0          # of those, the ones that moved
         self.broken = False           # a move made before bumped this episode
+        self.break_t = -1             # the clock of the last such bump, ever
         self._route_due = False       # the route is read off V0 at the episode's first solve
         self._stuck = False           # stuck when the last update solved Eq. 5'
         self.delta = np.zeros((P, 0))     # mean sensed displacement per primitive

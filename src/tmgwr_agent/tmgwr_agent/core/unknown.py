@@ -170,6 +170,23 @@ successor, an *option*, in the max of Eq. 5::
   few dozen steps and the agent never got far from it (one held-out suite trial took
   over a hundred times the oracle's steps). While stuck the clock is the step (the task
   is impossible now, not in a few episodes) and the re-test budget does not apply.
+  Without a lattice (:meth:`OptionRules._unplaced_options`: the wall's cell cannot be
+  looked up, so its option is valued as unknown space) two facts of the agent's own
+  history decide which walls it doubts. *The break dates the change*: the route broke at
+  the bump of a move made before (``break_t``, the clock of the last such bump), so the
+  world changed after the route was last walked; every wall bumped before that bump may
+  have changed with it, however long before, and is doubted at the limit ``p``; only the
+  walls bumped since (re-tested in vain while finding the way round) follow the clock
+  above. Ranked by the age of their bumps instead, the walls bumped last in training,
+  often those beside the route just learnt and so near the opening, were re-tested last.
+  *Nothing is known beyond the known extent*: a wall whose cell (the successor the local
+  forward model predicts) lies more than half a step outside the box that the map's
+  places and the goal sensation span is not doubted: nothing was ever sensed there and
+  the goal is not there, so a way through it would have to lead back in through space
+  never sensed, which is the untried moves' to find (the lattice's wall runs stop at the
+  known extent for the same reason, :func:`kernels.wall_exits`). Without it the maze's
+  outer wall, valued as unknown space as near the goal as any inner wall, was re-tested
+  cell by cell before the opening.
 * *The goal when the route broke*: an episode ends at the goal, so the agent never moves
   from a goal node, and its potential in Eq. 5' is ``R_g`` plus what its own untried
   moves promise (about 10 here, against the ``V* = 17`` the unknown is scaled to: a goal
@@ -359,6 +376,7 @@ class OutcomeMemory:
                      and self.succ[node, a] >= 0)
         self.broken |= broke
         if broke:
+            self.break_t = self.clock
             self._close_cell(node, a, w)
         elif winner >= 0 and (inserted or not outcome.bumped):
             self._mark_closed(winner, -1)     # a node stood on (or a new one) is open
@@ -442,6 +460,7 @@ class OutcomeMemory:
                 "moves": self.moves.copy(), "episode": int(self.episode),
                 "route": float(self.route), "retests": int(self.retests),
                 "wall_tests": int(self.wall_tests), "wall_opened": int(self.wall_opened),
+                "break_t": int(self.break_t),
                 "route_due": int(self._route_due), "sel": self.sel.copy(),
                 "chain": self.chain.copy()}
 
@@ -470,6 +489,7 @@ class OutcomeMemory:
         self.retests = int(d.get("retests", 0))
         self.wall_tests = int(d.get("wall_tests", 0))      # older checkpoints: no re-test
         self.wall_opened = int(d.get("wall_opened", 0))
+        self.break_t = int(d.get("break_t", -1))          # older checkpoints: no break
         self._route_due = bool(d.get("route_due", 0))
         self.sel = grown(np.array(d["sel"], dtype=bool), len(self.succ), True) \
             if "sel" in d else np.ones(self.succ.shape, dtype=bool)   # older: every one
@@ -817,6 +837,9 @@ class OptionRules:
         successor is valued as an untried move's. Without it a remembered wall had no
         option without a lattice: a block that left only a way through a wall that had
         opened was passed only when a random walk, every potential 0, hit the opening.
+        A wall bumped before the route broke (``break_t``) is doubted at the limit, and a
+        wall whose cell lies beyond the known extent (:meth:`_known_extent`, half a step
+        out) not at all: the module docstring, *Stuck*, says why.
 
         A primitive whose last try from i moved it to ``j = succ[i, a]`` while the map
         has since deleted that link (it aged out: :mod:`~tmgwr_agent.core.
@@ -834,13 +857,16 @@ class OptionRules:
         wall = live & self.tried[r, a] & (bump >= 0) & (bump < clock) & (doubt > 0.0) \
             & (T > 0.0)
         known_for = np.where(self.closed_t[r, a] >= 0, bump - self.closed_t[r, a], 0)
-        rho_w = np.where(wall, doubt * (1.0 - np.exp(-(clock - bump) / (T + known_for))), 0.0)
+        fresh = 1.0 - np.exp(-(clock - bump) / (T + known_for))
+        rho_w = np.where(wall, doubt * np.where(bump < self.break_t, 1.0, fresh), 0.0)
         unknown = untried | wall
         step = math.sqrt(max(float(self.delta_sq.max()), 0.0))
         gap = np.sqrt(np.einsum("ij,ij->i", m.w[rows] - self.goal_x, m.w[rows] - self.goal_x))
         h = np.maximum(gap / step - 1.0, 0.0) if step > 0.0 else np.zeros(len(rows))
         h = np.repeat(h[:, None], len(prims), axis=1)
         rho_u = np.where(wall, rho_w, self.rho_new)
+        if wall.any():
+            lo, hi = self._known_extent(m)
         for c, p in enumerate(prims):
             q = np.flatnonzero(unknown[:, c])
             x = self._predicted(m, rows[q], int(p)) if len(q) and step > 0.0 else None
@@ -853,6 +879,9 @@ class OptionRules:
                 d = x[:, None, :] - self._region_x[None, :, :]
                 ends = (np.einsum("ijk,ijk->ij", d, d) <= self.goal_tolerance ** 2).any(axis=1)
                 rho_u[q[ends], c] = 0.0
+            if wall[q, c].any():
+                beyond = ((x < lo - 0.5 * step) | (x > hi + 0.5 * step)).any(axis=1)
+                rho_u[q[beyond & wall[q, c]], c] = 0.0
         j = self.succ[r, a]
         jc = np.maximum(j, 0)
         lost = (live & self.tried[r, a] & (self.bump_t[r, a] < 0) & (j >= 0) & (j != r)
@@ -863,6 +892,12 @@ class OptionRules:
         self.rho[r, a] = np.where(unknown, rho_u, np.where(lost, 1.0, 0.0))
         self.U[r, a] = np.where(unknown & (rho_u > 0.0), self.v_star * self.gamma ** h, 0.0)
         self.osucc[r, a] = np.where(lost, j, -1)
+
+    def _known_extent(self, m: SensorimotorMap) -> tuple[np.ndarray, np.ndarray]:
+        """The box the live nodes' places and the goal sensation span (lower, upper)."""
+        w = m.w[:m.n][m.alive[:m.n]]
+        pts = np.vstack([w, self.goal_x[None, :]]) if len(w) else self.goal_x[None, :]
+        return pts.min(axis=0), pts.max(axis=0)
 
     def _outside(self, m: SensorimotorMap, n: int) -> np.ndarray:
         """The (node, primitive) pairs of rows ``[0, n)`` whose predicted successor lies
