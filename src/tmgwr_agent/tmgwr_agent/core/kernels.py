@@ -2067,8 +2067,10 @@ def map_step(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T,
              shape, moves, k):
     """One learning step of the map in one call (sensorimotor_map.py) when nothing needs
     Python: :func:`match`, then, reached by action ``a`` (``has_action``) from ``prev``,
-    :func:`link_step` on prev -> winner (``keep1`` prev, ``keep2`` ``keep``), then, with
-    ``r2`` >= 0, :func:`close_pair` over the nodes moved (the merge's first pair). Returns
+    :func:`link_step` on prev -> winner (``keep1`` prev, ``keep2`` ``keep``; none when
+    ``unblocked``, the action was not blocked, and the winner is ``prev``: a move within
+    one node, sensorimotor_map.py), then, with ``r2`` >= 0, :func:`close_pair` over the
+    nodes moved (the merge's first pair). Returns
     ``(b, insert, moved, done, changes, ends, i, j, linked)``: ``done`` False when the
     step needs the caller (not learning, a node to insert, a terminal ``prev``, link rows
     to widen: then only the match was made, and the caller goes on from there), else
