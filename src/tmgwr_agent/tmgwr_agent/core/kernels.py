@@ -2087,13 +2087,15 @@ def sensed_motion(motion, a, d, a_T):
 
 @njit(cache=True)
 def map_step(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T, learn, eps_b,
-             eps_n, tau_b, tau_n, kappa, E, A, age, terminal, a, has_action, alpha, sigma_a,
-             eta_a, E_init, E_min, max_age, credit, keep, r2, prior, head, node, geom,
+             eps_n, tau_b, tau_n, kappa, E, A, age, terminal, a, has_action, unblocked, alpha,
+             sigma_a, eta_a, E_init, E_min, max_age, credit, keep, r2, prior, head, node, geom,
              shape, moves, k):
     """One learning step of the map in one call (sensorimotor_map.py) when nothing needs
     Python: :func:`match`, then, reached by action ``a`` (``has_action``) from ``prev``,
-    :func:`link_step` on prev -> winner (``keep1`` prev, ``keep2`` ``keep``), then, with
-    ``r2`` >= 0, :func:`close_pair` over the nodes moved (the merge's first pair). Returns
+    :func:`link_step` on prev -> winner (``keep1`` prev, ``keep2`` ``keep``; none when
+    ``unblocked``, the action was not blocked, and the winner is ``prev``: a move within
+    one node, sensorimotor_map.py), then, with ``r2`` >= 0, :func:`close_pair` over the
+    nodes moved (the merge's first pair). Returns
     ``(b, insert, moved, done, changes, ends, i, j, linked)``: ``done`` False when the
     step needs the caller (not learning, a node to insert, a terminal ``prev``, link rows
     to widen: then only the match was made, and the caller goes on from there), else
@@ -2108,7 +2110,7 @@ def map_step(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T,
     changes, ends, linked = 0, np.empty(0, dtype=np.int64), False
     if not learn or insert:
         return b, insert, moved, False, changes, ends, -1, -1, linked
-    if prev >= 0 and has_action:
+    if prev >= 0 and has_action and not (unblocked and b == prev):
         if terminal[prev]:
             return b, insert, moved, False, changes, ends, -1, -1, linked
         changes, ends = link_step(out, E, A, age, inn, alive, terminal, n, prev, b, a, alpha,

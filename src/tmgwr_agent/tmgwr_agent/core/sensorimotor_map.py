@@ -120,6 +120,18 @@ bump_from`, what the agent and the graph's map learner report as the node acted 
 -1, no node, when the winner is the same node or the bump is elsewhere for it too).
 Without noise, or with a scatter inside GWR's radius, the check is off.
 
+**A move within one node.** Eq. 1-2 read a self transition ``i -> i`` as a bump: the
+primitive left the agent where it was, so the links of that primitive out of ``i`` lose
+reliability (the credit rule) and age. The touch sensor tells a bump from a move, and a
+move that was not blocked but whose two samples have one winner is no bump: the node
+won samples of two places (under noise a sample scattered past the half-way line, or a
+node left between two places by a merge), and which of its links the move took the map
+cannot see. Such a step changes no link (:meth:`SensorimotorMap.step`, ``unblocked``;
+:func:`kernels.map_step`): no reliability lost, no ageing. Without noise a move always
+changes the winner (two places are a step apart, far beyond the matching radius, and
+GWR inserts a node for a sample beyond it while ``h_T`` lets every winner insert, as
+the default does), so there the rule does not apply.
+
 **The place the links predict.** A sample scattered nearer a neighbouring node than its
 own makes that node the winner, and the action chosen from it is the neighbour's (a
 greedy walk then bumps or turns off its route). The links say where the move just made
@@ -471,7 +483,8 @@ class SensorimotorMap:
         prior = -1
         if motor is not None and self.merge and self.a_place < self.a_T and not elsewhere:
             prior = before if outcome.bumped else self.link_target(before, outcome.action)
-        winner = self.step(x, None if elsewhere else motor, learn=learn, prior=prior)
+        winner = self.step(x, None if elsewhere else motor, learn=learn, prior=prior,
+                           unblocked=not outcome.bumped)
         if elsewhere:
             winner = self._bump_elsewhere(before, winner, motor, outcome.action)
         elif learn and motor is not None:
@@ -482,10 +495,12 @@ class SensorimotorMap:
         return winner
 
     def step(self, x: np.ndarray, action: np.ndarray | None, learn: bool = True,
-             prior: int = -1) -> int:
+             prior: int = -1, unblocked: bool = False) -> int:
         """Present input x reached by motor vector ``action``; returns the winner.
         ``prior``: the node the links predict (``experience``), the winner when x lies
-        within the radius of its place.
+        within the radius of its place. ``unblocked``: the touch sensor said the action was
+        not blocked, so a winner equal to the previous one is no transition the links
+        learn (the module docstring, "A move within one node"); else it is a bump.
 
         With ``learn`` False only the winner is found (greedy rollouts).
         """
@@ -505,8 +520,8 @@ class SensorimotorMap:
             self.w, self.c, self.h, self.alive, self.out, self.inn, self.n, self.prev, x, C,
             self.alpha_c, self.beta_c, self.a_place, self.h_T, learn, self.eps_b, self.eps_n,
             self.tau_b, self.tau_n, self.kappa_h, self.E, self.a, self.age, self.terminal, a,
-            has_action, self.alpha, self.sigma_a, self.eta_a, self.E_init, self.E_min,
-            self.max_age, self.link_rule == "credit", self.winner, r2, prior,
+            has_action, unblocked, self.alpha, self.sigma_a, self.eta_a, self.E_init,
+            self.E_min, self.max_age, self.link_rule == "credit", self.winner, r2, prior,
             *self.index.arrays, moves, len(moves))
         if len(moved):
             self.log.touch(moved)
@@ -529,7 +544,8 @@ class SensorimotorMap:
             winner = self._insert(self.w[b] + lam * (x - self.w[b]),
                                   self.c[b] + lam * (C - self.c[b]))
             self._habituate(b, self.tau_b)
-        if learn and self.prev >= 0 and action is not None:
+        if learn and self.prev >= 0 and action is not None \
+                and not (unblocked and winner == self.prev):
             if self.terminal[self.prev]:        # walked on from prev: its place is not an
                 at = self.nodes_at(self.prev)                              # episode end
                 self.terminal[at] = False
