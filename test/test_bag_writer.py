@@ -96,3 +96,34 @@ def test_recover_a_directory_whose_last_file_was_cut(tmp_path):
         ids = [int(reader.deserialize(raw, c.msgtype).x) for c, _t, raw in reader.messages()]
     assert ids == list(range(saved))
     shutil.rmtree(out)
+
+
+def test_replay_plays_in_the_order_received_or_in_the_order_sent(tmp_path):
+    """``./tmgwr replay --message-order sent`` (rosbag2's name): the recorder may receive a
+    step's action before the state that caused it (it takes its subscriptions one after the
+    other); played in publish-time order the ring's causal order comes back, and a message
+    that arrived later than SENT_WINDOW after its sending still comes out."""
+    from dataclasses import replace
+
+    from tmgwr_agent.bag.replay import SENT_WINDOW, iter_messages
+    bag = tmp_path / "b"
+    w = BagWriter(bag, compression="none")
+    w.add_topic(replace(topic(), name="/state"))
+    w.add_topic(replace(topic(), name="/action"))
+    ms, late = 10 ** 6, int(SENT_WINDOW * 1e9) + 5 * 10 ** 9
+    t0 = 1_700_000_000 * 10 ** 9
+    # (topic, step, sent, received): each step's action received before its state
+    sent = [("/state", 0, 0, 3), ("/action", 0, 1, 2), ("/state", 1, 10, 13),
+            ("/action", 1, 11, 12), ("/state", 2, 20, 20 + late // ms)]
+    for name, step, at, got in sent:
+        w.write(name, observation_bytes(step), t0 + got * ms, t0 + at * ms, step)
+    w.close()
+    files = sorted(bag.glob("*.mcap"))
+    got = {order: [(name, t - t0) for name, t, _ in iter_messages(files, None, order)]
+           for order in ("received", "sent")}
+    assert got["received"] == [("/action", 2 * ms), ("/state", 3 * ms), ("/action", 12 * ms),
+                               ("/state", 13 * ms), ("/state", 20 * ms + late)]
+    assert got["sent"] == [("/state", 0), ("/action", ms), ("/state", 10 * ms),
+                           ("/action", 11 * ms), ("/state", 20 * ms)]
+    with pytest.raises(ValueError, match="one of received, sent"):
+        list(iter_messages(files, None, "arrival"))

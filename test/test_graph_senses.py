@@ -170,7 +170,7 @@ LATE_START = "maze_sim:\n  ros__parameters:\n    await_recorder: true\n"
 STATES = 300
 
 
-@pytest.mark.timeout(400)
+@pytest.mark.timeout(900)
 def test_a_recording_without_the_declarations_replays_on_the_grid(ros_domain, tmp_path):
     """A grid run recorded without ``/world_senses`` and ``/feature_senses`` (a recording
     made before they existed), its states and actions replayed (``./tmgwr replay``) into a
@@ -207,11 +207,14 @@ def test_a_recording_without_the_declarations_replays_on_the_grid(ros_domain, tm
                          "checkpoint_period:=0", domain=ros_domain, env=home)
     with estimator:
         estimator.wait_for_line(r"motivation_estimator ready", timeout=90)
-        # a tenth of the recorded pace: the replay is not lockstep, and a reader of the
-        # ring's keep-last history loses states when starved of CPU for STEP_DEPTH of them
+        # in the ring's causal order (the estimator holds a state until the previous
+        # step's action; the recorder may receive an action before its state), at half
+        # the recorded pace: the replay is not lockstep, and a reader of the ring's
+        # keep-last history loses states when starved of CPU for STEP_DEPTH of them (a
+        # loaded machine's recording may last a minute or more: its ring was slow too)
         replay = tmgwr_cli("replay", str(bag), "--topics", "/sensorimotor_state", "/action",
-                           "--wait-subscribers", "1", "--delay", "0.5", "--rate", "0.1",
-                           domain=ros_domain, timeout=240)
+                           "--wait-subscribers", "1", "--delay", "0.5", "--rate", "0.5",
+                           "--message-order", "sent", domain=ros_domain, timeout=600)
         assert replay.returncode == 0, replay.stdout + replay.stderr
         line = estimator.wait_for_line(r"the world's senses set", timeout=30)
         estimator.stop()

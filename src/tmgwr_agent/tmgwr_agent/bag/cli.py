@@ -37,6 +37,10 @@ def register(subparsers) -> None:
                    help="seconds to wait for discovery before the first message (default 1)")
     p.add_argument("--wait-subscribers", type=int, default=0, metavar="N",
                    help="before playing, wait until every topic has N subscribers")
+    p.add_argument("--message-order", choices=("received", "sent"), default="received",
+                   help="play in the order the recorder received the messages (default) "
+                        "or the order their publishers sent them (the ring's causal order "
+                        "on one host: what a node of the ring fed by a replay needs)")
     p.set_defaults(func=_replay)
 
     p = subparsers.add_parser(
@@ -70,7 +74,8 @@ def _replay(args: argparse.Namespace) -> int:
     from tmgwr_agent.bag.replay import replay
     try:
         res = replay(args.bag, rate=args.rate, topics=args.topics, loop=args.loop,
-                     delay=args.delay, wait_subscribers=args.wait_subscribers)
+                     delay=args.delay, wait_subscribers=args.wait_subscribers,
+                     order=args.message_order)
     except (OSError, ValueError, TimeoutError) as exc:
         print(f"replay: {exc}", file=sys.stderr)
         return 1

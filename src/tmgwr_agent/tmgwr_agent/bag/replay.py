@@ -6,6 +6,16 @@ deserialization), each on a publisher with the QoS its original publisher offere
 original pace: message ``k`` goes out ``(log_time_k - log_time_0) / R`` seconds after the
 first. Nodes, the recorder and Foxglove see the run again.
 
+Message order (``--message-order``, as rosbag2's ``ros2 bag play`` names it): ``received``
+(default) plays in the order the recorder received the messages (log time); ``sent`` in
+the order their publishers sent them (publish time, the writer's source timestamp), paced
+by it. Across topics the two differ: the recorder takes its subscriptions one after the
+other, so it may receive a step's ``/action`` before the ``/sensorimotor_state`` that caused
+it. A node that follows the lockstep ring (the motivation estimator holds a state until the
+previous step's action) needs the causal order: ``sent``, exact when the graph ran on one
+host (one clock) and no message reached the recorder more than ``SENT_WINDOW`` seconds after
+it was sent.
+
 The map travels as per-step changes (``/sensorimotor_state``) that a consumer applies to a
 replica starting from a whole map (:mod:`tmgwr_agent.map_replica`): a replay that selects
 ``/sensorimotor_state`` also plays ``/sensorimotor_snapshot`` (latched again), so a
@@ -19,6 +29,7 @@ depth 100 (enough for bursts).
 
 from __future__ import annotations
 
+import heapq
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +45,8 @@ from tmgwr_common.topics import GraphNames
 
 LATCHED_DEPTH = 1
 STREAM_DEPTH = 100
+ORDERS = ("received", "sent")
+SENT_WINDOW = 10.0   # s: how long after its sending a message may arrive and stay in order
 
 
 @dataclass
@@ -81,14 +94,32 @@ def read_channels(files: list[Path]) -> dict[str, Channel]:
     return channels
 
 
-def iter_messages(files: list[Path], topics: set[str] | None) -> Iterator[tuple[str, int, bytes]]:
-    """``(topic, log_time, data)`` in log-time order, file after file."""
+def iter_messages(files: list[Path], topics: set[str] | None,
+                  order: str = "received") -> Iterator[tuple[str, int, bytes]]:
+    """``(topic, time, data)``, file after file: ``received``, the log time in log-time
+    order; ``sent``, the publish time in publish-time order (read in log-time order and
+    held back ``SENT_WINDOW`` s: a message sent before the log time of what was read
+    minus the window comes out, smallest publish time first)."""
+    if order not in ORDERS:
+        raise ValueError(f"message order {order!r}: one of {', '.join(ORDERS)}")
+    window = int(SENT_WINDOW * 1e9)
     for path in files:
+        held: list[tuple[int, int, str, bytes]] = []     # (publish_time, n, topic, data)
         with open(path, "rb") as f:
             reader = make_reader(f)
-            for _schema, channel, message in reader.iter_messages(
-                    topics=sorted(topics) if topics else None, log_time_order=True):
-                yield channel.topic, message.log_time, bytes(message.data)
+            for n, (_schema, channel, message) in enumerate(reader.iter_messages(
+                    topics=sorted(topics) if topics else None, log_time_order=True)):
+                if order == "received":
+                    yield channel.topic, message.log_time, bytes(message.data)
+                    continue
+                heapq.heappush(held, (message.publish_time, n, channel.topic,
+                                      bytes(message.data)))
+                while held and held[0][0] < message.log_time - window:
+                    sent, _, topic, data = heapq.heappop(held)
+                    yield topic, sent, data
+        while held:
+            sent, _, topic, data = heapq.heappop(held)
+            yield topic, sent, data
 
 
 def replay_qos(offered: list[dict]):
@@ -105,13 +136,17 @@ def replay_qos(offered: list[dict]):
 
 def replay(bag: str | Path, rate: float = 1.0, topics: list[str] | None = None,
            loop: bool = False, delay: float = 1.0, wait_subscribers: int = 0,
-           wait_timeout: float = 10.0, linger: float = 1.0, log=print) -> dict:
-    """Publish the recording; returns ``{"published": n, "loops": k, "seconds": s}``."""
+           wait_timeout: float = 10.0, linger: float = 1.0, order: str = "received",
+           log=print) -> dict:
+    """Publish the recording in ``order`` (:data:`ORDERS`); returns ``{"published": n,
+    "loops": k, "seconds": s}``."""
     import rclpy
     from rclpy.executors import ExternalShutdownException
 
     if not rate > 0:
         raise ValueError(f"--rate must be > 0 (got {rate})")
+    if order not in ORDERS:
+        raise ValueError(f"--message-order {order!r}: one of {', '.join(ORDERS)}")
     files = bag_files(bag)
     require_finished(bag, files)             # a killed recorder's bag: recover it first
     channels = read_channels(files)
@@ -136,7 +171,8 @@ def replay(bag: str | Path, rate: float = 1.0, topics: list[str] | None = None,
         pubs = {t: node.create_publisher(definitions.import_message(c.type), t,
                                          replay_qos(c.offered_qos))
                 for t, c in selected.items()}
-        log(f'replay: {len(pubs)} topics from {", ".join(str(f) for f in files)} at rate {rate}')
+        log(f'replay: {len(pubs)} topics from {", ".join(str(f) for f in files)} at rate {rate}, '
+            f'in the order {order}')
         time.sleep(delay)
         if wait_subscribers > 0:
             deadline = time.monotonic() + wait_timeout
@@ -151,10 +187,10 @@ def replay(bag: str | Path, rate: float = 1.0, topics: list[str] | None = None,
         while True:
             t0_bag = None
             t0_wall = time.monotonic()
-            for topic, log_time, data in iter_messages(files, set(selected)):
+            for topic, bag_time, data in iter_messages(files, set(selected), order):
                 if t0_bag is None:
-                    t0_bag = log_time
-                target = t0_wall + (log_time - t0_bag) / 1e9 / rate
+                    t0_bag = bag_time
+                target = t0_wall + (bag_time - t0_bag) / 1e9 / rate
                 while True:
                     left = target - time.monotonic()
                     if left <= 0:
