@@ -30,44 +30,6 @@ GAPS = ("#########\n"
         "#########\n")
 
 
-def test_while_stuck_a_remembered_wall_has_an_option():
-    """Trained, then blocked: once the agent is stuck, walls it bumped into have options
-    (rho > 0, a successor worth U > 0; before: none, rho = 0 on every remembered wall)."""
-    world = MiniGridWorld(Maze.from_text(GAPS), "G", max_episode_steps=3000)
-    agent = TMGWRAgent(world_senses(world), np.random.default_rng(0))
-    agent.set_goal(world.goal, world.goal_observation())
-    for _ in range(6):
-        run_episode(world, agent)
-    world.fire_event("a")
-    obs, _ = world.reset()
-    agent.begin_episode(obs)
-    mo, m = agent.motivation, agent.map
-    for _ in range(200):
-        obs, _, terminated, _, info = world.step(agent.act())
-        agent.observe(obs, info)
-        if mo._stuck or terminated:
-            break
-    assert mo._stuck
-    n = m.n
-    walls = m.alive[:n, None] & mo.tried[:n] & (mo.bump_t[:n] >= 0)
-    assert walls.any()
-    doubted = walls & (mo.rho[:n] > 0.0)
-    assert doubted.any()
-    assert (mo.U[:n][doubted] > 0.0).all() or (mo.osucc[:n][doubted] >= 0).all()
-
-
-def test_a_block_that_leaves_only_an_opened_wall_is_passed_in_few_steps():
-    """Six trials of the env-change protocol on GAPS: the median first episode after the
-    event stays within four times the oracle (before: over six times; the agent found the
-    opening only by a random walk)."""
-    maze, spec = Maze.from_text(GAPS), parse_world("minigrid")
-    oracle = event_oracle(spec, maze, "a", "G")["oracle_steps"]
-    steps = [trial("tmgwr", t, s, maze, "a", "G", to_optimal=False, world_spec=spec)["steps"]
-             for t, s in enumerate(trial_seeds(0, 6))]
-    assert None not in steps, steps
-    assert statistics.median(steps) <= 4 * oracle, (steps, oracle)
-
-
 def _stuck_after_the_block(maze_text: str, seed: int):
     """An agent trained on ``maze_text`` until its route is learnt, then walked after
     event a until it is stuck (the known route broke and no link leads to the goal)."""
@@ -86,6 +48,31 @@ def _stuck_after_the_block(maze_text: str, seed: int):
             break
     assert agent.motivation._stuck
     return agent
+
+
+def test_while_stuck_a_remembered_wall_has_an_option():
+    """Trained, then blocked: once the agent is stuck, walls it bumped into have options
+    (rho > 0, a successor worth U > 0; before: none, rho = 0 on every remembered wall)."""
+    agent = _stuck_after_the_block(GAPS, 0)
+    mo, m = agent.motivation, agent.map
+    n = m.n
+    walls = m.alive[:n, None] & mo.tried[:n] & (mo.bump_t[:n] >= 0)
+    assert walls.any()
+    doubted = walls & (mo.rho[:n] > 0.0)
+    assert doubted.any()
+    assert (mo.U[:n][doubted] > 0.0).all() or (mo.osucc[:n][doubted] >= 0).all()
+
+
+def test_a_block_that_leaves_only_an_opened_wall_is_passed_in_few_steps():
+    """Six trials of the env-change protocol on GAPS: the median first episode after the
+    event stays within four times the oracle (before: over six times; the agent found the
+    opening only by a random walk)."""
+    maze, spec = Maze.from_text(GAPS), parse_world("minigrid")
+    oracle = event_oracle(spec, maze, "a", "G")["oracle_steps"]
+    steps = [trial("tmgwr", t, s, maze, "a", "G", to_optimal=False, world_spec=spec)["steps"]
+             for t, s in enumerate(trial_seeds(0, 6))]
+    assert None not in steps, steps
+    assert statistics.median(steps) <= 4 * oracle, (steps, oracle)
 
 
 def test_while_stuck_walls_known_before_the_break_are_doubted_alike():
