@@ -99,8 +99,11 @@ def test_suite_json_keys_oracle_and_skipped(block_run):
             maze.start, maze.goal_cell("G"), walls=maze.walls_after([m["event"]]))
         assert list(m["agents"]) == agents
         for a in agents:
+            mapped = {"nodes"} if a.startswith("tmgwr") else set()   # a learnt map's size
             assert set(m["agents"][a]) == {"steps", "episodes_to_optimal",
-                                           "train_episodes", "learning_steps"}
+                                           "train_episodes", "learning_steps"} | mapped
+            for v in m["agents"][a].get("nodes", {"values": []})["values"]:
+                assert 1 <= v <= 3 * m["free_cells"]
             assert len(m["agents"][a]["steps"]["values"]) == TRIALS
             assert len(m["agents"][a]["learning_steps"]["values"]) == TRIALS
     # top-level agents: every trial of every maze, maze by maze
@@ -115,7 +118,10 @@ def test_suite_json_keys_oracle_and_skipped(block_run):
     assert s["families"]["shortcut"]["mazes"] == 0
     assert s["families"]["shortcut"]["skipped"] == 1
     fam = s["families"]["blocking"]
-    assert set(fam) == SUMMARY_KEYS and fam["mazes"] == 2
+    assert set(fam) == SUMMARY_KEYS | {"max_nodes_per_cell"} and fam["mazes"] == 2
+    assert set(fam["max_nodes_per_cell"]) == {a for a in agents if a.startswith("tmgwr")}
+    assert fam["max_nodes_per_cell"]["tmgwr"] == max(
+        v / m["free_cells"] for m in s["mazes"] for v in m["agents"]["tmgwr"]["nodes"]["values"])
     for a in agents:
         steps = [m["agents"][a]["steps"]["values"] for m in s["mazes"]]
         if all(None not in v for v in steps):

@@ -75,6 +75,7 @@ from tmgwr_agent.experiments.runner import (
     greedy_optimal,
     learning_steps,
     make_world,
+    map_nodes,
     run_episode,
     scenario_trial,
     set_goal,
@@ -87,6 +88,8 @@ from tmgwr_agent.experiments.stats import stat
 RESULTS = ("steps", "episodes_to_optimal", "train_episodes", "learning_steps")
 #: With an event delay K > 0, also: the mean steps of the K settled episodes.
 DELAYED_RESULTS = RESULTS + ("settled_steps",)
+#: Of an agent with a learnt map only: its nodes when the event fires.
+MAP_RESULTS = ("nodes",)
 
 DEFAULT_AGENTS = ("tmgwr", "tmgwr:literal", "tmgwr:credit", "q_learning", "model_based",
                   "dyna_q_plus")
@@ -118,6 +121,13 @@ def parse_delays(text: str | int | Sequence[int] | None) -> tuple[int, ...]:
 def results_keys(delay: int) -> tuple[str, ...]:
     """The per-trial results of a run at event delay ``delay``."""
     return DELAYED_RESULTS if delay else RESULTS
+
+
+def agent_keys(trials: Sequence[Mapping[str, Any]], delay: int) -> tuple[str, ...]:
+    """The results of one agent's ``trials``: :func:`results_keys`, and those of
+    ``MAP_RESULTS`` that every trial has (an agent with a map)."""
+    return results_keys(delay) + tuple(k for k in MAP_RESULTS
+                                       if trials and all(k in r for r in trials))
 
 
 def delay_views(result: dict) -> list[tuple[int, dict]]:
@@ -230,6 +240,7 @@ def trial(spec: str, t: int, seed: np.random.SeedSequence, maze: str | Maze, eve
     set_goal(world, agent, goal)
     conv = train_until_converged(world, agent, caps)
     settled = [run_episode(world, agent).steps for _ in range(delay)]
+    nodes = map_nodes(agent)
     world.fire_event(event)
     d_new = world.shortest_path_length()
     ep = run_episode(world, agent)
@@ -251,6 +262,8 @@ def trial(spec: str, t: int, seed: np.random.SeedSequence, maze: str | Maze, eve
            "train_episodes": conv.episodes, "learning_steps": learning_steps(conv.curve)}
     if delay:
         out["settled_steps"] = sum(settled) / delay
+    if nodes is not None:
+        out["nodes"] = nodes
     return out
 
 
@@ -280,6 +293,6 @@ def run(maze_path: str, agents: list[str], trials: int, seed: int, event: str = 
         res = agent_trials(with_overrides(fn, overrides), agents, seed, trials,
                            (maze_path, event, goal), jobs, what, progress)
         views.append((k, {**head, "agents": {a: {key: stat(r[key] for r in rs)
-                                                 for key in results_keys(k)}
+                                                 for key in agent_keys(rs, k)}
                                              for a, rs in res.items()}}))
     return with_delays(views)

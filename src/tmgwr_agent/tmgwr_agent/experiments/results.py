@@ -265,6 +265,7 @@ def table_suite(root: Path, name: str = "suite_blocks") -> str:
     r, s = views[0][1], views[0][1]["suite"]
     agents = list(r["agents"])
     first, others = agents[0], agents[1:]
+    mapped = list(s["overall"].get("max_nodes_per_cell", {}))   # files since it was kept
     rows = []
     for k, fam, f in ((k, fam, f) for k, v in views for fam, f in _families(v["suite"])):
         row = ([str(k)] if shown else []) + [f"{fam} ({f['mazes']})"]
@@ -275,10 +276,14 @@ def table_suite(root: Path, name: str = "suite_blocks") -> str:
                        + ("" if worst is None else f" / {worst:.1f}")
                        + (f" ({failed} failed)" if failed else ""))
         row.append(" / ".join(_pct(f["win_rate"][first].get(b)) for b in others))
+        if mapped:
+            row.append(" / ".join(_f2(f["max_nodes_per_cell"].get(a)) for a in mapped))
         rows.append(row)
     header = ((["event delay K"] if shown else []) + ["family (mazes)"]
               + [f"`{a}` median / worst" for a in agents]
-              + [f"`{first}` beats {' / '.join(f'`{b}`' for b in others)}"])
+              + [f"`{first}` beats {' / '.join(f'`{b}`' for b in others)}"]
+              + ([f"{' / '.join(f'`{a}`' for a in mapped)} map nodes / free cell (max)"]
+                 if mapped else []))
     return (_md(header, rows)
             + "\n\nSteps of the first episode after the block over `oracle_steps`: the "
             "median over mazes of each maze's median trial, then the worst trial; a maze "

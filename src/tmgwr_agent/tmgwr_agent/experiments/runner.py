@@ -195,6 +195,12 @@ def learning_steps(curve: list[int], n: int = LEARNING_EPISODES) -> float | None
     return sum(tail) / len(tail) if tail else None
 
 
+def map_nodes(agent: Any) -> int | None:
+    """The nodes of the agent's learnt map (None: an agent without one, a table)."""
+    m = getattr(agent, "map", None)
+    return None if m is None else m.size
+
+
 @dataclass
 class Convergence:
     episodes: int | None        # training episodes to the start of the streak; None = cap

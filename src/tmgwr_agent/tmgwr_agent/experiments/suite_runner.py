@@ -60,7 +60,9 @@ env-change ``SUMMARY`` (over the mazes of the family, or over all of them)::
      "optimal_within_10": {NAME: fraction of trials with episodes_to_optimal <= 10},
      "optimal_found": {NAME: fraction of trials with episodes_to_optimal not null},
      "episodes_win_rate": {NAME: {OTHER: as win_rate, on the per-maze median
-                                  episodes_to_optimal}}}
+                                  episodes_to_optimal}},
+     "max_nodes_per_cell": {NAME: largest nodes / free_cells of a trial, for the agents
+                            with a learnt map (their ``nodes`` when the event fired)}}
 
 With ``--event-delay K`` (K > 0) each maze's agents also hold ``settled_steps`` (the mean
 steps of the K learning episodes between convergence and the event, per trial) and the
@@ -191,6 +193,10 @@ def _env_summary(mazes: list[dict], agents: list[str], trials: int, skipped: int
                                  pred) for a in agents}
     out["episodes_win_rate"] = _wins({a: out["episodes_to_optimal"][a]["values"]
                                       for a in agents})
+    out["max_nodes_per_cell"] = {
+        a: max((v / m["free_cells"] for m in mazes
+                for v in m["agents"][a]["nodes"]["values"]), default=None)
+        for a in agents if mazes and all("nodes" in m["agents"][a] for m in mazes)}
     if delay:
         out["settled_ratio"] = {
             a: _stat_median([statistics.median(m["agents"][a]["settled_steps"]["values"])
@@ -201,10 +207,10 @@ def _env_summary(mazes: list[dict], agents: list[str], trials: int, skipped: int
 def _env_maze(sm: SuiteMaze, event: str, res: dict[str, list[dict]],
               world: WorldSpec | None = None, delay: int = 0) -> dict:
     maze = sm.maze()
-    keys = env_change.results_keys(delay)
     return {"event": event, **env_change.event_oracle(world, maze, event, GOAL),
             "caps": asdict(Caps.for_maze(maze)),
-            "agents": {a: {k: stat(r[k] for r in rs) for k in keys}
+            "agents": {a: {k: stat(r[k] for r in rs)
+                           for k in env_change.agent_keys(rs, delay)}
                        for a, rs in res.items()}}
 
 
@@ -212,7 +218,7 @@ def _env_agents(mazes: list[dict], agents: list[str], delay: int = 0) -> dict:
     out = {}
     for a in agents:
         d = {k: stat(v for m in mazes for v in m["agents"][a][k]["values"])
-             for k in env_change.results_keys(delay)}
+             for k in env_change.agent_keys([m["agents"][a] for m in mazes], delay)}
         d["oracle_ratio"] = stat(None if v is None else v / m["oracle_steps"]
                                  for m in mazes for v in m["agents"][a]["steps"]["values"])
         out[a] = d
