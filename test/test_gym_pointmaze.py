@@ -89,6 +89,7 @@ def test_sample_complexity_runs_on_a_registered_pointmaze(tmp_path):
                "--world-kwargs", '{"layout_seed": 3}', "--agents", "tmgwr",
                "--trials", "1", "--episodes", "3", "--jobs", "1", "--json", out, "--quiet")
     assert proc.returncode == 0, proc.stderr
+    assert "AdroitHand" not in proc.stderr      # gymnasium_robotics' import-time notice
     res = json.loads(out.read_text())
     assert res["world"] == "gym:PointMaze_UMaze-v3"
     assert res["maze"] == "gym:PointMaze_UMaze-v3 (layout seed 3)"

@@ -81,9 +81,10 @@ def _register(fam: str) -> None:
             import minigrid
             gym.register_envs(minigrid)
         elif fam == "pointmaze":
-            import gymnasium_robotics
             import mujoco  # noqa: F401  (the physics: a clear error before the envs)
-            gym.register_envs(gymnasium_robotics)
+
+            from maze_sim.pointmaze_world import import_gymnasium_robotics
+            gym.register_envs(import_gymnasium_robotics())
     except ImportError as exc:
         raise _error(f"gym family {fam!r} is not available in this build "
                      f"({exc.name} is not installed)") from None

@@ -166,9 +166,25 @@ RETURN_STEPS = 400
 PROBE_TOLERANCE = 0.0
 
 
+def import_gymnasium_robotics():
+    """``gymnasium_robotics``, imported without the notice its releases 1.2.1 to 1.4.2 print
+    on stderr at every import (through ``farama_notifications``): it concerns the rewards
+    of the Adroit hand envs, which no world here hosts (the gym adapter maps no Adroit id),
+    and would otherwise open every PointMaze run's output. Raises ImportError as the import
+    does."""
+    try:
+        import farama_notifications
+        farama_notifications.notifications.pop("gymnasium_robotics", None)
+    except ImportError:          # pragma: no cover - a release without the notices
+        pass
+    import gymnasium_robotics
+    return gymnasium_robotics
+
+
 def _gym_robotics():
     """The PointMaze classes (imported on first use: MuJoCo is loaded only by this world)."""
     try:
+        import_gymnasium_robotics()
         from gymnasium_robotics.envs.maze.point import PointEnv
         from gymnasium_robotics.envs.maze.point_maze import PointMazeEnv
     except ImportError as exc:   # pragma: no cover - packaging
