@@ -260,6 +260,7 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         self.goal_sigma, self.goal_sim_floor = config.goal_sigma, config.goal_sim_floor
         self.vi_tol, self.vi_max_sweeps = config.vi_tol, config.vi_max_sweeps
         self.vi_incremental = config.vi_incremental
+        self._sweep_tol = sweep_tolerance(self.vi_tol, self.beta)
         self._inc: IncrementalState | None = None   # the copy of the last solve's inputs
         self._spare: IncrementalState | None = None  # a retired one, its arrays to reuse
         self._opt_rows: np.ndarray | None = None    # option rows recomputed since
@@ -747,13 +748,13 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         inc = self._inc
         if inc is None or inc.goal_node != self.goal_node:
             return self._declined("goal")
-        if inc.n != n or inc.out0.shape != (n, m.out.shape[1]) or \
+        if inc.n != n or inc.out0.shape[1] != m.out.shape[1] or \
                 inc.rho0.shape != self.rho.shape:
             return self._declined("size")
         log = getattr(m, "log", None)
         logged = log.since(inc.log_pos) if log is not None and log is inc.log and \
             inc.epoch == self._epoch else None       # None: compare every row
-        tol = sweep_tolerance(self.vi_tol, self.beta)
+        tol = self._sweep_tol
         # with no option rows to compare, a change that needs nothing more is swept at once
         c, lost, relinked, swept, done = kernels.changed_rows_sweep(
             m.out, m.E, R, absorbing, inc.out0, inc.E0, inc.R0, inc.abs0, n, inc.seeds,
