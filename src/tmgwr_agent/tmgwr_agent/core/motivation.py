@@ -525,7 +525,8 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         T, x, goal, delta = cached
         # the absorbing flags' rows (_absorbing), when their key holds
         cells = self._closed if self.value_unknown else self._no_cells(n)
-        abs_rows = log.since(self._abs_pos) if log is self._abs_log else None
+        abs_rows = None if log is not self._abs_log else rows \
+            if self._abs_pos == self._prep_pos else log.since(self._abs_pos)
         if self._abs_key != (n, self._epoch, id(self.R)) or abs_rows is None \
                 or cells is None or len(cells) != n:
             abs_rows, abs_k = _NO_ROWS, -1
