@@ -63,6 +63,5 @@ def test_the_fused_step_is_the_general_step_to_the_bit(deg, noise):
     A = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
     fused, general = pair_run(A, noise, steps=2500)
     assert general.motivation.fused_steps == 0
-    # the converged steps take the fused path (most steps of the run)
-    print(fused.motivation.fused_steps)
+    # the fused path was taken (on steps where only logged rows changed)
     assert fused.motivation.fused_steps > 0
