@@ -117,6 +117,11 @@ class SensorFrame:
            rows: np.ndarray | None = None, cache: bool = True) -> Frame:
         return Frame(w, goal, delta, L)
 
+    @staticmethod
+    def cached(w: np.ndarray, goal: np.ndarray, delta: np.ndarray) -> None:
+        """Nothing to map: the estimator's general path (:meth:`LearntFrame.cached`)."""
+        return None
+
 
 class LearntFrame:
     """The coordinates of the learnt forward model (``learnt``); :meth:`refresh` picks the
@@ -231,6 +236,20 @@ class LearntFrame:
             self._goal_key = (self.version, goal.tobytes())
             self._goal = np.ascontiguousarray(T @ goal)
         return Frame(x, self._goal, forward_model(delta, T), 1.0)
+
+    def cached(self, w: np.ndarray, goal: np.ndarray, delta: np.ndarray) -> tuple | None:
+        """``(T, x, goal, delta_out)`` when :meth:`of` with ``rows`` would only map those
+        rows into the cached coordinates ``x``, the goal's coordinates are cached and the
+        forward model is mapped by the kernel (``delta_out``: a new array for it): what
+        the estimator's fused preparation (``kernels.prepare_rows``) needs to do the
+        same; else None (:meth:`of` is the general path)."""
+        T, x = self.T, self._w
+        if T is None or x.shape != (len(w), len(T)) or self._w_version != self.version \
+                or self._goal_key != (self.version, goal.tobytes()) \
+                or not (1 < len(delta) and 1 < len(T) and delta.shape[1] <= KERNEL_DIM
+                        and _same_sums()):
+            return None
+        return T, x, self._goal, np.empty((len(delta), len(T)))
 
 
 def make_frame(unknown: str) -> SensorFrame | LearntFrame:

@@ -2145,6 +2145,34 @@ def changed_rows_sweep(out, E, R, absorbing, out0, E0, R0, absorbing0, n, seeds,
     return c, lost, relinked, True, done
 
 
+@njit(cache=True)
+def prepare_rows(w, alive, T, x, delta, frame_delta_out, rows, k, goal_x, g0, sigma, floor,
+                 R, terminal, use_terminal, closed, use_closed, goal_r, n, abs_rows, abs_k,
+                 absorbing, terminal_only, count):
+    """The estimator's preparation of a converged step in one call (motivation.py,
+    ``MotivationEstimator._prepare_rows``), used when only the rows ``rows[:k]`` of the
+    map changed since the last one and the goal node, frame, sizes and keys held: the
+    frame coordinates of those rows (:func:`frame_coords` into ``x``), the forward model
+    in the frame (:func:`frame_delta`), the node nearest the goal among the last one
+    ``g0`` and those rows (:func:`nearest_weight_among`), and, when that is still ``g0``,
+    Eq. 10 on those rows (:func:`goal_rewards`) and the absorbing flags of ``abs_rows[:
+    abs_k]`` (:func:`absorbing_flags`; none when ``abs_k`` < 0). The general path is
+    ``MotivationEstimator._prepare`` and ``_absorbing``, which call the same kernels one
+    by one. Returns ``(g, count)``: the nearest node and the terminal-only count (as
+    given when the flags were not brought up to date)."""
+    if k > 0:
+        frame_coords(w, T, rows, k, x)
+    frame_delta(delta, T, frame_delta_out)
+    g = nearest_weight_among(w, alive, goal_x, g0, rows, k)
+    if g != g0:
+        return g, count
+    goal_rewards(x, alive, n, g, sigma, floor, R, rows, k)
+    if abs_k >= 0:
+        count = absorbing_flags(terminal, use_terminal, closed, use_closed, R, goal_r, n,
+                                abs_rows, abs_k, absorbing, terminal_only, count)
+    return g, count
+
+
 # ---------------------------------------------------------------- the on-disk cache
 #: Every kernel, by name (what the warm-up must compile); those numba inlines into their
 #: callers (``inline="always"``) are never compiled on their own.

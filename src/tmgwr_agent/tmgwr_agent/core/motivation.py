@@ -236,6 +236,10 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
     (:class:`~tmgwr_agent.core.unknown.OutcomeMemory`, whose ``record`` notes what an
     action did) and its option rules (:class:`~tmgwr_agent.core.unknown.OptionRules`)."""
 
+    #: The fused paths of a converged step (:meth:`_prepare_rows`); False: the general
+    #: path every step (the same state to the bit: test_fused_step.py).
+    fused = True
+
     def __init__(self, config: MotivationConfig = MotivationConfig(), *,
                  primitives: np.ndarray, goal_tolerance: float = 0.0,
                  bounds: tuple[np.ndarray, np.ndarray] | None = None):
@@ -256,6 +260,7 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         self.goal_sigma, self.goal_sim_floor = config.goal_sigma, config.goal_sim_floor
         self.vi_tol, self.vi_max_sweeps = config.vi_tol, config.vi_max_sweeps
         self.vi_incremental = config.vi_incremental
+        self._sweep_tol = sweep_tolerance(self.vi_tol, self.beta)
         self._inc: IncrementalState | None = None   # the copy of the last solve's inputs
         self._spare: IncrementalState | None = None  # a retired one, its arrays to reuse
         self._opt_rows: np.ndarray | None = None    # option rows recomputed since
@@ -337,6 +342,8 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         self._prep_log, self._prep_pos = None, -1
         self._R_key: tuple | None = None
         self._g_raw = -1
+        self._represented = -1     # the goal node the last _prepare found represents it
+        self.fused_steps = 0       # steps prepared by the fused path (_prepare_rows)
         # Bumped whenever R or the absorbing mask may change on rows the map's log does
         # not list (a full recompute of R, the closed cells, the goal terminal): the
         # incremental solve then compares every row with its copy.
@@ -447,6 +454,10 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         """Sizes, goal node and rewards of this map; returns n. Only the rows the map's
         change log lists are looked at again when it can tell (:meth:`rewards`,
         :func:`kernels.nearest_weight_among`, the frame's coordinates)."""
+        n = self._prepare_rows(m) if self.fused else -1
+        if n >= 0:
+            return n
+        self._represented = -1
         n = m.n
         rows = self._changed_since_prepare(m)
         self._size_forward_model(m.w.shape[1])
@@ -468,14 +479,78 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         g, g_moved = self._nearest_goal(m, n, rows)
         if self.value_unknown and not self._placed:
             return self.sensed_goal(m, n)
+        return self._goal_rewards(F, m, n, g, None if g_moved else rows)
+
+    def _goal_rewards(self, F: Frame, m: SensorimotorMap, n: int, g: int,
+                      rows: np.ndarray | None) -> int:
+        """The end of :meth:`_prepare`: the goal node ``g`` when it represents the goal,
+        and the rewards of Eq. 10 (on ``rows`` alone when not None); returns n."""
+        self._represented = -1
         if g < 0 or (self.value_unknown                   # represented only once sensed
                      and not self._represents_goal(F, m, g)):
             self.R = np.zeros(n)
             self._R_key = None
             self._epoch += 1
             return n
+        self._represented = g
         self.goal_node = g
-        self.R = self.rewards(F, m, g, None if g_moved else rows)
+        self.R = self.rewards(F, m, g, rows)
+        return n
+
+    def _prepare_rows(self, m: SensorimotorMap) -> int:
+        """:meth:`_prepare`, and :meth:`_absorbing` brought up to date, for the common
+        step of a converged map, in one kernel call (:func:`kernels.prepare_rows`): when
+        the map's log lists the rows changed since the last preparation, and sizes,
+        frame, goal node and the keys of the rewards and flags held (so the general path
+        would only look at those rows again, by the same kernels). Returns n, or -1
+        with nothing changed: the general path (the rest of :meth:`_prepare`) then runs.
+        When the nearest node to the goal moved, the general path's end
+        (:meth:`_goal_rewards`, in full) follows the kernel's row updates."""
+        log = getattr(m, "log", None)
+        if log is None or log is not self._prep_log or self.goal_x is None:
+            return -1
+        rows = log.since(self._prep_pos)
+        n, g0 = m.n, self._g_raw
+        if rows is None or len(self.V) != n + 1 or len(self.U) < n \
+                or self._scale_version != m.version or self._frame_episode != self.episode \
+                or not self._placed or not self.frame.complete \
+                or self.delta.shape != (self.n_primitives, m.w.shape[1]) \
+                or self._represented != g0 or not 0 <= g0 < n or not m.alive[g0] \
+                or self._R_key != (n, g0, 1.0, self.frame.version) or len(self.R) != n \
+                or g0 in rows.tolist():
+            return -1
+        cached = self.frame.cached(m.w, self.goal_x, self.delta)
+        if cached is None:
+            return -1
+        T, x, goal, delta = cached
+        # the absorbing flags' rows (_absorbing), when their key holds
+        cells = self._closed if self.value_unknown else self._no_cells(n)
+        abs_rows = None if log is not self._abs_log else rows \
+            if self._abs_pos == self._prep_pos else log.since(self._abs_pos)
+        if self._abs_key != (n, self._epoch, id(self.R)) or abs_rows is None \
+                or cells is None or len(cells) != n:
+            abs_rows, abs_k = _NO_ROWS, -1
+        elif self._abs_seen == (log.pos, log.pos, True):
+            abs_rows, abs_k = _NO_ROWS, 0                # nothing new
+        else:
+            abs_k = len(abs_rows)
+        self._prep_pos = pos = log.pos
+        g, count = kernels.prepare_rows(
+            m.w, m.alive, T, x, self.delta, delta, rows, len(rows), self.goal_x, g0,
+            self.goal_sigma, self.goal_sim_floor, self.R, self.terminal_of(m, n),
+            self.absorbing_terminals, cells, self.value_unknown, GOAL_R, n, abs_rows, abs_k,
+            self._abs, self._abs_terminal, self._abs_count)
+        F = self._F = Frame(x, goal, delta, 1.0)
+        self._g_raw = g
+        self.goal_node = -1
+        if g != g0:
+            return self._goal_rewards(F, m, n, g, None)
+        self.goal_node = g
+        if abs_k >= 0:
+            self._abs_count = count
+            self._abs_pos = pos
+            self._abs_seen = (pos, pos, True)
+        self.fused_steps += 1
         return n
 
     def _represents_goal(self, F: Frame, m: SensorimotorMap, g: int) -> bool:
@@ -674,13 +749,13 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         inc = self._inc
         if inc is None or inc.goal_node != self.goal_node:
             return self._declined("goal")
-        if inc.n != n or inc.out0.shape != (n, m.out.shape[1]) or \
+        if inc.n != n or inc.out0.shape[1] != m.out.shape[1] or \
                 inc.rho0.shape != self.rho.shape:
             return self._declined("size")
         log = getattr(m, "log", None)
         logged = log.since(inc.log_pos) if log is not None and log is inc.log and \
             inc.epoch == self._epoch else None       # None: compare every row
-        tol = sweep_tolerance(self.vi_tol, self.beta)
+        tol = self._sweep_tol
         # with no option rows to compare, a change that needs nothing more is swept at once
         c, lost, relinked, swept, done = kernels.changed_rows_sweep(
             m.out, m.E, R, absorbing, inc.out0, inc.E0, inc.R0, inc.abs0, n, inc.seeds,

@@ -1,0 +1,67 @@
+"""The fused paths of a converged step (motivation.py's ``_prepare_rows``, one kernel call,
+kernels.prepare_rows) leave the agent in the same state, to the bit, as the general path
+(the estimator's ``fused`` False): two agents of one seed, one on each path, take the same
+actions and hold the same potentials, rewards, absorbing flags, options and map after every
+step of a training run, under identity, rotated and noisy sensing (noise moves the goal's
+node and the frame more often, so the fallbacks run too)."""
+
+import numpy as np
+import pytest
+
+from maze_sim import GridWorld, Maze
+from maze_sim.maze import maze_file
+from tmgwr_agent.core.agent import TMGWRAgent
+from tmgwr_agent.world_senses import maze_senses
+
+#: What must be equal after each step: the estimator's and the map's arrays.
+ESTIMATOR = ("V", "R", "U", "rho", "osucc", "onb", "ong", "_abs", "_abs_terminal", "delta")
+MAP = ("w", "c", "h", "alive", "out", "E", "a", "age", "terminal")
+
+
+def sense(obs, A, rng, noise):
+    return A @ obs + (rng.normal(0.0, noise, 2) if noise else 0.0)
+
+
+def pair_run(A, noise, steps, seed=5):
+    """Two agents of one seed on two worlds of one seed, the second on the general path;
+    returns them after ``steps`` steps checked equal at each."""
+    maze = Maze.from_file(maze_file())
+    agents, worlds, rngs = [], [], []
+    for fused in (True, False):
+        world = GridWorld(maze, "G", seed=0, max_episode_steps=400)
+        agent = TMGWRAgent(maze_senses(), np.random.default_rng(seed))
+        agent.motivation.fused = fused
+        rng = np.random.default_rng(seed + 1)
+        agent.set_goal(world.goal, A @ world.goal_observation())
+        obs, _ = world.reset()
+        agent.begin_episode(sense(obs, A, rng, noise))
+        agents.append(agent)
+        worlds.append(world)
+        rngs.append(rng)
+    for _ in range(steps):
+        acts = [agent.act() for agent in agents]
+        assert acts[0] == acts[1]
+        for agent, world, rng in zip(agents, worlds, rngs):
+            obs, _, terminated, truncated, info = world.step(acts[0])
+            agent.observe(sense(obs, A, rng, noise), info)
+            if terminated or truncated:
+                obs, _ = world.reset()
+                agent.begin_episode(sense(obs, A, rng, noise))
+        f, g = agents
+        assert f.motivation.goal_node == g.motivation.goal_node
+        assert f.motivation._abs_count == g.motivation._abs_count
+        for name in ESTIMATOR:
+            assert np.array_equal(getattr(f.motivation, name), getattr(g.motivation, name)), name
+        for name in MAP:
+            assert np.array_equal(getattr(f.map, name), getattr(g.map, name)), name
+    return agents
+
+
+@pytest.mark.parametrize("deg,noise", [(0, 0.0), (30, 0.0), (0, 0.2)])
+def test_the_fused_step_is_the_general_step_to_the_bit(deg, noise):
+    t = np.radians(deg)
+    A = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+    fused, general = pair_run(A, noise, steps=2500)
+    assert general.motivation.fused_steps == 0
+    # the fused path was taken (on steps where only logged rows changed)
+    assert fused.motivation.fused_steps > 0
