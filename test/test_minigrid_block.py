@@ -99,3 +99,21 @@ def test_while_stuck_walls_known_before_the_break_are_doubted_alike():
                 before += 1
                 assert mo.rho[i, a] == prior, (i, a, mo.rho[i, a], prior)
     assert before > 0 and beyond > 0
+
+
+def test_the_place_a_broken_move_led_to_is_closed():
+    """The move that broke the route (a move made before that bumps now) led to a node:
+    without a lattice that place is what closed, terminal in Eq. 5 (before: only a
+    lattice cell closed, and the node before the block kept its potential through the
+    broken link, so the agent bumped into the block again)."""
+    agent = _stuck_after_the_block(GAPS, 0)
+    mo, m = agent.motivation, agent.map
+    n = m.n
+    broke = np.argwhere(m.alive[:n, None] & (mo.bump_t[:n] == mo.break_t))
+    assert len(broke)
+    closed = mo.closed_cells(n)
+    for i, a in broke:
+        assert not mo.lattice[a]
+        j = mo.succ[i, a]
+        assert j >= 0 and closed[j], (i, a, j)
+

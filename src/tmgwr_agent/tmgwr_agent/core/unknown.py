@@ -97,8 +97,12 @@ successor, an *option*, in the max of Eq. 5::
   terminal in Eq. 5, worth its own R (no successor), for the ``T`` episodes the bump
   is trusted, or until the agent stands on it. Without it the agent, having bumped into
   a block, walked round to bump into it again from its other sides along the links it
-  knew into it (held-out open fields: one block cell bumped from three sides). The stuck
-  test (below) ignores it: those links never bumped.
+  knew into it (held-out open fields: one block cell bumped from three sides). Without
+  a lattice no cell is predicted, and the place the move led to (the node it reached,
+  ``succ``) is what closed; it is terminal as a cell is. Without that, the node before
+  a block kept its potential through the broken link until Eq. 1-2 wore its reliability
+  down, and the agent bumped into the block again and again. The stuck test (below)
+  ignores it: those links never bumped.
 * The *re-tests* of an episode (``stale_rank``): a re-test costs a step and often a
   detour, so an episode re-tests at most ``B = stale_budget`` times ``d`` stale walls,
   rounded up (at least one; ``stale_budget`` 0.1, the share of steps the paper's agent
@@ -431,9 +435,12 @@ class OutcomeMemory:
         """Primitive a, a move made before from ``node``, bumps now: the cell it led to has
         closed, from every side (the node it led to, while that node is still at the
         predicted cell; a map loaded or rebuilt since may hold fewer nodes than ``succ``
-        remembers)."""
+        remembers). Without a lattice (no cell predicted), the node it led to."""
         j = self.succ[node, a]
-        if j == node or j >= len(w) or not self.lattice[a]:   # no cell it predicts
+        if j == node or j >= len(w):
+            return
+        if not self.lattice[a]:
+            self._mark_closed(j, self.episode)
             return
         F = self.frame.of(w[[node, j]], np.zeros(w.shape[1]), self.delta[[a]], self._scale,
                           cache=False)
