@@ -99,3 +99,43 @@ def test_while_stuck_walls_known_before_the_break_are_doubted_alike():
                 before += 1
                 assert mo.rho[i, a] == prior, (i, a, mo.rho[i, a], prior)
     assert before > 0 and beyond > 0
+
+
+def test_the_place_a_broken_move_led_to_is_closed():
+    """The move that broke the route (a move made before that bumps now) led to a node:
+    without a lattice that place is what closed, terminal in Eq. 5 (before: only a
+    lattice cell closed, and the node before the block kept its potential through the
+    broken link, so the agent bumped into the block again)."""
+    agent = _stuck_after_the_block(GAPS, 0)
+    mo, m = agent.motivation, agent.map
+    n = m.n
+    broke = np.argwhere(m.alive[:n, None] & (mo.bump_t[:n] == mo.break_t))
+    assert len(broke)
+    closed = mo.closed_cells(n)
+    for i, a in broke:
+        assert not mo.lattice[a]
+        j = mo.succ[i, a]
+        assert j >= 0 and closed[j], (i, a, j)
+
+
+def test_an_untried_move_into_a_known_linked_place_is_worth_that_place():
+    """An untried move whose predicted successor is the place of a live node that the
+    map links with the move's node is valued by that node's potential (``osucc``), not
+    as unknown space (before: every untried move without a lattice was unknown space,
+    and the agent turned through the headings it knew)."""
+    agent = _stuck_after_the_block(GAPS, 0)
+    mo, m = agent.motivation, agent.map
+    n = m.n
+    half = 0.5 * np.sqrt(mo.delta_sq[mo.delta_sq > 0.0].min())
+    placed = 0
+    for i in np.flatnonzero(m.alive[:n]):
+        for a in range(mo.n_primitives):
+            q = mo.osucc[i, a]
+            if mo.tried[i, a] or q < 0:
+                continue
+            placed += 1
+            x = mo._predicted(m, np.array([i]), a)[0]
+            assert np.linalg.norm(x - m.w[q]) < half
+            assert q in m.out[i] or i in m.out[q]
+            assert mo.U[i, a] == 0.0 and mo.rho[i, a] > 0.0
+    assert placed > 0

@@ -143,10 +143,19 @@ def region_nodes(agent, x):
 
 
 def forget_move(agent, i, a):
-    """The outcome memory as if primitive a had never been taken from node i."""
-    mo = agent.motivation
+    """The outcome memory as if primitive a had never been taken from node i, and the map
+    without the link that move made (a known place linked with i would value the move by
+    that place, ``OptionRules._known_place``)."""
+    mo, m = agent.motivation, agent.map
+    j = mo.succ[i, a]
     mo.tried[i, a], mo.succ[i, a], mo.bump_t[i, a] = False, -1, -1
     mo._dirty.add(int(i))
+    s = np.flatnonzero(m.out[i] == j) if j >= 0 else []
+    if len(s):
+        m.out[i, s], m.E[i, s] = -1, 0.0
+        m.rebuild_in_links()
+        m.version += 1
+        m.log.touch(np.array([i]))
 
 
 def test_an_old_goal_ends_episodes_in_its_whole_region():

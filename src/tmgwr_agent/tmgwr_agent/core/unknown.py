@@ -97,8 +97,12 @@ successor, an *option*, in the max of Eq. 5::
   terminal in Eq. 5, worth its own R (no successor), for the ``T`` episodes the bump
   is trusted, or until the agent stands on it. Without it the agent, having bumped into
   a block, walked round to bump into it again from its other sides along the links it
-  knew into it (held-out open fields: one block cell bumped from three sides). The stuck
-  test (below) ignores it: those links never bumped.
+  knew into it (held-out open fields: one block cell bumped from three sides). Without
+  a lattice no cell is predicted, and the place the move led to (the node it reached,
+  ``succ``) is what closed; it is terminal as a cell is. Without that, the node before
+  a block kept its potential through the broken link until Eq. 1-2 wore its reliability
+  down, and the agent bumped into the block again and again. The stuck test (below)
+  ignores it: those links never bumped.
 * The *re-tests* of an episode (``stale_rank``): a re-test costs a step and often a
   detour, so an episode re-tests at most ``B = stale_budget`` times ``d`` stale walls,
   rounded up (at least one; ``stale_budget`` 0.1, the share of steps the paper's agent
@@ -431,9 +435,12 @@ class OutcomeMemory:
         """Primitive a, a move made before from ``node``, bumps now: the cell it led to has
         closed, from every side (the node it led to, while that node is still at the
         predicted cell; a map loaded or rebuilt since may hold fewer nodes than ``succ``
-        remembers)."""
+        remembers). Without a lattice (no cell predicted), the node it led to."""
         j = self.succ[node, a]
-        if j == node or j >= len(w) or not self.lattice[a]:   # no cell it predicts
+        if j == node or j >= len(w):
+            return
+        if not self.lattice[a]:
+            self._mark_closed(j, self.episode)
             return
         F = self.frame.of(w[[node, j]], np.zeros(w.shape[1]), self.delta[[a]], self._scale,
                           cache=False)
@@ -811,18 +818,33 @@ class OptionRules:
                           doubt: float = 0.0, clock: int = 0, T: float = 0.0) -> None:
         """The options of the primitives ``prims`` that make no lattice step (frame.py),
         on the nodes ``rows``. The mean forward model cannot place their successor, so no
-        rule that looks a place up applies (a known node there, a wall's exits, the untried
-        chain, a closed cell). A primitive never taken from i has an option into unknown
-        space, ``rho = rho_new`` and ``U = V* gamma^h``, ``h = |x - x_g| / l``: ``x`` the
-        successor the local forward model predicts (:meth:`_predicted`), ``l`` the root
-        mean square step of the longest-moving primitive (a path of k moves covers about
-        k l at most: the triangle inequality, in the sensation's own norm, so h does not
-        overestimate the steps from a rightly predicted successor to the goal, the A*
-        argument of the module docstring); ``h = 0`` when x lies in the goal region
-        (within ``goal_tolerance`` of x_g), and no option when it lies in a terminal
-        region (:meth:`_terminal_regions`: the move is predicted to end the episode short
-        of the goal, worth its R = 0). Before the primitive has moved anywhere, ``h =
-        max(0, |w_i - x_g| / l - 1)``, the bound from i itself.
+        rule that looks a cell up applies (a wall's exits, the untried chain, a closed
+        cell; a known node there only as below). A primitive never taken from i has an
+        option into unknown space, ``rho = rho_new`` and ``U = V* gamma^h``, ``h = |x -
+        x_g| / l``: ``x`` the successor the local forward model predicts
+        (:meth:`_predicted`), ``l`` the root mean square step of the longest-moving
+        primitive (a path of k moves covers about k l at most: the triangle inequality, in
+        the sensation's own norm, so h does not overestimate the steps from a rightly
+        predicted successor to the goal, the A* argument of the module docstring); ``h =
+        0`` when x lies in the goal region (within ``goal_tolerance`` of x_g), and no
+        option when it lies in a terminal region (:meth:`_terminal_regions`: the move is
+        predicted to end the episode short of the goal, worth its R = 0). Before the
+        primitive has moved anywhere, ``h = max(0, |w_i - x_g| / l - 1)``, the bound from
+        i itself.
+
+        *A known place is no unknown space*: when x is the place of a live node q
+        (:meth:`_known_place`, within half a step of it) that the map links with i, either
+        way (the agent has moved between the two), the untried move is worth what q is,
+        ``S = V(q)`` (``osucc``), as an untried move between two known cells is on a
+        lattice. The link is asked for because the local model predicts from the nearest
+        node whose try of a moved, which may differ from i in what the move depends on
+        (MiniGrid: a forward predicted from a node facing another way lands on a known
+        place off its true direction); a place the map never linked with i is no evidence
+        that the move reaches it, and the option stays unknown space. Without the rule an
+        untried turn to a heading the agent knew was valued as unknown space, ``l`` (the
+        turn's longer step) making it look nearer the goal than the known route, and the
+        agent turned through the headings of the cells on its way (after a block, on its
+        way round).
 
         Why the local model: the mean displacement of a primitive whose effect depends on
         where it is taken (MiniGrid's forward, by the heading) predicts nothing, and with
@@ -867,6 +889,7 @@ class OptionRules:
         rho_u = np.where(wall, rho_w, self.rho_new)
         if wall.any():
             lo, hi = self._known_extent(m)
+        placed = np.full((len(rows), len(prims)), -1, dtype=np.int64)
         for c, p in enumerate(prims):
             q = np.flatnonzero(unknown[:, c])
             x = self._predicted(m, rows[q], int(p)) if len(q) and step > 0.0 else None
@@ -882,6 +905,9 @@ class OptionRules:
             if wall[q, c].any():
                 beyond = ((x < lo - 0.5 * step) | (x > hi + 0.5 * step)).any(axis=1)
                 rho_u[q[beyond & wall[q, c]], c] = 0.0
+            t = ~wall[q, c]
+            if t.any():
+                placed[q[t], c] = self._known_place(m, x[t], rows[q[t]])
         j = self.succ[r, a]
         jc = np.maximum(j, 0)
         lost = (live & self.tried[r, a] & (self.bump_t[r, a] < 0) & (j >= 0) & (j != r)
@@ -890,8 +916,34 @@ class OptionRules:
             d = m.w[jc] - m.w[rows][:, None, :]
             lost &= np.einsum("ijk,ijk->ij", d, d) <= (2.0 * step) ** 2
         self.rho[r, a] = np.where(unknown, rho_u, np.where(lost, 1.0, 0.0))
-        self.U[r, a] = np.where(unknown & (rho_u > 0.0), self.v_star * self.gamma ** h, 0.0)
-        self.osucc[r, a] = np.where(lost, j, -1)
+        self.U[r, a] = np.where(unknown & (rho_u > 0.0) & (placed < 0),
+                                self.v_star * self.gamma ** h, 0.0)
+        self.osucc[r, a] = np.where(lost, j, placed)
+
+    def _known_place(self, m: SensorimotorMap, x: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """For each predicted successor ``x[k]`` of a move from node ``rows[k]``: the live
+        node nearest it when within half the shortest step of the forward model (the
+        places a move joins lie a step apart, so half a step is the line between two) and
+        the map links it with ``rows[k]`` either way; else -1 (also for ``rows[k]``
+        itself)."""
+        n = m.n
+        live = np.flatnonzero(m.alive[:n])
+        out = np.full(len(x), -1, dtype=np.int64)
+        moved = self.delta_sq[self.delta_sq > 0.0]
+        if not len(live) or not len(x) or not len(moved):
+            return out
+        wl = m.w[live]
+        d2 = (np.einsum("ij,ij->i", x, x)[:, None] - 2.0 * x @ wl.T
+              + np.einsum("ij,ij->i", wl, wl)[None, :])
+        near = np.argmin(d2, axis=1)
+        ok = d2[np.arange(len(x)), near] < 0.25 * float(moved.min())
+        out[ok] = live[near[ok]]
+        out[out == rows] = -1
+        q = np.maximum(out, 0)
+        linked = (m.out[rows] == q[:, None]).any(axis=1) | \
+            (m.out[q] == rows[:, None]).any(axis=1)
+        out[~linked] = -1
+        return out
 
     def _known_extent(self, m: SensorimotorMap) -> tuple[np.ndarray, np.ndarray]:
         """The box the live nodes' places and the goal sensation span (lower, upper)."""
