@@ -202,6 +202,36 @@ def test_the_agent_records_a_bump_taken_elsewhere_at_its_place():
     assert mo.tried[1, 1] and mo.bump_t[1, 1] >= 0          # the wall of node 1's place
 
 
+def test_a_bump_is_of_the_place_of_the_mean_of_its_two_samples():
+    """The agent stands a cell below the origin (node 1's place), but its last sample
+    scattered to within node 0's moves (not elsewhere for node 0); RIGHT bumps and the
+    next sample is node 1's. The mean of the two samples lies at node 1's place: the bump
+    is node 1's, not a break of node 0's move to node 2, and the two places stay two."""
+    agent = TMGWRAgent(maze_senses(), np.random.default_rng(0))
+    agent.map = m = elsewhere_map(0.0016)          # noise of 0.2 cell
+    m.primitives = agent.senses.primitives
+    m.a[0, 0] = m.primitives[1]
+    m.x_prev[:] = (0.0, 0.045)
+    assert not m.bumped_elsewhere(0, 1)            # one sample alone: node 0's bump
+    agent.winner = 0
+    agent.motivation.record(-1, 0, False, EPISODE_START, m.w)
+    agent.motivation.record(0, 2, False, Outcome(action=1), m.w)
+    agent.step(np.array([0.0, 0.12]) / agent.preprocessor.gain, Outcome(action=1, bumped=True))
+    assert m.bump_from == 1 and m.merges == [] and m.alive[:3].all()
+    mo = agent.motivation
+    assert mo.bump_t[0, 1] < 0 and mo.succ[0, 1] == 2 and not mo.broken   # no break
+    assert mo.tried[1, 1] and mo.bump_t[1, 1] >= 0          # the wall of node 1's place
+
+
+@pytest.mark.parametrize("spread", [0.0, 1e-33, 0.001])
+def test_without_a_place_radius_a_bump_is_its_first_samples(spread):
+    """No sensing scatter beyond GWR's radius: the winner of the sample before the bump
+    is the bump's node, whatever the mean of the two samples."""
+    m = elsewhere_map(spread)
+    m.x_prev[:] = (0.0, 0.045)
+    assert m.bump_place(0, np.array([0.0, 0.12])) == -1
+
+
 @pytest.mark.parametrize("spread, winner", [
     (0.0016, 2),    # noise of 0.2 cell: within the radius of the place RIGHT leads to
     (0.0, 3),       # no noise: the nearest node, as GWR

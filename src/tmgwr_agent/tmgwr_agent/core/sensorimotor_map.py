@@ -118,6 +118,12 @@ lose reliability, as the node's share of samples where the primitive bumps grows
 no link and merges nothing, and is the winner's, the place it was taken at (:attr:`SensorimotorMap.
 bump_from`, what the agent and the graph's map learner report as the node acted from;
 -1, no node, when the winner is the same node or the bump is elsewhere for it too).
+That check reads one sample, ``x_prev``, which a scatter past the half-way line puts at
+the wrong place. A bump leaves the agent where it was, so it has two samples of its
+place, ``x_prev`` and ``x``, whose mean scatters ``1/sqrt(2)`` as far as either: when
+the node nearest that mean is another place's than the winner of ``x_prev`` (beyond the
+radius of its place), the bump was taken there, and is learnt as above with that node as
+``bump_from`` (:meth:`SensorimotorMap.bump_place`).
 Without noise, or with a scatter inside GWR's radius, the check is off.
 
 **A move within one node.** Eq. 1-2 read a self transition ``i -> i`` as a bump: the
@@ -478,15 +484,17 @@ class SensorimotorMap:
             motor = self.primitives[outcome.action]
         before = self.prev
         self.bump_from = None
+        at = self.bump_place(before, x) if learn and motor is not None and outcome.bumped \
+            and self.merge else -1
         elsewhere = learn and motor is not None and outcome.bumped and self.merge \
-            and self.bumped_elsewhere(before, outcome.action)
+            and (at >= 0 or self.bumped_elsewhere(before, outcome.action))
         prior = -1
         if motor is not None and self.merge and self.a_place < self.a_T and not elsewhere:
             prior = before if outcome.bumped else self.link_target(before, outcome.action)
         winner = self.step(x, None if elsewhere else motor, learn=learn, prior=prior,
                            unblocked=not outcome.bumped)
         if elsewhere:
-            winner = self._bump_elsewhere(before, winner, motor, outcome.action)
+            winner = self._bump_elsewhere(before, winner, motor, outcome.action, at)
         elif learn and motor is not None:
             winner = self._sensed_move(np.asarray(x, dtype=float), outcome, before, winner)
         self.x_prev[:] = x
@@ -611,21 +619,43 @@ class SensorimotorMap:
         self.prev = self.winner = winner
         return winner
 
-    def _bump_elsewhere(self, before: int, winner: int, motor: np.ndarray, a: int) -> int:
+    def _bump_elsewhere(self, before: int, winner: int, motor: np.ndarray, a: int,
+                        at: int = -1) -> int:
         """After a step without a link (the matching and adaptation only) for a bump of
         primitive ``a`` that :meth:`bumped_elsewhere` says was taken at another place than
         the moves of ``a`` from ``before``: Eq. 1-2 as a bump at ``before`` (a self
         transition: the links of ``a`` out of it lose reliability, as for any bump there,
         and no link to the winner is made), no bump merge (the two winners are two
-        places), and :attr:`bump_from`, the node the bump is of, is the winner when it is
-        another node and the bump is not elsewhere for it too, else -1 (no node).
-        Returns the winner."""
+        places), and :attr:`bump_from`, the node the bump is of: ``at`` when
+        :meth:`bump_place` found one, else the winner when it is another node and the bump
+        is not elsewhere for it too, else -1 (no node). Returns the winner."""
         before = survivor(before, self.merges)
+        at = survivor(at, self.merges)
         if before >= 0 and self.alive[before]:
             self._update_links(before, before, motor)
-        self.bump_from = winner if winner != before and winner >= 0 \
-            and not self.bumped_elsewhere(winner, a) else -1
+        if at >= 0 and self.alive[at]:         # the place of its two samples (bump_place)
+            self.bump_from = at
+        else:
+            self.bump_from = winner if winner != before and winner >= 0 \
+                and not self.bumped_elsewhere(winner, a) else -1
         return winner
+
+    def bump_place(self, before: int, x: np.ndarray) -> int:
+        """The node of the place where a bump sensed at ``x`` after ``x_prev`` was taken
+        (the module docstring, "A bump from another place"), when that is another place's
+        than ``before``'s, the winner of ``x_prev``, else -1: the node whose weight is
+        nearest the mean of the two samples, when it lies beyond the radius of
+        ``before``'s place (within it, it is that place: the bump's merge joins them).
+        Only while the place radius is the sensing scatter's (``a_place < a_T``, as
+        :meth:`bumped_elsewhere`)."""
+        if not self.a_place < self.a_T or before < 0 or not self.alive[before] \
+                or not np.isfinite(self.x_prev).all():
+            return -1
+        j = self.nearest_by_weight(0.5 * (self.x_prev + np.asarray(x, dtype=float)))
+        if j < 0 or j == before:
+            return -1
+        d = self.w[j] - self.w[before]
+        return j if float(d @ d) >= math.log(self.a_place) ** 2 else -1
 
     def bumped_elsewhere(self, i: int, a: int) -> bool:
         """Whether a bump of primitive ``a``, taken where the last input ``x_prev`` was
