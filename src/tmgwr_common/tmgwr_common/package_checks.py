@@ -33,6 +33,7 @@ PYTHON_KEYS = {
     "optuna": {"python3-optuna-pip", "python3-optuna"},
     "minigrid": {"python3-minigrid-pip"},
     "gymnasium_robotics": {"python3-gymnasium-robotics-pip"},
+    "farama_notifications": {"python3-farama-notifications-pip"},
     "mujoco": {"python3-mujoco-pip"},
 }
 
