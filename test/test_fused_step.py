@@ -22,9 +22,10 @@ def sense(obs, A, rng, noise):
     return A @ obs + (rng.normal(0.0, noise, 2) if noise else 0.0)
 
 
-def pair_run(A, noise, steps, seed=5):
+def pair_run(A, noise, steps, seed=5, before_step=None):
     """Two agents of one seed on two worlds of one seed, the second on the general path;
-    returns them after ``steps`` steps checked equal at each."""
+    returns them after ``steps`` steps checked equal at each (``before_step(agent)``
+    called before each step's observation, when given)."""
     maze = Maze.from_file(maze_file())
     agents, worlds, rngs = [], [], []
     for fused in (True, False):
@@ -43,6 +44,8 @@ def pair_run(A, noise, steps, seed=5):
         assert acts[0] == acts[1]
         for agent, world, rng in zip(agents, worlds, rngs):
             obs, _, terminated, truncated, info = world.step(acts[0])
+            if before_step is not None:
+                before_step(agent)
             agent.observe(sense(obs, A, rng, noise), info)
             if terminated or truncated:
                 obs, _ = world.reset()
@@ -64,4 +67,15 @@ def test_the_fused_step_is_the_general_step_to_the_bit(deg, noise):
     fused, general = pair_run(A, noise, steps=2500)
     assert general.motivation.fused_steps == 0
     # the fused path was taken (on steps where only logged rows changed)
+    assert fused.motivation.fused_steps > 0
+
+
+
+def test_the_fused_step_runs_while_the_closed_cells_are_to_recompute():
+    """The trusted closed cells are recomputed at the solve (``closed_cells``); a fused
+    preparation that comes first, after a mark changed them (``_closed`` None), runs
+    (it brings no flags up to date) and leaves the agent as the general path does."""
+    def forget(agent):
+        agent.motivation._closed = None
+    fused, general = pair_run(np.eye(2), 0.0, steps=1500, before_step=forget)
     assert fused.motivation.fused_steps > 0

@@ -534,6 +534,8 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
             abs_rows, abs_k = _NO_ROWS, 0                # nothing new
         else:
             abs_k = len(abs_rows)
+        if cells is None:           # marks changed, recomputed at the solve: no flags now
+            cells = self._no_cells(n)           # (an array all the same: numba types it)
         self._prep_pos = pos = log.pos
         g, count = kernels.prepare_rows(
             m.w, m.alive, T, x, self.delta, delta, rows, len(rows), self.goal_x, g0,
