@@ -402,7 +402,7 @@ def table_bench_scaling(root: Path) -> str:
 #: The sensors of the sensing table, and the results file of each.
 SENSORS = (("identity", "sensing_identity"), ("scale=1:2", "sensing_scale-1_2"),
            ("scale=1:5", "sensing_scale-1_5"), ("rotate=30", "sensing_rotate-30"),
-           ("noise=0.1", "sensing_noise-0p1"))
+           ("noise=0.1", "sensing_noise-0p1"), ("noise=0.2", "sensing_noise-0p2"))
 
 
 def table_sensing(root: Path) -> str:
