@@ -36,6 +36,7 @@ def close_pairs(m: SensorimotorMap) -> np.ndarray:
     measures it."""
     idx = np.flatnonzero(m.alive[: m.n])
     w, c = m.w[idx], m.c[idx]
+    c = c @ m.Sc.T if len(m.Sc) else c          # the context in primitive steps
     d = (1 - m.alpha_c) * ((w[:, None] - w[None]) ** 2).sum(-1) \
         + m.alpha_c * ((c[:, None] - c[None]) ** 2).sum(-1)
     i, j = np.nonzero(np.triu(d < math.log(m.a_T) ** 2, 1))

@@ -12,6 +12,8 @@ the same nodes, makes the same merges and ends with the same arrays as one that 
 
 from __future__ import annotations
 
+from itertools import product
+
 import numpy as np
 import pytest
 
@@ -71,22 +73,24 @@ def test_indexed_searches_equal_the_scans(dim):
     assert index.shape[3] == 1
     n = len(w)
     lo, hi = w.min(0), w.max(0)
+    # the context in the sensor's units, and in a learnt metric (sensorimotor_map.py)
+    metrics = (np.zeros((0, 0)), np.ascontiguousarray(rng.normal(0.0, 2.0, (dim, dim))))
     for q in range(400):
         if q % 4 == 0:
             x = w[rng.integers(n)].copy()                       # on a node (and its ties)
         else:
             x = rng.uniform(lo - 0.5 * (hi - lo), hi + 0.5 * (hi - lo))  # also outside
         C = x + rng.normal(0.0, 0.05, dim)
-        for alpha_c in (0.0, 0.01, 0.5):
-            assert kernels.indexed_argmin(w, c, alive, n, x, C, alpha_c, *index.arrays) == \
-                kernels.merge_distance_argmin(w, c, alive, n, x, C, alpha_c)
+        for alpha_c, SC in product((0.0, 0.01, 0.5), metrics):
+            assert kernels.indexed_argmin(w, c, alive, n, x, C, alpha_c, SC, *index.arrays) == \
+                kernels.merge_distance_argmin(w, c, alive, n, x, C, alpha_c, SC)
     for q in range(200):
         rows = rng.integers(-1, n, 6)
         rows[3] = rows[1]                                        # a row twice
-        for alpha_c, r2 in ((0.0, 0.3), (0.01, 0.05), (0.5, 2.0)):
-            assert kernels.indexed_close_pair(w, c, alive, n, rows, alpha_c, r2,
+        for (alpha_c, r2), SC in product(((0.0, 0.3), (0.01, 0.05), (0.5, 2.0)), metrics):
+            assert kernels.indexed_close_pair(w, c, alive, n, rows, alpha_c, SC, r2,
                                               *index.arrays) == \
-                kernels.close_pair(w, c, alive, n, rows, alpha_c, r2)
+                kernels.close_pair(w, c, alive, n, rows, alpha_c, SC, r2)
 
 
 def test_moved_nodes_are_listed_in_their_cells_or_the_grid_is_built_again():

@@ -132,7 +132,7 @@ def test_context_is_merge_gng_blend_of_previous_winner():
     # the step computes both in kernels (their loop forms): the same context, distance
     m.step(x, np.array([1.0, 0.0]), learn=False)
     np.testing.assert_allclose(m.C_t, expected)
-    b, d_b = kernels.merge_distance_argmin(m.w, m.c, m.alive, m.n, x, C, m.alpha_c)
+    b, d_b = kernels.merge_distance_argmin(m.w, m.c, m.alive, m.n, x, C, m.alpha_c, m.Sc)
     assert (b, d_b) == (0, pytest.approx(d[0]))
 
 

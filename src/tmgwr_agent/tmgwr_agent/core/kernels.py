@@ -26,45 +26,59 @@ from numba import njit, types
 from numba.core.extending import intrinsic
 
 
+@njit(cache=True, inline="always")
+def context_gap(C, c, i, Sc):
+    """``|Sc (C - c_i)|^2``, the context's share of ``d_n`` (sensorimotor_map.py, "The
+    context in primitive steps"); ``|C - c_i|^2`` when ``Sc`` has no rows (the sensor's
+    own units)."""
+    dc = 0.0
+    if Sc.shape[0] == 0:
+        for k in range(C.shape[0]):
+            u = C[k] - c[i, k]
+            dc += u * u
+        return dc
+    for r in range(Sc.shape[0]):
+        u = 0.0
+        for k in range(C.shape[0]):
+            u += Sc[r, k] * (C[k] - c[i, k])
+        dc += u * u
+    return dc
+
+
 @njit(cache=True)
-def merge_distance_argmin(w, c, alive, n, x, C, alpha_c):
-    """argmin_n d_n, d_n = (1 - alpha_c)|x - w_n|^2 + alpha_c |C - c_n|^2; returns (b, d_b)."""
+def merge_distance_argmin(w, c, alive, n, x, C, alpha_c, Sc):
+    """argmin_n d_n, d_n = (1 - alpha_c)|x - w_n|^2 + alpha_c |Sc (C - c_n)|^2; returns
+    (b, d_b)."""
     best, best_d = -1, np.inf
     dim = x.shape[0]
     for i in range(n):
         if not alive[i]:
             continue
         dx = 0.0
-        dc = 0.0
         for k in range(dim):
             t = x[k] - w[i, k]
             dx += t * t
-            u = C[k] - c[i, k]
-            dc += u * u
-        d = (1.0 - alpha_c) * dx + alpha_c * dc
+        d = (1.0 - alpha_c) * dx + alpha_c * context_gap(C, c, i, Sc)
         if d < best_d:
             best, best_d = i, d
     return best, best_d
 
 
 @njit(cache=True, inline="always")
-def pair_distance(w, c, i, j, alpha_c):
+def pair_distance(w, c, i, j, alpha_c, Sc):
     """The merge's distance between nodes i and j,
-    ``(1 - alpha_c)|w_i - w_j|^2 + alpha_c |c_i - c_j|^2`` (sensorimotor_map.py)."""
+    ``(1 - alpha_c)|w_i - w_j|^2 + alpha_c |Sc (c_i - c_j)|^2`` (sensorimotor_map.py)."""
     dx = 0.0
-    dc = 0.0
     for k in range(w.shape[1]):
         t = w[i, k] - w[j, k]
         dx += t * t
-        u = c[i, k] - c[j, k]
-        dc += u * u
-    return (1.0 - alpha_c) * dx + alpha_c * dc
+    return (1.0 - alpha_c) * dx + alpha_c * context_gap(c[i], c, j, Sc)
 
 
 @njit(cache=True)
-def close_pair(w, c, alive, n, rows, alpha_c, r2):
+def close_pair(w, c, alive, n, rows, alpha_c, Sc, r2):
     """The nearest pair (i, j), i in ``rows``, of live nodes closer than the GWR's matching
-    radius, ``d_ij = (1 - alpha_c)|w_i - w_j|^2 + alpha_c |c_i - c_j|^2 < r2``
+    radius, ``d_ij = (1 - alpha_c)|w_i - w_j|^2 + alpha_c |Sc (c_i - c_j)|^2 < r2``
     (sensorimotor_map.py, the merge); (-1, -1) when none."""
     bi, bj, best = -1, -1, r2
     for i in rows:
@@ -73,7 +87,7 @@ def close_pair(w, c, alive, n, rows, alpha_c, r2):
         for j in range(n):
             if j == i or not alive[j]:
                 continue
-            d = pair_distance(w, c, i, j, alpha_c)
+            d = pair_distance(w, c, i, j, alpha_c, Sc)
             if d < best:
                 bi, bj, best = i, j, d
     return bi, bj
@@ -203,19 +217,16 @@ def _index_covers(shape, cx, cy, r):
 
 
 @njit(cache=True)
-def _argmin_in_cell(w, c, alive, n, x, C, alpha_c, head, node, cell, best, best_d):
+def _argmin_in_cell(w, c, alive, n, x, C, alpha_c, Sc, head, node, cell, best, best_d):
     """:func:`merge_distance_argmin` over one cell's list, from (best, best_d)."""
     i = head[cell]
     while i >= 0:
         if i < n and alive[i]:
             dx = 0.0
-            dc = 0.0
             for k in range(x.shape[0]):
                 t = x[k] - w[i, k]
                 dx += t * t
-                u = C[k] - c[i, k]
-                dc += u * u
-            d = (1.0 - alpha_c) * dx + alpha_c * dc
+            d = (1.0 - alpha_c) * dx + alpha_c * context_gap(C, c, i, Sc)
             if d < best_d or (d == best_d and i < best):
                 best, best_d = i, d
         i = node[0, i]
@@ -223,13 +234,13 @@ def _argmin_in_cell(w, c, alive, n, x, C, alpha_c, head, node, cell, best, best_
 
 
 @njit(cache=True)
-def indexed_argmin(w, c, alive, n, x, C, alpha_c, head, node, geom, shape):
+def indexed_argmin(w, c, alive, n, x, C, alpha_c, Sc, head, node, geom, shape):
     """:func:`merge_distance_argmin` through the node index: the cells in squares of
     growing width around x until no node outside can be as near as the best found
     (``(1 - alpha_c)`` times the squared distance along the indexed coordinates bounds
     ``d_n`` below); ties to the lowest id, as the scan."""
     if shape[3] == 0 or alpha_c >= 1.0:
-        return merge_distance_argmin(w, c, alive, n, x, C, alpha_c)
+        return merge_distance_argmin(w, c, alive, n, x, C, alpha_c, Sc)
     best, best_d = -1, np.inf
     fx, cx, fy, cy = _index_square(geom, shape, x[0], x[1] if shape[2] > 1 else 0.0)
     gx, gy = shape[0], shape[1]
@@ -238,14 +249,14 @@ def indexed_argmin(w, c, alive, n, x, C, alpha_c, head, node, geom, shape):
         for ix in range(max(cx - r, 0), min(cx + r, gx - 1) + 1):
             if ix == cx - r or ix == cx + r:          # a side of the square: every cell
                 for iy in range(max(cy - r, 0), min(cy + r, gy - 1) + 1):
-                    best, best_d = _argmin_in_cell(w, c, alive, n, x, C, alpha_c, head,
+                    best, best_d = _argmin_in_cell(w, c, alive, n, x, C, alpha_c, Sc, head,
                                                    node, ix * gy + iy, best, best_d)
                 continue
             if 0 <= cy - r < gy:                       # inside: the top and bottom cells
-                best, best_d = _argmin_in_cell(w, c, alive, n, x, C, alpha_c, head, node,
+                best, best_d = _argmin_in_cell(w, c, alive, n, x, C, alpha_c, Sc, head, node,
                                                ix * gy + cy - r, best, best_d)
             if r > 0 and 0 <= cy + r < gy:
-                best, best_d = _argmin_in_cell(w, c, alive, n, x, C, alpha_c, head, node,
+                best, best_d = _argmin_in_cell(w, c, alive, n, x, C, alpha_c, Sc, head, node,
                                                ix * gy + cy + r, best, best_d)
         if _index_covers(shape, cx, cy, r):
             return best, best_d
@@ -256,12 +267,12 @@ def indexed_argmin(w, c, alive, n, x, C, alpha_c, head, node, geom, shape):
 
 
 @njit(cache=True)
-def indexed_close_pair(w, c, alive, n, rows, alpha_c, r2, head, node, geom, shape):
+def indexed_close_pair(w, c, alive, n, rows, alpha_c, Sc, r2, head, node, geom, shape):
     """:func:`close_pair` through the node index: for each i of ``rows`` only the cells
     within the radius (``(1 - alpha_c) |w_i - w_j|^2 < r2`` along the indexed
     coordinates); ties to the first row, then the lowest j, as the scan."""
     if shape[3] == 0 or alpha_c >= 1.0:
-        return close_pair(w, c, alive, n, rows, alpha_c, r2)
+        return close_pair(w, c, alive, n, rows, alpha_c, Sc, r2)
     bi, bj, bq, best = -1, -1, -1, r2
     reach = math.sqrt(r2 / (1.0 - alpha_c)) * geom[3] * (1.0 + 1e-9)   # in cell widths
     gy = shape[1]
@@ -282,7 +293,7 @@ def indexed_close_pair(w, c, alive, n, rows, alpha_c, r2, head, node, geom, shap
                 j = head[ix * gy + iy]
                 while j >= 0:
                     if j != i and j < n and alive[j]:
-                        d = pair_distance(w, c, i, j, alpha_c)
+                        d = pair_distance(w, c, i, j, alpha_c, Sc)
                         if d < best or (d == best and (q < bq or (q == bq and j < bj))):
                             bi, bj, bq, best = i, j, q, d
                     j = node[0, j]
@@ -1981,8 +1992,8 @@ def update_links(out, E, A, age, inn, n, i, j, a, alpha, sigma_a, eta_a, E_init,
 
 
 @njit(cache=True)
-def match(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T, learn, eps_b,
-          eps_n, tau_b, tau_n, kappa, prior, head, node, geom, shape):
+def match(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, Sc, beta_c, a_T, h_T, learn,
+          eps_b, eps_n, tau_b, tau_n, kappa, prior, head, node, geom, shape):
     """The matching and adaptation of one input x (sensorimotor_map.py, one call a step):
     writes its Merge-GNG context ``C_t = (1 - beta_c) w_prev + beta_c c_prev`` into C (x
     itself at an episode start, ``prev`` < 0), finds the winner b = argmin d_n and, when
@@ -1999,12 +2010,17 @@ def match(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T, le
             C[k] = (1.0 - beta_c) * w[prev, k] + beta_c * c[prev, k]
     else:
         C[:] = x
-    b, d_b = indexed_argmin(w, c, alive, n, x, C, alpha_c, head, node, geom, shape)
+    b, d_b = indexed_argmin(w, c, alive, n, x, C, alpha_c, Sc, head, node, geom, shape)
     if 0 <= prior < n and prior != b and alive[prior]:     # the place the links predict
         d_p = 0.0
-        for k in range(x.shape[0]):
-            d_p += (1.0 - alpha_c) * (x[k] - w[prior, k]) ** 2 \
-                + alpha_c * (C[k] - c[prior, k]) ** 2
+        if Sc.shape[0] == 0:
+            for k in range(x.shape[0]):
+                d_p += (1.0 - alpha_c) * (x[k] - w[prior, k]) ** 2 \
+                    + alpha_c * (C[k] - c[prior, k]) ** 2
+        else:
+            for k in range(x.shape[0]):
+                d_p += (1.0 - alpha_c) * (x[k] - w[prior, k]) ** 2
+            d_p += alpha_c * context_gap(C, c, prior, Sc)
         if d_p < np.log(a_T) ** 2:
             b, d_b = prior, d_p
     if not learn:
@@ -2086,10 +2102,10 @@ def sensed_motion(motion, a, d, a_T):
 
 
 @njit(cache=True)
-def map_step(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T, learn, eps_b,
-             eps_n, tau_b, tau_n, kappa, E, A, age, terminal, a, has_action, unblocked, alpha,
-             sigma_a, eta_a, E_init, E_min, max_age, credit, keep, r2, prior, head, node, geom,
-             shape, moves, k):
+def map_step(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, Sc, beta_c, a_T, h_T, learn,
+             eps_b, eps_n, tau_b, tau_n, kappa, E, A, age, terminal, a, has_action, unblocked,
+             alpha, sigma_a, eta_a, E_init, E_min, max_age, credit, keep, r2, prior, head, node,
+             geom, shape, moves, k):
     """One learning step of the map in one call (sensorimotor_map.py) when nothing needs
     Python: :func:`match`, then, reached by action ``a`` (``has_action``) from ``prev``,
     :func:`link_step` on prev -> winner (``keep1`` prev, ``keep2`` ``keep``; none when
@@ -2104,7 +2120,7 @@ def map_step(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T,
     (``head`` ... ``shape``, node_index.py) first follows the rows ``moves[:k]`` (changed
     since it last did), then the nodes the match moved."""
     index_move(w, alive, n, moves, k, head, node, geom, shape)
-    b, insert, moved = match(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T,
+    b, insert, moved = match(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, Sc, beta_c, a_T,
                              h_T, learn, eps_b, eps_n, tau_b, tau_n, kappa, prior, head,
                              node, geom, shape)
     changes, ends, linked = 0, np.empty(0, dtype=np.int64), False
@@ -2121,7 +2137,7 @@ def map_step(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, beta_c, a_T, h_T,
     i, j = -1, -1
     if r2 >= 0.0 and len(moved):
         index_move(w, alive, n, moved, len(moved), head, node, geom, shape)
-        i, j = indexed_close_pair(w, c, alive, n, moved, alpha_c, r2, head, node, geom,
+        i, j = indexed_close_pair(w, c, alive, n, moved, alpha_c, Sc, r2, head, node, geom,
                                   shape)
     return b, insert, moved, True, changes, ends, i, j, linked
 

@@ -2,7 +2,7 @@
 finds the winner and the merge's close pairs among the nodes near the input, not among
 all of them.
 
-Both searches minimise ``d_n = (1 - alpha_c) |x - w_n|^2 + alpha_c |C_t - c_n|^2``
+Both searches minimise ``d_n = (1 - alpha_c) |x - w_n|^2 + alpha_c |Sc (C_t - c_n)|^2``
 (sensorimotor_map.py), which is at least ``(1 - alpha_c)`` times the squared distance
 along any of w's coordinates. The grid lists every live node in the cell of its first one
 or two weight coordinates; the winner is searched in squares of cells of growing width

@@ -5,7 +5,8 @@ Merge-GNG (Strickert & Hammer 2005; docs/interpretation.md), as the 2019 TMGWR
 paper is not public:
 
 * context of the input    ``C_t = (1 - beta_c) w_{prev} + beta_c c_{prev}``
-* distance                ``d_n = (1 - alpha_c) |x - w_n|^2 + alpha_c |C_t - c_n|^2``
+* distance                ``d_n = (1 - alpha_c) |x - w_n|^2 + alpha_c |Sc (C_t - c_n)|^2``
+                          (``Sc``: below, "The context in primitive steps")
 * activity                ``a = exp(-sqrt(d_b))`` of the winner ``b``
 * insertion               when ``a < a_T`` and ``h_b <= h_T``: a node at ``insert_at`` of
                           the way from the winner to the input (weight and context; GWR:
@@ -149,6 +150,24 @@ noise on a node's place, above), it wins, though another node may lie a little n
 the radius is the sensing scatter's (``a_place < a_T``): without noise the nearest node
 wins, as in GWR.
 
+**The context in primitive steps.** Merge-GNG's context term tells apart nodes of one
+sensation by where the agent came from; measured in the sensor's units, ``|C_t - c_n|^2``
+weighs a step along an axis by the square of that axis's unit, so a sensor whose axes
+have different units (a grid sensed in cells along one axis and fifths of a cell along the
+other) splits each place by the direction it was entered from along the larger unit:
+places double, links of one move split between them, and learning slows. The context is
+therefore measured in primitive steps: ``|Sc (C_t - c_n)|^2`` with ``Sc = l T``, ``T`` the
+frame of the learnt forward model (frame.LearntFrame over :attr:`motion`: one primitive
+step is one unit) and ``l`` the shortest primitive step, so a step along any axis counts
+as the shortest one does (:meth:`SensorimotorMap._context_metric`; learnt at each
+episode's start and at each doubling of a primitive's moves, from its second on). Where
+``l T`` is an isometry as far as the moves tell (``|Sc^T Sc - I|`` within three of its
+standard errors, about ``8 r``, ``r`` the largest relative standard error of a mean step,
+``sqrt(s / n) / |m|``; the deviation is about twice the difference of two steps' relative
+errors) the sensor's units stand: a grid sensed in one unit, rotated or not, with or
+without noise; so where no primitive is a lattice step (MiniGrid's turns). ``d_n`` is
+then GWR's.
+
 Storage is fixed-width adjacency (``out[i, :K]`` target ids, -1 = empty slot) so that value
 iteration over the map is a few vectorised numpy operations. Node ids are slot indices; a
 freed slot is reused by the next insertion (lowest first) and ``version`` counts structural
@@ -165,6 +184,7 @@ from typing import NamedTuple
 import numpy as np
 
 from tmgwr_agent.core import kernels
+from tmgwr_agent.core.frame import LearntFrame
 from tmgwr_agent.core.node_index import INDEX_MIN, NodeIndex
 from tmgwr_agent.core.outcome import Outcome
 from tmgwr_common.params import Config, param
@@ -317,6 +337,9 @@ def survivor(i: int, merges) -> int:
 _INITIAL_CAPACITY = 64
 _NO_ROWS = np.zeros(0, dtype=np.int64)
 _INITIAL_DEGREE = 4
+_SENSOR_UNITS = np.zeros((0, 0))   # Sc with no rows: the context in the sensor's units
+_ROUNDING = 1e-9                   # an isometry up to rounding (_context_metric)
+_STANDARD_ERRORS = 8.0             # ... or within 3 standard errors, 3 * 2 * sqrt(2) r
 
 
 class SensorimotorMap:
@@ -359,6 +382,7 @@ class SensorimotorMap:
         self.bump_from: int | None = None   # a bump taken elsewhere: the node it was (-1:
         #                                     none; None: the step's own previous winner)
         self.C_t = np.zeros(dim)   # Merge-GNG context of the last input (kernels.match)
+        self.Sc = _SENSOR_UNITS    # the context's metric (_context_metric; none: raw units)
         self.log = RowLog()        # the rows each change touched (the estimator's input)
         self.index = NodeIndex()   # where the step searches for the winner (node_index.py)
         self.rebuild_in_links()    # (none yet: compiles the kernel where maps are made)
@@ -424,12 +448,14 @@ class SensorimotorMap:
         return (1.0 - self.beta_c) * self.w[self.prev] + self.beta_c * self.c[self.prev]
 
     def distances(self, x: np.ndarray, C: np.ndarray) -> np.ndarray:
-        """d_n = (1 - alpha_c)|x - w_n|^2 + alpha_c |C_t - c_n|^2 (inf for dead slots)."""
+        """d_n = (1 - alpha_c)|x - w_n|^2 + alpha_c |Sc (C_t - c_n)|^2 (inf for dead slots)."""
         n = self.n
         dx = self.w[:n] - x
         d = (1.0 - self.alpha_c) * np.einsum("ij,ij->i", dx, dx)
         if self.alpha_c > 0.0:
             dc = self.c[:n] - C
+            if len(self.Sc):
+                dc = dc @ self.Sc.T
             d += self.alpha_c * np.einsum("ij,ij->i", dc, dc)
         d[~self.alive[:n]] = np.inf
         return d
@@ -440,8 +466,10 @@ class SensorimotorMap:
 
     # ------------------------------------------------------------------ learning
     def begin_episode(self) -> None:
-        """The agent was moved, not walked: no link from the last winner."""
+        """The agent was moved, not walked: no link from the last winner; the context's
+        metric learnt anew from the moves so far (:meth:`_context_metric`)."""
         self.prev = -1
+        self._context_metric()
 
     def mark_terminal(self, i: int) -> None:
         """An episode ended on node i (the agent is moved back to the start next), at the
@@ -526,7 +554,8 @@ class SensorimotorMap:
             else _NO_ROWS     # rows the node index is to follow (node_index.py)
         b, insert, moved, done, changes, ends, ci, cj, linked = kernels.map_step(
             self.w, self.c, self.h, self.alive, self.out, self.inn, self.n, self.prev, x, C,
-            self.alpha_c, self.beta_c, self.a_place, self.h_T, learn, self.eps_b, self.eps_n,
+            self.alpha_c, self.Sc, self.beta_c, self.a_place, self.h_T, learn, self.eps_b,
+            self.eps_n,
             self.tau_b, self.tau_n, self.kappa_h, self.E, self.a, self.age, self.terminal, a,
             has_action, unblocked, self.alpha, self.sigma_a, self.eta_a, self.E_init,
             self.E_min, self.max_age, self.link_rule == "credit", self.winner, r2, prior,
@@ -584,7 +613,7 @@ class SensorimotorMap:
             if pair is None:
                 self._sync_index()
             i, j = pair if pair is not None else kernels.indexed_close_pair(
-                self.w, self.c, self.alive, self.n, rows, self.alpha_c, r2,
+                self.w, self.c, self.alive, self.n, rows, self.alpha_c, self.Sc, r2,
                 *self.index.arrays)
             pair = None
             if i < 0:
@@ -609,6 +638,9 @@ class SensorimotorMap:
                                           np.zeros((a + 1 - len(self.motion), self.dim + 2))])
         if not outcome.bumped:                 # Welford's running moments, then a_place
             self.a_place = kernels.sensed_motion(self.motion, a, d, self.a_T)
+            count = int(self.motion[a, 0])
+            if count >= 2 and count & (count - 1) == 0:   # each doubling of its moves
+                self._context_metric()
             return winner
         before = survivor(before, self.merges)
         if not self.merge or before < 0 or before == winner or not self.alive[before] \
@@ -700,6 +732,33 @@ class SensorimotorMap:
         the least spread of a primitive whose moves stand out of their scatter (as in
         :meth:`stayed`)."""
         self.a_place = kernels.place_activity(self.motion, self.a_T)
+
+    def _context_metric(self) -> None:
+        """``Sc``, the metric of the context's share of ``d_n`` (the module docstring, "The
+        context in primitive steps"): ``l T``, ``T`` the learnt frame of the primitives'
+        mean sensed displacements (frame.LearntFrame over :attr:`motion`, the primitives
+        moved at least twice: their spread known), ``l`` the shortest of their steps;
+        none (the sensor's units) while no primitive is a lattice step or while ``l T`` is
+        an isometry within three standard errors (``8 r``; a grid sensed in one unit, or
+        rotated: ``d_n`` as GWR's)."""
+        count, delta = self.motion[:, 0], self.motion[:, 1:-1]
+        spread = np.sqrt(self.motion[:, -1] / np.maximum(count, 1.0))
+        length = np.sqrt(np.einsum("ij,ij->i", delta, delta))
+        steps = (count >= 2) & (length > 0.0) & LearntFrame.consistent(delta, count, spread)
+        self.Sc = _SENSOR_UNITS
+        if not steps.any():
+            return
+        ell = float(length[steps].min())
+        frame = LearntFrame()
+        frame.refresh(delta, np.where(steps, count, 0.0), ell, spread=spread)
+        if frame.T is None:
+            return
+        Sc = ell * frame.T
+        chosen = list(frame.chosen)
+        r = spread[chosen] / (length[chosen] * np.sqrt(count[chosen]))
+        tol = max(_ROUNDING, _STANDARD_ERRORS * float(r.max()))
+        if np.abs(Sc.T @ Sc - np.eye(self.dim)).max() > tol:
+            self.Sc = np.ascontiguousarray(Sc)
 
     def stayed(self, a: int, d: np.ndarray) -> bool:
         """Whether a bump of primitive ``a`` that displaced the sensation by ``d`` left the
@@ -842,6 +901,7 @@ class SensorimotorMap:
         last = s.get("x_prev")
         self.x_prev[:] = last if last is not None and last.shape == (self.dim,) else np.nan
         self._place_radius()
+        self._context_metric()
         self.n = n
         self.version, self.prev, self.winner = (int(v) for v in s["meta"])
         self.log.invalidate()
