@@ -865,7 +865,12 @@ def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, abso
 
 
 # ---------------------------------------------------------------- incremental Eq. 4-5'
-@njit(cache=True)
+# node_target and the heap's helpers are inlined into their callers at numba's IR level
+# (``inline="always"``): the solves call them once per node update and per reader of it,
+# and a call that is not inlined passes each of its arrays as a struct of several words,
+# which costs more than the few link and option slots the body reads. The same operations
+# in the same order: the same V to the bit.
+@njit(cache=True, inline="always")
 def node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb, ong):
     """The right-hand side of Eq. 4-5' at node i, ``R_i + gamma max(max_k E[i, k] V(k),
     max_a O(i, a))`` (:func:`value_iteration`'s update with beta = 1): the value V(i) has
@@ -954,7 +959,7 @@ def predecessors(out, n, alive, osucc, onb):
     return first, pred
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _heap_up(heap, pos, key, k):
     x = heap[k]
     while k > 0:
@@ -968,7 +973,7 @@ def _heap_up(heap, pos, key, k):
     pos[x] = k
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _heap_down(heap, pos, key, k, size):
     x = heap[k]
     while True:
@@ -986,7 +991,7 @@ def _heap_down(heap, pos, key, k, size):
     pos[x] = k
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _heap_push(heap, pos, key, size, i, priority):
     """Push node i with ``priority`` (or raise its priority if queued); returns the size."""
     if pos[i] >= 0:
