@@ -933,20 +933,19 @@ class OptionRules:
         node nearest it when within half the shortest step of the forward model (the
         places a move joins lie a step apart, so half a step is the line between two) and
         the map links it with ``rows[k]`` either way; else -1 (also for ``rows[k]``
-        itself)."""
+        itself). The nearest node by :func:`kernels.nearest_weight`, a scan per
+        successor (no successors x nodes matrix: a full refresh asks for every row)."""
         n = m.n
-        live = np.flatnonzero(m.alive[:n])
         out = np.full(len(x), -1, dtype=np.int64)
         moved = self.delta_sq[self.delta_sq > 0.0]
-        if not len(live) or not len(x) or not len(moved):
+        if not len(x) or not len(moved) or not m.alive[:n].any():
             return out
-        wl = m.w[live]
-        d2 = (np.einsum("ij,ij->i", x, x)[:, None] - 2.0 * x @ wl.T
-              + np.einsum("ij,ij->i", wl, wl)[None, :])
-        near = np.argmin(d2, axis=1)
-        ok = d2[np.arange(len(x)), near] < 0.25 * float(moved.min())
-        out[ok] = live[near[ok]]
-        out[out == rows] = -1
+        half2 = 0.25 * float(moved.min())
+        for k in range(len(x)):
+            q = kernels.nearest_weight(m.w, m.alive, n, x[k])
+            d = x[k] - m.w[q]
+            if q != rows[k] and d @ d < half2:
+                out[k] = q
         q = np.maximum(out, 0)
         linked = (m.out[rows] == q[:, None]).any(axis=1) | \
             (m.out[q] == rows[:, None]).any(axis=1)
