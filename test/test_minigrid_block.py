@@ -139,3 +139,33 @@ def test_an_untried_move_into_a_known_linked_place_is_worth_that_place():
             assert q in m.out[i] or i in m.out[q]
             assert mo.U[i, a] == 0.0 and mo.rho[i, a] > 0.0
     assert placed > 0
+
+
+def test_in_a_training_episode_an_untried_move_into_a_known_place_is_unknown_space():
+    """Trained, in an episode whose known route has not broken: an untried move whose
+    predicted successor is the place of a live node linked with its node is valued as
+    unknown space (``U > 0``, no ``osucc``), so the look round that training pays for
+    goes on (before: it was worth that place in every episode, and the agent kept the
+    first route it found, taking more episodes to learn a shortest one)."""
+    world = MiniGridWorld(Maze.from_text(GAPS), "G", max_episode_steps=3000)
+    agent = TMGWRAgent(world_senses(world), np.random.default_rng(0))
+    agent.set_goal(world.goal, world.goal_observation())
+    for _ in range(6):
+        run_episode(world, agent)
+    obs, _ = world.reset()
+    agent.begin_episode(obs)
+    mo, m = agent.motivation, agent.map
+    n = m.n
+    mo.refresh_options(m, n)
+    assert not mo.broken
+    known = 0
+    for i in np.flatnonzero(m.alive[:n]):
+        for a in np.flatnonzero(~mo.lattice):
+            if mo.tried[i, a] or mo.rho[i, a] <= 0.0:
+                continue
+            x = mo._predicted(m, np.array([i]), int(a))
+            if x is None or mo._known_place(m, x, np.array([i]))[0] < 0:
+                continue
+            known += 1
+            assert mo.osucc[i, a] == -1 and mo.U[i, a] > 0.0, (i, a, mo.osucc[i, a])
+    assert known > 0

@@ -726,8 +726,9 @@ class OptionRules:
         spent = not stuck and self.budget_spent(nodes)
         rho_max = self.wall_prior() if stuck else 0.0 if spent else self.stale_prior
         F = self._F
+        # a break re-values the moves off the lattice (_unplaced_options reads ``broken``)
         key = ((m.version, self.frame.version), clock if stuck else self.episode, n, stuck,
-               spent, rho_max)
+               spent, rho_max, self.broken and not self.lattice.all())
         if key != self._options_key:
             rows = None
             if self._options_key[:1] != key[:1]:
@@ -832,19 +833,26 @@ class OptionRules:
         primitive has moved anywhere, ``h = max(0, |w_i - x_g| / l - 1)``, the bound from
         i itself.
 
-        *A known place is no unknown space*: when x is the place of a live node q
-        (:meth:`_known_place`, within half a step of it) that the map links with i, either
-        way (the agent has moved between the two), the untried move is worth what q is,
-        ``S = V(q)`` (``osucc``), as an untried move between two known cells is on a
-        lattice. The link is asked for because the local model predicts from the nearest
-        node whose try of a moved, which may differ from i in what the move depends on
-        (MiniGrid: a forward predicted from a node facing another way lands on a known
-        place off its true direction); a place the map never linked with i is no evidence
-        that the move reaches it, and the option stays unknown space. Without the rule an
-        untried turn to a heading the agent knew was valued as unknown space, ``l`` (the
-        turn's longer step) making it look nearer the goal than the known route, and the
-        agent turned through the headings of the cells on its way (after a block, on its
-        way round).
+        *A known place is no unknown space*, in an episode whose known route broke
+        (``broken``): when x is the place of a live node q (:meth:`_known_place`, within
+        half a step of it) that the map links with i, either way (the agent has moved
+        between the two), the untried move is worth what q is, ``S = V(q)`` (``osucc``), as
+        an untried move between two known cells is on a lattice. The link is asked for
+        because the local model predicts from the nearest node whose try of a moved, which
+        may differ from i in what the move depends on (MiniGrid: a forward predicted from a
+        node facing another way lands on a known place off its true direction); a place the
+        map never linked with i is no evidence that the move reaches it, and the option
+        stays unknown space. Without the rule an untried turn to a heading the agent knew
+        was valued as unknown space, ``l`` (the turn's longer step) making it look nearer
+        the goal than the known route, and the agent turned through the headings of the
+        cells on its way (after a block, on its way round). In a training episode the move
+        stays unknown space, as the goal stays a state the agent may step off (module
+        docstring, *The goal when the route broke*): there the look round pays, the map
+        learning the moves between the places it knows. Valued as q while training, an
+        untried turn was worth what q's own untried moves promised with their odds ``rho``
+        counted once more for the turn (``rho^2`` for a way into unknown space through a
+        known place): it lost to the known route, the agent kept the first route it found,
+        and a registered MiniGrid id took more episodes to learn a shortest one.
 
         Why the local model: the mean displacement of a primitive whose effect depends on
         where it is taken (MiniGrid's forward, by the heading) predicts nothing, and with
@@ -906,7 +914,7 @@ class OptionRules:
                 beyond = ((x < lo - 0.5 * step) | (x > hi + 0.5 * step)).any(axis=1)
                 rho_u[q[beyond & wall[q, c]], c] = 0.0
             t = ~wall[q, c]
-            if t.any():
+            if t.any() and self.broken:
                 placed[q[t], c] = self._known_place(m, x[t], rows[q[t]])
         j = self.succ[r, a]
         jc = np.maximum(j, 0)
@@ -925,20 +933,19 @@ class OptionRules:
         node nearest it when within half the shortest step of the forward model (the
         places a move joins lie a step apart, so half a step is the line between two) and
         the map links it with ``rows[k]`` either way; else -1 (also for ``rows[k]``
-        itself)."""
+        itself). The nearest node by :func:`kernels.nearest_weight`, a scan per
+        successor (no successors x nodes matrix: a full refresh asks for every row)."""
         n = m.n
-        live = np.flatnonzero(m.alive[:n])
         out = np.full(len(x), -1, dtype=np.int64)
         moved = self.delta_sq[self.delta_sq > 0.0]
-        if not len(live) or not len(x) or not len(moved):
+        if not len(x) or not len(moved) or not m.alive[:n].any():
             return out
-        wl = m.w[live]
-        d2 = (np.einsum("ij,ij->i", x, x)[:, None] - 2.0 * x @ wl.T
-              + np.einsum("ij,ij->i", wl, wl)[None, :])
-        near = np.argmin(d2, axis=1)
-        ok = d2[np.arange(len(x)), near] < 0.25 * float(moved.min())
-        out[ok] = live[near[ok]]
-        out[out == rows] = -1
+        half2 = 0.25 * float(moved.min())
+        for k in range(len(x)):
+            q = kernels.nearest_weight(m.w, m.alive, n, x[k])
+            d = x[k] - m.w[q]
+            if q != rows[k] and d @ d < half2:
+                out[k] = q
         q = np.maximum(out, 0)
         linked = (m.out[rows] == q[:, None]).any(axis=1) | \
             (m.out[q] == rows[:, None]).any(axis=1)
