@@ -252,6 +252,25 @@ def test_a_sample_within_the_place_the_links_predict_is_that_place(spread, winne
     assert m.alive[:4].all() and not m.inserted
 
 
+@pytest.mark.parametrize("spread, prev, inserts", [
+    (0.0016, 0, False),   # noise of 0.2 cell: the tail of the place RIGHT leads to
+    (0.0016, 1, True),    # no link of RIGHT from node 1: nothing predicts the place
+    (0.0, 0, True),       # no noise: GWR's test alone
+])
+def test_a_sample_nearest_the_place_the_links_predict_inserts_no_node(spread, prev, inserts):
+    """RIGHT from node 0 has led to node 2 (x=0.1); it senses x=0.16, beyond the radius of
+    node 2's place (0.057 under this noise) and nearest node 2: the tail of that place's
+    scatter, not a new place, when the links predict node 2."""
+    m = elsewhere_map(spread)
+    m.motion[0] = m.motion[1] * (1, -1, 1, 1)           # LEFT: the opposite move
+    m._place_radius()
+    m.prev = m.winner = prev
+    m.x_prev[:] = m.w[prev]
+    winner = m.experience(np.array([0.16, 0.0]), Outcome(action=1))
+    assert m.inserted == inserts
+    assert (winner == 2) != inserts and m.alive[:3].all()
+
+
 def test_a_new_node_merged_into_a_known_place_is_not_new():
     """A bump's sample beyond the radius inserts a node, which the bump's merge joins to
     the place it stood on: the step's winner is that known place (``inserted`` False, so

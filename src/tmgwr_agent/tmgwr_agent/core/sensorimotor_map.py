@@ -146,9 +146,16 @@ leads: the target of the previous winner's most reliable link of that primitive 
 previous winner itself after a bump that was not elsewhere). When the input lies within
 the radius of a place of that node (``-ln a_place``, the radius within which a sample is
 noise on a node's place, above), it wins, though another node may lie a little nearer
-(:func:`kernels.match`, ``prior``); the sensation alone decides otherwise. Only while
-the radius is the sensing scatter's (``a_place < a_T``): without noise the nearest node
-wins, as in GWR.
+(:func:`kernels.match`, ``prior``); the sensation alone decides otherwise. And when
+that node is the nearest but the input lies beyond its place's radius, no node is
+inserted (:meth:`SensorimotorMap.step`): the sample is the tail of the predicted place's
+scatter, not a new place. GWR inserts a node for an input that no node explains; here the
+links explain it, and the nearest node agrees. A node inserted from such a tail sample
+stays just beyond the radius of its twin (it wins only the tail on its side, and it
+habituates before it drifts back), so the merges never join the two, and one action's
+links into the place split their reliability between them (the duplicates of issue 28).
+Only while the radius is the sensing scatter's (``a_place < a_T``): without noise the
+nearest node wins, and GWR's test inserts, as in GWR.
 
 **The context in primitive steps.** Merge-GNG's context term tells apart nodes of one
 sensation by where the agent came from; measured in the sensor's units, ``|C_t - c_n|^2``
@@ -534,9 +541,11 @@ class SensorimotorMap:
              prior: int = -1, unblocked: bool = False) -> int:
         """Present input x reached by motor vector ``action``; returns the winner.
         ``prior``: the node the links predict (``experience``), the winner when x lies
-        within the radius of its place. ``unblocked``: the touch sensor said the action was
-        not blocked, so a winner equal to the previous one is no transition the links
-        learn (the module docstring, "A move within one node"); else it is a bump.
+        within the radius of its place; when it is the nearest node, none is inserted
+        (the module docstring, "The place the links predict"). ``unblocked``: the touch
+        sensor said the action was not blocked, so a winner equal to the previous one is
+        no transition the links learn (the module docstring, "A move within one node");
+        else it is a bump.
 
         With ``learn`` False only the winner is found (greedy rollouts).
         """
@@ -572,7 +581,7 @@ class SensorimotorMap:
                 b = self._merge_close(moved, b, (ci, cj))
             self.prev = self.winner = b
             return b
-        if not learn or not insert:
+        if not learn or not insert or b == prior >= 0:   # (the links' place: no insertion)
             winner = b
         elif b < 0:
             winner = self._insert(x, C)
