@@ -133,7 +133,12 @@ try:
     # late still gets every one of them.
     i = 0
     while rclpy.ok():
-        pub.publish(msgs[i % N])
+        try:
+            pub.publish(msgs[i % N])
+        except Exception:
+            if rclpy.ok():
+                raise
+            break       # the stop's SIGINT shut the context down between ok() and publish
         i += 1
         time.sleep(0.02)
 except (KeyboardInterrupt, ExternalShutdownException):

@@ -26,7 +26,7 @@ from numba import njit, types
 from numba.core.extending import intrinsic
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def context_gap(C, c, i, Sc):
     """``|Sc (C - c_i)|^2``, the context's share of ``d_n`` (sensorimotor_map.py, "The
     context in primitive steps"); ``|C - c_i|^2`` when ``Sc`` has no rows (the sensor's
@@ -64,7 +64,7 @@ def merge_distance_argmin(w, c, alive, n, x, C, alpha_c, Sc):
     return best, best_d
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def pair_distance(w, c, i, j, alpha_c, Sc):
     """The merge's distance between nodes i and j,
     ``(1 - alpha_c)|w_i - w_j|^2 + alpha_c |Sc (c_i - c_j)|^2`` (sensorimotor_map.py)."""
@@ -870,7 +870,7 @@ def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, abso
 # and a call that is not inlined passes each of its arrays as a struct of several words,
 # which costs more than the few link and option slots the body reads. The same operations
 # in the same order: the same V to the bit.
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb, ong):
     """The right-hand side of Eq. 4-5' at node i, ``R_i + gamma max(max_k E[i, k] V(k),
     max_a O(i, a))`` (:func:`value_iteration`'s update with beta = 1): the value V(i) has
@@ -959,7 +959,7 @@ def predecessors(out, n, alive, osucc, onb):
     return first, pred
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def _heap_up(heap, pos, key, k):
     x = heap[k]
     while k > 0:
@@ -973,7 +973,7 @@ def _heap_up(heap, pos, key, k):
     pos[x] = k
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def _heap_down(heap, pos, key, k, size):
     x = heap[k]
     while True:
@@ -991,7 +991,7 @@ def _heap_down(heap, pos, key, k, size):
     pos[x] = k
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def _heap_push(heap, pos, key, size, i, priority):
     """Push node i with ``priority`` (or raise its priority if queued); returns the size."""
     if pos[i] >= 0:
@@ -2196,7 +2196,9 @@ def prepare_rows(w, alive, T, x, delta, frame_delta_out, rows, k, goal_x, g0, si
 
 # ---------------------------------------------------------------- the on-disk cache
 #: Every kernel, by name (what the warm-up must compile); those numba inlines into their
-#: callers (``inline="always"``) are never compiled on their own.
+#: callers (``inline="always"``) are never compiled on their own, and keep no cache of their
+#: own: a test that calls one from Python would otherwise add a cache file after the
+#: warm-up, and the bootstrap would read the cache as changed (tools/bootstrap.sh).
 KERNELS = {name: obj for name, obj in list(globals().items())
            if hasattr(obj, "py_func") and hasattr(obj, "signatures")
            and obj.targetoptions.get("inline", "never") != "always"}
