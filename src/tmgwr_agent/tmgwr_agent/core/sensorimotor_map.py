@@ -564,11 +564,10 @@ class SensorimotorMap:
         b, insert, moved, done, changes, ends, ci, cj, linked = kernels.map_step(
             self.w, self.c, self.h, self.alive, self.out, self.inn, self.n, self.prev, x, C,
             self.alpha_c, self.Sc, self.beta_c, self.a_place, self.h_T, learn, self.eps_b,
-            self.eps_n,
-            self.tau_b, self.tau_n, self.kappa_h, self.E, self.a, self.age, self.terminal, a,
-            has_action, unblocked, self.alpha, self.sigma_a, self.eta_a, self.E_init,
-            self.E_min, self.max_age, self.link_rule == "credit", self.winner, r2, prior,
-            *self.index.arrays, moves, len(moves))
+            self.eps_n, self.tau_b, self.tau_n, self.kappa_h, self.E, self.a, self.age,
+            self.terminal, a, has_action, unblocked, self.alpha, self.sigma_a, self.eta_a,
+            self.E_init, self.E_min, self.max_age, self.link_rule == "credit", self.winner,
+            r2, prior, *self.index.arrays, moves, len(moves))
         if len(moved):
             self.log.touch(moved)
         if done:
