@@ -169,3 +169,39 @@ def test_in_a_training_episode_an_untried_move_into_a_known_place_is_unknown_spa
             known += 1
             assert mo.osucc[i, a] == -1 and mo.U[i, a] > 0.0, (i, a, mo.osucc[i, a])
     assert known > 0
+
+
+def test_after_the_break_an_untried_move_is_bounded_one_move_on():
+    """Once the known route broke, an untried move into unknown space is worth ``V*
+    gamma^h`` with h at least one move more than the distance bound of the successor the
+    best primitive from it reaches (``_one_move_on``); some move's h is raised by it (a
+    turn: its successor is as far from the goal as its node). Before: h was the distance
+    bound alone, and every untried turn was worth the node's own bound, whichever way it
+    turned."""
+    agent = _stuck_after_the_block(GAPS, 0)
+    mo, m = agent.motivation, agent.map
+    n = m.n
+    assert mo.broken
+    mo._options_key = ()                       # a full pass, on the weights of now
+    mo.refresh_options(m, n)
+    step = np.sqrt(mo.delta_sq.max())
+    tol = mo.goal_tolerance
+
+    def bound(x):
+        g = np.linalg.norm(x - mo.goal_x, axis=1)
+        return np.where(g <= tol, 0.0, g / step)
+
+    checked = raised = 0
+    for i in np.flatnonzero(m.alive[:n]):
+        for a in np.flatnonzero(~mo.lattice):
+            if mo.tried[i, a] or mo.osucc[i, a] >= 0 or mo.U[i, a] <= 0.0:
+                continue
+            x = mo._predicted(m, np.array([i]), int(a))
+            h0 = bound(x)[0]
+            on = 1.0 + min(bound(mo._predicted(m, None, b, at=x))[0]
+                           for b in range(mo.n_primitives))
+            h = max(h0, on) if h0 > 0.0 else 0.0
+            assert np.isclose(mo.U[i, a], mo.v_star * mo.gamma ** h), (i, a, h0, on)
+            checked += 1
+            raised += on > h0 + 1e-9
+    assert checked > 0 and raised > 0

@@ -854,6 +854,23 @@ class OptionRules:
         known place): it lost to the known route, the agent kept the first route it found,
         and a registered MiniGrid id took more episodes to learn a shortest one.
 
+        *One move on*, in an episode whose known route broke: ``h`` is at least ``1 +
+        min_b h(x_b)`` (:meth:`_one_move_on`), ``x_b`` the successor of primitive b from x
+        as the local forward model predicts it. Every way from x to the goal (x outside
+        the goal region) starts with one of the primitives, so this bounds the moves from
+        a rightly predicted x from below as the distance bound does, and the larger of the
+        two is the bound kept (Eq. 5', the A* argument of the module docstring). The
+        distance bound cannot tell a move that only changes what the next move does from
+        one that brings the goal nearer: a move whose successor lies no nearer the goal
+        than its node (MiniGrid's turn: the goal sensation has no heading, so every
+        heading at a place is as far from it) was worth as much as the node's own bound,
+        whichever way it turned; after a block the agent turned through the headings of
+        the places on its way round, one turn after another, where a single turn faced
+        the move that leads on. One move on, a move whose successor has a primitive that
+        brings the goal nearer is worth more than one whose successor has none. In a
+        training episode the distance bound stands, as the known place above does: there
+        the look round pays.
+
         Why the local model: the mean displacement of a primitive whose effect depends on
         where it is taken (MiniGrid's forward, by the heading) predicts nothing, and with
         the bound from i every untried move within a few steps of the goal looked as good
@@ -903,9 +920,10 @@ class OptionRules:
             x = self._predicted(m, rows[q], int(p)) if len(q) and step > 0.0 else None
             if x is None:
                 continue
-            dx = x - self.goal_x
-            gx = np.sqrt(np.einsum("ij,ij->i", dx, dx))
-            h[q, c] = np.where(gx <= self.goal_tolerance, 0.0, gx / step)
+            h[q, c] = self._steps_bound(x, step)
+            if self.broken:
+                h[q, c] = np.where(h[q, c] > 0.0,
+                                   np.maximum(h[q, c], self._one_move_on(m, x, step)), 0.0)
             if len(self._region_x):
                 d = x[:, None, :] - self._region_x[None, :, :]
                 ends = (np.einsum("ijk,ijk->ij", d, d) <= self.goal_tolerance ** 2).any(axis=1)
@@ -927,6 +945,28 @@ class OptionRules:
         self.U[r, a] = np.where(unknown & (rho_u > 0.0) & (placed < 0),
                                 self.v_star * self.gamma ** h, 0.0)
         self.osucc[r, a] = np.where(lost, j, placed)
+
+    def _steps_bound(self, x: np.ndarray, step: float) -> np.ndarray:
+        """The fewest moves from each sensation ``x[k]`` to the goal as the triangle
+        inequality bounds them, ``|x - x_g| / l`` (``l = step``, the longest-moving
+        primitive's root mean square step), 0 in the goal region (within
+        ``goal_tolerance`` of x_g): :meth:`_unplaced_options`."""
+        dx = x - self.goal_x
+        gx = np.sqrt(np.einsum("ij,ij->i", dx, dx))
+        return np.where(gx <= self.goal_tolerance, 0.0, gx / step)
+
+    def _one_move_on(self, m: SensorimotorMap, x: np.ndarray, step: float) -> np.ndarray:
+        """The same bound one move further on: ``1 + min_b`` :meth:`_steps_bound` of
+        ``x_b``, the successor of primitive b from ``x`` as the local forward model
+        predicts it (:meth:`_predicted` from those places); ``-inf`` (no bound) while some
+        primitive has not moved from any live node."""
+        best = np.full(len(x), np.inf)
+        for b in range(self.n_primitives):
+            y = self._predicted(m, None, b, at=x)
+            if y is None:
+                return np.full(len(x), -np.inf)
+            best = np.minimum(best, self._steps_bound(y, step))
+        return 1.0 + best
 
     def _known_place(self, m: SensorimotorMap, x: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """For each predicted successor ``x[k]`` of a move from node ``rows[k]``: the live
@@ -967,11 +1007,13 @@ class OptionRules:
         x = m.w[:n, None, :] + self.delta[None, :, :]
         return ((x < lo) | (x > hi)).any(axis=-1) & self.lattice
 
-    def _predicted(self, m: SensorimotorMap, rows: np.ndarray, a: int) -> np.ndarray | None:
+    def _predicted(self, m: SensorimotorMap, rows: np.ndarray | None, a: int,
+                   at: np.ndarray | None = None) -> np.ndarray | None:
         """The successors of primitive a from the nodes ``rows`` as the local forward model
         predicts them: ``w_i + (w_j - w_k)``, k the node nearest i (in weights) whose last
         try of a moved it, to j = ``succ[k, a]`` (a move does from a place what it did from
-        the place most like it); None before a has moved from any live node."""
+        the place most like it); from the places ``at`` instead of the nodes' weights when
+        given; None before a has moved from any live node."""
         n = m.n
         k = np.flatnonzero(m.alive[:n] & self.tried[:n, a] & (self.bump_t[:n, a] < 0))
         j = self.succ[k, a]
@@ -980,7 +1022,7 @@ class OptionRules:
         k, j = k[m.alive[j]], j[m.alive[j]]
         if not len(k):
             return None
-        wr, wk = m.w[rows], m.w[k]
+        wr, wk = (m.w[rows] if at is None else at), m.w[k]
         d2 = (np.einsum("ij,ij->i", wr, wr)[:, None] - 2.0 * wr @ wk.T
               + np.einsum("ij,ij->i", wk, wk)[None, :])
         near = np.argmin(d2, axis=1)
