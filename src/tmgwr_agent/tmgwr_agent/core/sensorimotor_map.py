@@ -92,23 +92,24 @@ scatter, ``|m| > 2 sqrt(s)``, count (the radius then stays below a step, so neig
 places are not taken for one), the least ``s`` among them. Without noise ``s`` is 0 (a
 grid) or far below the matching radius (PointMaze's physics): GWR's radius stands.
 
-The touch sensor tells of one more case: a *bump* (the primitive
-was blocked) leaves the agent where it was, so the two winners of a bumped step are one
-place, and they are merged as above (:meth:`SensorimotorMap._sensed_move`). A body that
-moves some way before it meets the wall (PointMaze) makes a bump that is not a stay, so
-the map checks the bump against what the primitive normally does: a bump stayed when the
-primitive's moves stand out of their scatter, ``|m| > 2 sqrt(s)``, and this bump's sensed
-displacement lies within it, ``0 < |d|^2 < s`` (:meth:`SensorimotorMap.stayed`).
-Without sensing noise a bump in a grid senses no change (``d = 0``) and a partial move in
-PointMaze lies far beyond the spread of its physics, so no bump is merged.
+The touch sensor tells of one more case: a *bump* (the primitive was blocked) leaves the
+agent where it was, so its two samples are of one place; its two winners are not merged
+all the same. The second sample wins another node than the one stood on only from beyond
+the radius of that node's place, and under noise that far out the scatters of
+neighbouring places meet: the node is as likely a neighbour's place as a duplicate, and
+one sample cannot tell which (a merge of two places cuts every route through them).
+Duplicates are merged by their weights, which the samples they win draw into one place's
+radius (the merge of close nodes above): many samples, not one, tell that two nodes are
+one place. Without noise a bump in a grid senses no change (one winner), and one in
+PointMaze that moved part way before it met the wall is two places.
 
 **A bump from another place.** Under noise a node can win samples of two neighbouring
 places (a node left between them by a merge, or a sample scattered past the half-way
 line); from such a node one primitive moves when the agent stands at one place and bumps
 at the other. Read as the node's own, that bump says the move the node made has closed
 (the outcome memory then cuts the link, closes the cell it led to and may find the goal
-unreachable), and the winners of the bump, two places, are merged. So before a bump is
-learnt, the map checks where it was taken (:meth:`SensorimotorMap.bumped_elsewhere`):
+unreachable). So before a bump is learnt, the map checks where it was taken
+(:meth:`SensorimotorMap.bumped_elsewhere`):
 the primitive's moves from the node (its most reliable link labelled with it, to ``j``)
 started about ``w_j - m``, and a bump sensed more than half a step ``|m| / 2`` from there
 was taken nearer another place than that one (the places of a lattice of steps ``m`` lie
@@ -530,8 +531,8 @@ class SensorimotorMap:
                            unblocked=not outcome.bumped)
         if elsewhere:
             winner = self._bump_elsewhere(before, winner, motor, outcome.action, at)
-        elif learn and motor is not None:
-            winner = self._sensed_move(np.asarray(x, dtype=float), outcome, before, winner)
+        elif learn and motor is not None and not outcome.bumped:
+            self._sensed_move(np.asarray(x, dtype=float), outcome.action)
         self.x_prev[:] = x
         if learn and outcome.ends_episode:
             self.mark_terminal(winner)
@@ -631,33 +632,20 @@ class SensorimotorMap:
             winner = keep if winner == gone else winner
             rows = np.append(rows[rows != gone], keep)
 
-    def _sensed_move(self, x: np.ndarray, outcome: Outcome, before: int,
-                     winner: int) -> int:
-        """After a learning step by primitive ``outcome.action`` from the winner ``before``
-        (the sensation ``x_prev``) to ``winner`` (``x``): a move adds its sensed
-        displacement ``x - x_prev`` to the primitive's statistics (:attr:`motion`); a bump
-        that stayed (:meth:`stayed`) merges its two winners, one place (the module
-        docstring); returns the winner's id after the merges."""
-        a, d = outcome.action, x - self.x_prev
+    def _sensed_move(self, x: np.ndarray, a: int) -> None:
+        """After a learning step by primitive ``a`` that moved (no bump) from the sensation
+        ``x_prev`` to ``x``: its sensed displacement ``x - x_prev`` joins the primitive's
+        statistics (:attr:`motion`), then ``a_place`` (the module docstring)."""
+        d = x - self.x_prev
         if not all(map(math.isfinite, d.tolist())):     # (a few values: no numpy call)
-            return winner
+            return
         if a >= len(self.motion):           # (a map made or loaded without primitives)
             self.motion = np.concatenate([self.motion,
                                           np.zeros((a + 1 - len(self.motion), self.dim + 2))])
-        if not outcome.bumped:                 # Welford's running moments, then a_place
-            self.a_place = kernels.sensed_motion(self.motion, a, d, self.a_T)
-            count = int(self.motion[a, 0])
-            if count >= 2 and count & (count - 1) == 0:   # each doubling of its moves
-                self._context_metric()
-            return winner
-        before = survivor(before, self.merges)
-        if not self.merge or before < 0 or before == winner or not self.alive[before] \
-                or not self.stayed(a, d):
-            return winner
-        self._merge(before, winner)         # (the node acted from keeps its id)
-        winner = self._merge_close(np.array([before], dtype=np.int64), before)
-        self.prev = self.winner = winner
-        return winner
+        self.a_place = kernels.sensed_motion(self.motion, a, d, self.a_T)   # Welford's
+        count = int(self.motion[a, 0])
+        if count >= 2 and count & (count - 1) == 0:   # each doubling of its moves
+            self._context_metric()
 
     def _bump_elsewhere(self, before: int, winner: int, motor: np.ndarray, a: int,
                         at: int = -1) -> int:
@@ -665,10 +653,10 @@ class SensorimotorMap:
         primitive ``a`` that :meth:`bumped_elsewhere` says was taken at another place than
         the moves of ``a`` from ``before``: Eq. 1-2 as a bump at ``before`` (a self
         transition: the links of ``a`` out of it lose reliability, as for any bump there,
-        and no link to the winner is made), no bump merge (the two winners are two
-        places), and :attr:`bump_from`, the node the bump is of: ``at`` when
-        :meth:`bump_place` found one, else the winner when it is another node and the bump
-        is not elsewhere for it too, else -1 (no node). Returns the winner."""
+        and no link to the winner is made), and :attr:`bump_from`, the node the bump is
+        of: ``at`` when :meth:`bump_place` found one, else the winner when it is another
+        node and the bump is not elsewhere for it too, else -1 (no node). Returns the
+        winner."""
         before = survivor(before, self.merges)
         at = survivor(at, self.merges)
         if before >= 0 and self.alive[before]:
@@ -685,7 +673,7 @@ class SensorimotorMap:
         (the module docstring, "A bump from another place"), when that is another place's
         than ``before``'s, the winner of ``x_prev``, else -1: the node whose weight is
         nearest the mean of the two samples, when it lies beyond the radius of
-        ``before``'s place (within it, it is that place: the bump's merge joins them).
+        ``before``'s place (within it, it is that place).
         Only while the place radius is the sensing scatter's (``a_place < a_T``, as
         :meth:`bumped_elsewhere`)."""
         if not self.a_place < self.a_T or before < 0 or not self.alive[before] \
@@ -704,9 +692,9 @@ class SensorimotorMap:
         ``a`` leads to node j, so those moves started about ``w_j - m`` (``m``: the
         primitive's mean sensed displacement), and the bump's sensation lies more than
         half a step ``|m| / 2`` from there. Only for a primitive whose moves stand out of
-        their scatter (as in :meth:`stayed`), while the place radius is the sensing
-        scatter's (``a_place < a_T``: below GWR's radius a node does not win samples of
-        two places a step apart)."""
+        their scatter (``|m| > 2 sqrt(s)``, ``s`` their spread), while the place radius is
+        the sensing scatter's (``a_place < a_T``: below GWR's radius a node does not win
+        samples of two places a step apart)."""
         if i < 0 or not self.alive[i] or a >= len(self.motion) or self.primitives is None \
                 or not np.isfinite(self.x_prev).all():
             return False
@@ -737,8 +725,8 @@ class SensorimotorMap:
     def _place_radius(self) -> None:
         """``a_place``, the activity threshold of one place (the module docstring): GWR's
         ``a_T``, or the sensing scatter ``sqrt(2 s)`` as the radius where it is wider, ``s``
-        the least spread of a primitive whose moves stand out of their scatter (as in
-        :meth:`stayed`)."""
+        the least spread of a primitive whose moves stand out of their scatter,
+        ``|m| > 2 sqrt(s)`` (the module docstring)."""
         self.a_place = kernels.place_activity(self.motion, self.a_T)
 
     def _context_metric(self) -> None:
@@ -767,22 +755,6 @@ class SensorimotorMap:
         tol = max(_ROUNDING, _STANDARD_ERRORS * float(r.max()))
         if np.abs(Sc.T @ Sc - np.eye(self.dim)).max() > tol:
             self.Sc = np.ascontiguousarray(Sc)
-
-    def stayed(self, a: int, d: np.ndarray) -> bool:
-        """Whether a bump of primitive ``a`` that displaced the sensation by ``d`` left the
-        agent where it was, by the primitive's own moves (:attr:`motion`): their mean
-        displacement ``m`` and spread ``s`` (mean squared deviation from ``m``). The
-        primitive moves by more than the sensing scatters, ``|m| > 2 sqrt(s)``, so a stay
-        and a move are told apart (the balls of radius ``sqrt(s)`` round 0 and ``m`` do not
-        overlap), and this bump's displacement is within that scatter of 0,
-        ``0 < |d|^2 < s``: as far as the senses tell, it stayed. (A sensation that did not
-        change at all is no noise: two winners of it differ by their temporal contexts,
-        which the map keeps apart.)"""
-        count, m, m2 = self.motion[a, 0], self.motion[a, 1:-1], self.motion[a, -1]
-        if count < 2:
-            return False
-        s, d2 = m2 / count, float(d @ d)
-        return bool(m @ m > 4.0 * s and 0.0 < d2 < s)
 
     def _merge(self, keep: int, gone: int) -> None:
         """Node ``gone`` becomes part of node ``keep`` (the module docstring): weights and
