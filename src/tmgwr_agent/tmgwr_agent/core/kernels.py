@@ -870,17 +870,20 @@ def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, abso
 # and a call that is not inlined passes each of its arrays as a struct of several words,
 # which costs more than the few link and option slots the body reads. The same operations
 # in the same order: the same V to the bit.
+# An inlined body takes a reference to each array it is passed (numba's NRT_incref, an
+# atomic add, and NRT_decref after), and LLVM's reference-count pruning removes those
+# pairs only when the body has no branch around its loops: no early return, no ``break``.
+# Left in, they cost several times the body itself, on every call. So these helpers are
+# written without either (test_kernels_refcount.py checks their callers' loops).
 @njit(inline="always")
 def node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb, ong):
     """The right-hand side of Eq. 4-5' at node i, ``R_i + gamma max(max_k E[i, k] V(k),
     max_a O(i, a))`` (:func:`value_iteration`'s update with beta = 1): the value V(i) has
-    at the fixed point given its successors' values. Dead slots: 0; absorbing nodes: R_i."""
-    if not alive[i]:
-        return 0.0
-    if absorbing[i]:
-        return R[i]
+    at the fixed point given its successors' values. Dead slots: 0; absorbing nodes: R_i
+    (no loop turns for them: ``live`` = 0; their R_i + gamma 0, times ``alive``)."""
+    live = np.int64(alive[i]) * (1 - np.int64(absorbing[i]))
     best = 0.0
-    for s in range(out.shape[1]):                       # max_k E[i, k] V(k)
+    for s in range(out.shape[1] * live):                # max_k E[i, k] V(k)
         j = out[i, s]
         if j >= 0:
             ev = E[i, s] * V[j]
@@ -888,7 +891,7 @@ def node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb, on
                 best = ev
     stay = R[i] + gamma * best
     opt = 0.0
-    for a in range(rho.shape[1]):                       # max_a O(i, a), Eq. 5'
+    for a in range(rho.shape[1] * live):                # max_a O(i, a), Eq. 5'
         r = rho[i, a]
         if r > 0.0:
             # S (:func:`option_successor`), written out: the solves spend most of their
@@ -910,7 +913,7 @@ def node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb, on
                 opt = ov
     if opt > best:
         best = opt
-    return R[i] + gamma * best
+    return alive[i] * (R[i] + gamma * best)
 
 
 @njit(cache=True)
@@ -960,20 +963,6 @@ def predecessors(out, n, alive, osucc, onb):
 
 
 @njit(inline="always")
-def _heap_up(heap, pos, key, k):
-    x = heap[k]
-    while k > 0:
-        p = (k - 1) >> 1
-        if key[heap[p]] >= key[x]:
-            break
-        heap[k] = heap[p]
-        pos[heap[k]] = k
-        k = p
-    heap[k] = x
-    pos[x] = k
-
-
-@njit(inline="always")
 def _heap_down(heap, pos, key, k, size):
     x = heap[k]
     while True:
@@ -994,16 +983,22 @@ def _heap_down(heap, pos, key, k, size):
 @njit(inline="always")
 def _heap_push(heap, pos, key, size, i, priority):
     """Push node i with ``priority`` (or raise its priority if queued); returns the size."""
-    if pos[i] >= 0:
-        if priority > key[i]:
-            key[i] = priority
-            _heap_up(heap, pos, key, pos[i])
-        return size
-    key[i] = priority
-    heap[size] = i
-    pos[i] = size
-    _heap_up(heap, pos, key, size)
-    return size + 1
+    k = pos[i]
+    grow = k < 0
+    if grow:
+        k = size
+    if grow or priority > key[i]:
+        key[i] = priority
+    ki = key[i]
+    p = (k - 1) >> 1
+    while k > 0 and key[heap[p]] < ki:                  # sift up
+        heap[k] = heap[p]
+        pos[heap[k]] = k
+        k = p
+        p = (k - 1) >> 1
+    heap[k] = i
+    pos[i] = k
+    return size + grow
 
 
 @njit(cache=True)
