@@ -921,7 +921,8 @@ def predecessors(out, n, alive, osucc, onb):
     """Who reads whose value in Eq. 4-5' (CSR, ``pred[first[j]:first[j + 1]]``: the nodes i
     whose target reads V(j)): links i -> j, option successors ``osucc[i, a] == j`` and wall
     exits ``onb[i, a, b] == j`` of every option slot, whatever its rho (a superset: a rho
-    that changes needs no rebuild)."""
+    that changes needs no rebuild, nor a link or successor that goes: the solves compute
+    the target of a reader too many in vain, and miss none)."""
     K, P, B = out.shape[1], osucc.shape[1], onb.shape[2]
     first = np.zeros(n + 1, dtype=np.int64)
     for i in range(n):
@@ -1217,8 +1218,9 @@ def changed_rows(out, E, R, absorbing, out0, E0, R0, absorbing0, n, seeds, rows,
     by the scan, so that the sweep that follows is the same). Returns (count, lost,
     relinked): ``lost`` when a change may cut a node off its sources (a link removed or
     retargeted or its E gone to 0, a node made absorbing, a reward gone to 0), which
-    prioritized sweeping only follows geometrically; ``relinked`` when a link changed its
-    target (:func:`predecessors` must be rebuilt)."""
+    prioritized sweeping only follows geometrically; ``relinked`` when a link got a new
+    target (:func:`predecessors` must be rebuilt; one removed leaves a reader too many
+    there, which costs a target computed in vain but misses none)."""
     K = out.shape[1]
     c = 0
     lost = False
@@ -1234,7 +1236,9 @@ def changed_rows(out, E, R, absorbing, out0, E0, R0, absorbing0, n, seeds, rows,
             lost = True
         for s in range(K):
             if out[i, s] != out0[i, s]:
-                diff = relinked = True
+                diff = True
+                if out[i, s] >= 0:
+                    relinked = True
                 if out0[i, s] >= 0:
                     lost = True
             elif E[i, s] != E0[i, s]:
@@ -1270,7 +1274,9 @@ def changed_options(rows, n_rows, rho, U, osucc, onb, ong, rho0, U0, osucc0, onb
     exit's discount lowered, its successor or an exit changed, a row's last option gone:
     the nodes whose value rested on it would be swept down only geometrically where two
     of them hold each other up), ``relinked`` when an option's successor or a wall exit
-    changed (the predecessors must be rebuilt, :func:`predecessors`)."""
+    became a node it was not (the predecessors must be rebuilt, :func:`predecessors`; a
+    successor gone, or now unknown space, leaves a reader too many there, which misses
+    none)."""
     P, B = rho.shape[1], onb.shape[2]
     lost = False
     relinked = False
@@ -1283,12 +1289,16 @@ def changed_options(rows, n_rows, rho, U, osucc, onb, ong, rho0, U0, osucc0, onb
                 if rho[i, a] < rho0[i, a] or (rho[i, a] > 0.0 and U[i, a] < U0[i, a]):
                     lost = True
             if osucc[i, a] != osucc0[i, a]:
-                diff = relinked = True
+                diff = True
+                if osucc[i, a] >= 0:
+                    relinked = True
                 if rho[i, a] > 0.0:
                     lost = True
             for b in range(B):
                 if onb[i, a, b] != onb0[i, a, b]:
-                    diff = relinked = True
+                    diff = True
+                    if onb[i, a, b] >= 0:
+                        relinked = True
                     if rho[i, a] > 0.0:
                         lost = True
                 elif ong[i, a, b] != ong0[i, a, b]:
