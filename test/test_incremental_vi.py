@@ -289,10 +289,15 @@ def test_changed_rows_finds_the_edits_and_flags_a_removal():
                                              NONE, -1)
     assert sorted(seeds[:c]) == [4, 9] and not lost and not relinked
     assert np.array_equal(E0, E)
-    out[7, np.flatnonzero(out[7] >= 0)[0]] = -1
+    s = np.flatnonzero(out[7] >= 0)[0]
+    out[7, s] = -1                  # removed: the predecessors keep a reader too many
     c, lost, relinked = kernels.changed_rows(out, E, R, absorbing, out0, E0, R0, a0, n, seeds,
                                              NONE, -1)
-    assert list(seeds[:c]) == [7] and lost and relinked
+    assert list(seeds[:c]) == [7] and lost and not relinked
+    out[7, s] = 3                   # added: node 7 reads node 3, which they must list
+    c, lost, relinked = kernels.changed_rows(out, E, R, absorbing, out0, E0, R0, a0, n, seeds,
+                                             NONE, -1)
+    assert list(seeds[:c]) == [7] and not lost and relinked
 
 
 def test_changed_rows_of_the_logged_rows_only():

@@ -870,17 +870,20 @@ def value_iteration(out, E, R, V, n, beta, gamma, tol, v_floor, max_sweeps, abso
 # and a call that is not inlined passes each of its arrays as a struct of several words,
 # which costs more than the few link and option slots the body reads. The same operations
 # in the same order: the same V to the bit.
+# An inlined body takes a reference to each array it is passed (numba's NRT_incref, an
+# atomic add, and NRT_decref after), and LLVM's reference-count pruning removes those
+# pairs only when the body has no branch around its loops: no early return, no ``break``.
+# Left in, they cost several times the body itself, on every call. So these helpers are
+# written without either (test_kernels_refcount.py checks their callers' loops).
 @njit(inline="always")
 def node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb, ong):
     """The right-hand side of Eq. 4-5' at node i, ``R_i + gamma max(max_k E[i, k] V(k),
     max_a O(i, a))`` (:func:`value_iteration`'s update with beta = 1): the value V(i) has
-    at the fixed point given its successors' values. Dead slots: 0; absorbing nodes: R_i."""
-    if not alive[i]:
-        return 0.0
-    if absorbing[i]:
-        return R[i]
+    at the fixed point given its successors' values. Dead slots: 0; absorbing nodes: R_i
+    (no loop turns for them: ``live`` = 0; their R_i + gamma 0, times ``alive``)."""
+    live = np.int64(alive[i]) * (1 - np.int64(absorbing[i]))
     best = 0.0
-    for s in range(out.shape[1]):                       # max_k E[i, k] V(k)
+    for s in range(out.shape[1] * live):                # max_k E[i, k] V(k)
         j = out[i, s]
         if j >= 0:
             ev = E[i, s] * V[j]
@@ -888,7 +891,7 @@ def node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb, on
                 best = ev
     stay = R[i] + gamma * best
     opt = 0.0
-    for a in range(rho.shape[1]):                       # max_a O(i, a), Eq. 5'
+    for a in range(rho.shape[1] * live):                # max_a O(i, a), Eq. 5'
         r = rho[i, a]
         if r > 0.0:
             # S (:func:`option_successor`), written out: the solves spend most of their
@@ -910,7 +913,7 @@ def node_target(i, out, E, R, V, gamma, absorbing, alive, U, rho, osucc, onb, on
                 opt = ov
     if opt > best:
         best = opt
-    return R[i] + gamma * best
+    return alive[i] * (R[i] + gamma * best)
 
 
 @njit(cache=True)
@@ -918,7 +921,8 @@ def predecessors(out, n, alive, osucc, onb):
     """Who reads whose value in Eq. 4-5' (CSR, ``pred[first[j]:first[j + 1]]``: the nodes i
     whose target reads V(j)): links i -> j, option successors ``osucc[i, a] == j`` and wall
     exits ``onb[i, a, b] == j`` of every option slot, whatever its rho (a superset: a rho
-    that changes needs no rebuild)."""
+    that changes needs no rebuild, nor a link or successor that goes: the solves compute
+    the target of a reader too many in vain, and miss none)."""
     K, P, B = out.shape[1], osucc.shape[1], onb.shape[2]
     first = np.zeros(n + 1, dtype=np.int64)
     for i in range(n):
@@ -960,20 +964,6 @@ def predecessors(out, n, alive, osucc, onb):
 
 
 @njit(inline="always")
-def _heap_up(heap, pos, key, k):
-    x = heap[k]
-    while k > 0:
-        p = (k - 1) >> 1
-        if key[heap[p]] >= key[x]:
-            break
-        heap[k] = heap[p]
-        pos[heap[k]] = k
-        k = p
-    heap[k] = x
-    pos[x] = k
-
-
-@njit(inline="always")
 def _heap_down(heap, pos, key, k, size):
     x = heap[k]
     while True:
@@ -994,16 +984,22 @@ def _heap_down(heap, pos, key, k, size):
 @njit(inline="always")
 def _heap_push(heap, pos, key, size, i, priority):
     """Push node i with ``priority`` (or raise its priority if queued); returns the size."""
-    if pos[i] >= 0:
-        if priority > key[i]:
-            key[i] = priority
-            _heap_up(heap, pos, key, pos[i])
-        return size
-    key[i] = priority
-    heap[size] = i
-    pos[i] = size
-    _heap_up(heap, pos, key, size)
-    return size + 1
+    k = pos[i]
+    grow = k < 0
+    if grow:
+        k = size
+    if grow or priority > key[i]:
+        key[i] = priority
+    ki = key[i]
+    p = (k - 1) >> 1
+    while k > 0 and key[heap[p]] < ki:                  # sift up
+        heap[k] = heap[p]
+        pos[heap[k]] = k
+        k = p
+        p = (k - 1) >> 1
+    heap[k] = i
+    pos[i] = k
+    return size + grow
 
 
 @njit(cache=True)
@@ -1222,8 +1218,9 @@ def changed_rows(out, E, R, absorbing, out0, E0, R0, absorbing0, n, seeds, rows,
     by the scan, so that the sweep that follows is the same). Returns (count, lost,
     relinked): ``lost`` when a change may cut a node off its sources (a link removed or
     retargeted or its E gone to 0, a node made absorbing, a reward gone to 0), which
-    prioritized sweeping only follows geometrically; ``relinked`` when a link changed its
-    target (:func:`predecessors` must be rebuilt)."""
+    prioritized sweeping only follows geometrically; ``relinked`` when a link got a new
+    target (:func:`predecessors` must be rebuilt; one removed leaves a reader too many
+    there, which costs a target computed in vain but misses none)."""
     K = out.shape[1]
     c = 0
     lost = False
@@ -1239,7 +1236,9 @@ def changed_rows(out, E, R, absorbing, out0, E0, R0, absorbing0, n, seeds, rows,
             lost = True
         for s in range(K):
             if out[i, s] != out0[i, s]:
-                diff = relinked = True
+                diff = True
+                if out[i, s] >= 0:
+                    relinked = True
                 if out0[i, s] >= 0:
                     lost = True
             elif E[i, s] != E0[i, s]:
@@ -1275,7 +1274,9 @@ def changed_options(rows, n_rows, rho, U, osucc, onb, ong, rho0, U0, osucc0, onb
     exit's discount lowered, its successor or an exit changed, a row's last option gone:
     the nodes whose value rested on it would be swept down only geometrically where two
     of them hold each other up), ``relinked`` when an option's successor or a wall exit
-    changed (the predecessors must be rebuilt, :func:`predecessors`)."""
+    became a node it was not (the predecessors must be rebuilt, :func:`predecessors`; a
+    successor gone, or now unknown space, leaves a reader too many there, which misses
+    none)."""
     P, B = rho.shape[1], onb.shape[2]
     lost = False
     relinked = False
@@ -1288,12 +1289,16 @@ def changed_options(rows, n_rows, rho, U, osucc, onb, ong, rho0, U0, osucc0, onb
                 if rho[i, a] < rho0[i, a] or (rho[i, a] > 0.0 and U[i, a] < U0[i, a]):
                     lost = True
             if osucc[i, a] != osucc0[i, a]:
-                diff = relinked = True
+                diff = True
+                if osucc[i, a] >= 0:
+                    relinked = True
                 if rho[i, a] > 0.0:
                     lost = True
             for b in range(B):
                 if onb[i, a, b] != onb0[i, a, b]:
-                    diff = relinked = True
+                    diff = True
+                    if onb[i, a, b] >= 0:
+                        relinked = True
                     if rho[i, a] > 0.0:
                         lost = True
                 elif ong[i, a, b] != ong0[i, a, b]:
