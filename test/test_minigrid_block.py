@@ -184,7 +184,7 @@ def test_after_the_break_an_untried_move_is_bounded_one_move_on():
     assert mo.broken
     mo._options_key = ()                       # a full pass, on the weights of now
     mo.refresh_options(m, n)
-    step = np.sqrt(mo.delta_sq.max())
+    step = _nearer(mo, m)
     tol = mo.goal_tolerance
 
     def bound(x):
@@ -205,3 +205,46 @@ def test_after_the_break_an_untried_move_is_bounded_one_move_on():
             checked += 1
             raised += on > h0 + 1e-9
     assert checked > 0 and raised > 0
+
+
+def _nearer(mo, m) -> float:
+    """The most one remembered move (last try moved it, both nodes alive) brought the
+    agent nearer the goal sensation, at most the longest step."""
+    n, longest = m.n, float(np.sqrt(mo.delta_sq.max()))
+    dist = np.linalg.norm(m.w[:n] - mo.goal_x, axis=1)
+    most = -np.inf
+    for k in np.flatnonzero(m.alive[:n]):
+        for a in range(mo.n_primitives):
+            j = mo.succ[k, a]
+            if mo.tried[k, a] and mo.bump_t[k, a] < 0 and 0 <= j < n and j != k \
+                    and m.alive[j]:
+                most = max(most, dist[k] - dist[j])
+    return min(most, longest) if most > 0.0 else longest
+
+
+def test_after_the_break_the_bound_counts_the_steps_that_lead_on():
+    """Once the known route broke, the bound of an untried move's steps divides the
+    distance by the most one of the agent's moves brought it nearer the goal
+    (``_nearer``), not by the longest step: a turn has the longest step in MiniGrid's
+    sensation and brings the goal no nearer. Before: the longest step, and every place
+    looked nearer the goal than it is."""
+    agent = _stuck_after_the_block(GAPS, 0)
+    mo, m = agent.motivation, agent.map
+    n = m.n
+    mo._options_key = ()
+    mo.refresh_options(m, n)
+    longest, nearer = float(np.sqrt(mo.delta_sq.max())), _nearer(mo, m)
+    assert 0.0 < nearer < longest
+    assert np.isclose(mo._nearer(m, longest), nearer)
+    checked = 0
+    for i in np.flatnonzero(m.alive[:n]):
+        for a in np.flatnonzero(~mo.lattice):
+            if mo.tried[i, a] or mo.osucc[i, a] >= 0 or mo.U[i, a] <= 0.0:
+                continue
+            x = mo._predicted(m, np.array([i]), int(a))
+            g = np.linalg.norm(x - mo.goal_x, axis=1)[0]
+            if g <= mo.goal_tolerance:
+                continue
+            assert mo.U[i, a] <= mo.v_star * mo.gamma ** (g / nearer) * (1 + 1e-9), (i, a)
+            checked += 1
+    assert checked > 0

@@ -871,6 +871,19 @@ class OptionRules:
         training episode the distance bound stands, as the known place above does: there
         the look round pays.
 
+        *Steps of the moves that lead on*, in an episode whose known route broke: ``l``
+        in these bounds is the most one of the agent's moves has brought it nearer the
+        goal sensation, over the moves its outcome memory holds (:meth:`_nearer`; at
+        most the longest step, by the triangle inequality). The bound counts how many
+        moves the distance takes, and a move covers of it only what it brings the goal
+        nearer, not its whole step: a move that changes only what the next move does
+        (MiniGrid's turn, the goal sensation without a heading) has a long step and
+        brings the goal no nearer, and with ``l`` its step every place after a block
+        looked nearer the goal than it is, so every untried move near the
+        agent beat the known way round and the agent looked into each. Measured on the
+        agent's own moves, as the forward model is; in a training episode the step
+        stands, as the bounds above do.
+
         Why the local model: the mean displacement of a primitive whose effect depends on
         where it is taken (MiniGrid's forward, by the heading) predicts nothing, and with
         the bound from i every untried move within a few steps of the goal looked as good
@@ -908,8 +921,9 @@ class OptionRules:
         rho_w = np.where(wall, doubt * np.where(bump < self.break_t, 1.0, fresh), 0.0)
         unknown = untried | wall
         step = math.sqrt(max(float(self.delta_sq.max()), 0.0))
+        nearer = self._nearer(m, step) if self.broken else step
         gap = np.sqrt(np.einsum("ij,ij->i", m.w[rows] - self.goal_x, m.w[rows] - self.goal_x))
-        h = np.maximum(gap / step - 1.0, 0.0) if step > 0.0 else np.zeros(len(rows))
+        h = np.maximum(gap / nearer - 1.0, 0.0) if step > 0.0 else np.zeros(len(rows))
         h = np.repeat(h[:, None], len(prims), axis=1)
         rho_u = np.where(wall, rho_w, self.rho_new)
         if wall.any():
@@ -920,10 +934,10 @@ class OptionRules:
             x = self._predicted(m, rows[q], int(p)) if len(q) and step > 0.0 else None
             if x is None:
                 continue
-            h[q, c] = self._steps_bound(x, step)
+            h[q, c] = self._steps_bound(x, nearer)
             if self.broken:
                 h[q, c] = np.where(h[q, c] > 0.0,
-                                   np.maximum(h[q, c], self._one_move_on(m, x, step)), 0.0)
+                                   np.maximum(h[q, c], self._one_move_on(m, x, nearer)), 0.0)
             if len(self._region_x):
                 d = x[:, None, :] - self._region_x[None, :, :]
                 ends = (np.einsum("ijk,ijk->ij", d, d) <= self.goal_tolerance ** 2).any(axis=1)
@@ -945,6 +959,24 @@ class OptionRules:
         self.U[r, a] = np.where(unknown & (rho_u > 0.0) & (placed < 0),
                                 self.v_star * self.gamma ** h, 0.0)
         self.osucc[r, a] = np.where(lost, j, placed)
+
+    def _nearer(self, m: SensorimotorMap, step: float) -> float:
+        """The most one move of the agent's has brought it nearer the goal sensation:
+        ``max |w_k - x_g| - |w_j - x_g|`` over the moves its outcome memory holds (k's
+        last try of a primitive moved it to ``j = succ[k, a]``, both alive), at most
+        ``step`` (the triangle inequality); ``step`` when no move came nearer:
+        :meth:`_unplaced_options`, *Steps of the moves that lead on*."""
+        n = m.n
+        k, a = np.nonzero(m.alive[:n, None] & self.tried[:n] & (self.bump_t[:n] < 0))
+        j = self.succ[k, a]
+        ok = (j >= 0) & (j < n) & (j != k)
+        k, j = k[ok], j[ok]
+        k, j = k[m.alive[j]], j[m.alive[j]]
+        if not len(k):
+            return step
+        dist = np.sqrt(np.einsum("ij,ij->i", m.w[:n] - self.goal_x, m.w[:n] - self.goal_x))
+        most = float((dist[k] - dist[j]).max())
+        return min(most, step) if most > 0.0 else step
 
     def _steps_bound(self, x: np.ndarray, step: float) -> np.ndarray:
         """The fewest moves from each sensation ``x[k]`` to the goal as the triangle
