@@ -966,23 +966,20 @@ class OptionRules:
         last try of a primitive moved it to ``j = succ[k, a]``, both alive), at most
         ``step`` (the triangle inequality); ``step`` when no move came nearer:
         :meth:`_unplaced_options`, *Steps of the moves that lead on*."""
-        n = m.n
-        k, a = np.nonzero(m.alive[:n, None] & self.tried[:n] & (self.bump_t[:n] < 0))
-        j = self.succ[k, a]
-        ok = (j >= 0) & (j < n) & (j != k)
-        k, j = k[ok], j[ok]
-        k, j = k[m.alive[j]], j[m.alive[j]]
+        k, j = self._moves(m)
         if not len(k):
             return step
+        n = m.n
         dist = np.sqrt(np.einsum("ij,ij->i", m.w[:n] - self.goal_x, m.w[:n] - self.goal_x))
         most = float((dist[k] - dist[j]).max())
         return min(most, step) if most > 0.0 else step
 
     def _steps_bound(self, x: np.ndarray, step: float) -> np.ndarray:
         """The fewest moves from each sensation ``x[k]`` to the goal as the triangle
-        inequality bounds them, ``|x - x_g| / l`` (``l = step``, the longest-moving
-        primitive's root mean square step), 0 in the goal region (within
-        ``goal_tolerance`` of x_g): :meth:`_unplaced_options`."""
+        inequality bounds them, ``|x - x_g| / l`` (``l = step``: the longest-moving
+        primitive's root mean square step, or after a break the most a move came nearer
+        the goal, :meth:`_nearer`), 0 in the goal region (within ``goal_tolerance`` of
+        x_g): :meth:`_unplaced_options`."""
         dx = x - self.goal_x
         gx = np.sqrt(np.einsum("ij,ij->i", dx, dx))
         return np.where(gx <= self.goal_tolerance, 0.0, gx / step)
@@ -1039,6 +1036,20 @@ class OptionRules:
         x = m.w[:n, None, :] + self.delta[None, :, :]
         return ((x < lo) | (x > hi)).any(axis=-1) & self.lattice
 
+    def _moves(self, m: SensorimotorMap, a: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The moves the outcome memory holds, as pairs of nodes (k, j) in the order of k:
+        k's last try of primitive ``a`` (of any primitive when None) moved it to another
+        live node, j = ``succ[k, a]``; k live too."""
+        n = m.n
+        prims = slice(None) if a is None else slice(a, a + 1)
+        k, b = np.nonzero(m.alive[:n, None] & self.tried[:n, prims]
+                          & (self.bump_t[:n, prims] < 0))
+        j = self.succ[k, b if a is None else a]
+        ok = (j >= 0) & (j != k) & (j < n)
+        k, j = k[ok], j[ok]
+        live = m.alive[j]
+        return k[live], j[live]
+
     def _predicted(self, m: SensorimotorMap, rows: np.ndarray | None, a: int,
                    at: np.ndarray | None = None) -> np.ndarray | None:
         """The successors of primitive a from the nodes ``rows`` as the local forward model
@@ -1046,12 +1057,7 @@ class OptionRules:
         try of a moved it, to j = ``succ[k, a]`` (a move does from a place what it did from
         the place most like it); from the places ``at`` instead of the nodes' weights when
         given; None before a has moved from any live node."""
-        n = m.n
-        k = np.flatnonzero(m.alive[:n] & self.tried[:n, a] & (self.bump_t[:n, a] < 0))
-        j = self.succ[k, a]
-        ok = (j >= 0) & (j != k) & (j < n)
-        k, j = k[ok], j[ok]
-        k, j = k[m.alive[j]], j[m.alive[j]]
+        k, j = self._moves(m, a)
         if not len(k):
             return None
         wr, wk = (m.w[rows] if at is None else at), m.w[k]
