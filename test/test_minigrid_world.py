@@ -197,14 +197,14 @@ def test_env_change_in_minigrid_keeps_the_json_contract(tmp_path):
     maze.write_text(TINY)
     out = tmp_path / "out.json"
     proc = cli("experiment", "env-change", "--world", "minigrid", "--maze", maze,
-               "--agents", "tmgwr,q_learning,dyna_q_plus", "--trials", "2", "--jobs", "1",
-               "--json", out, "--quiet")
+               "--agents", "tmgwr,q_learning,dyna_q_plus,rmax", "--trials", "2",
+               "--jobs", "1", "--json", out, "--quiet")
     assert proc.returncode == 0, proc.stderr
     res = json.loads(out.read_text())
     assert res["world"] == "minigrid" and res["scenario"] == "env-change"
     assert res["oracle_steps"] == 10
     assert res["shortest_before"] == 2 and res["shortest_after"] == 9
-    for a in ("tmgwr", "q_learning", "dyna_q_plus"):
+    for a in ("tmgwr", "q_learning", "dyna_q_plus", "rmax"):
         steps = res["agents"][a]["steps"]
         assert len(steps["values"]) == 2
         assert all(v is None or v >= 10 for v in steps["values"])
@@ -215,7 +215,8 @@ def test_env_change_in_minigrid_keeps_the_json_contract(tmp_path):
     (["--world", "gym:NoSuchEnv-v9"], "unknown Gymnasium env id 'NoSuchEnv-v9'"),
     (["--world", "gym:CartPole-v1"], "cannot map this env's observation"),
     (["--world", "minigrid", "--world-kwargs", "{bad"], "--world-kwargs '{bad' is not JSON"),
-    (["--world", "minigrid", "--agents", "rmax"], "agent 'rmax' cannot run in --world"),
+    (["--world", "minigrid", "--agents", "freespace"],
+     "agent 'freespace' cannot run in --world"),
     (["--world", "gym:MiniGrid-FourRooms-v0"], "runs sample-complexity only"),
 ])
 def test_world_cli_errors_exit_2_naming_it(args, message):

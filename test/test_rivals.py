@@ -312,3 +312,27 @@ def test_a_tuned_file_of_the_rivals_is_read_and_checked(tmp_path):
 def test_bad_rival_parameters_are_refused_by_name(name, overrides, word):
     with pytest.raises(ParamError, match=word):
         make_agent(name, Maze.from_text(SMALL), np.random.default_rng(0), overrides)
+
+
+def test_rmax_on_sensed_keys_grows_and_marks_every_key_at_an_open_goal():
+    """With sensed states (another world, a sensor transform) R-max numbers keys as first
+    seen, grows its tables past the maze's cells, and counts as the goal every key that
+    falls on the goal's, seen before or after set_goal (MiniGrid: the goal cell facing any
+    way)."""
+    maze = Maze.from_text(CORRIDOR)
+    ag = RMaxAgent(maze, np.random.default_rng(0), sensed_states=True, n_actions=3)
+    assert ag.Q.shape == (maze.shape[0] * maze.shape[1], 3)
+    ag.begin_episode(None, (1, 5, 0))
+    ag.set_goal((1, 5, None))
+    assert ag.at_goal[ag.index((1, 5, 0))] and not ag.at_goal[ag.index((1, 4, 0))]
+    for k in range(40):                               # more keys than the maze has cells
+        ag.index((k, 0, 1))
+    assert len(ag.sensed) == 42 and len(ag.Q) >= 42 and len(ag.Q_rows) == len(ag.Q)
+    s, g = ag.index((1, 4, 0)), ag.index((1, 5, 3))   # the table grows for g
+    assert ag.at_goal[g] and len(ag.at_goal) == len(ag.Q)   # first seen after set_goal
+    ag.state = s
+    ag.observe(None, info((1, 5, 3), 2, goal=True, terminated=True))
+    ag.solve()
+    assert ag.Q[s, 2] == pytest.approx(ag.config.r_goal)    # into the goal: terminal
+    assert not ag.ended[s, 2] and ag.Q[g].tolist() == [ag.v_max] * 3
+    assert ag.states_seen() == 1

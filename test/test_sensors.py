@@ -151,7 +151,7 @@ def test_axis_aligned_grid_is_one_cell_centred():
     assert discretise(np.array([3.3, 4.8]), spec) == (3, 5)
 
 
-@pytest.mark.parametrize("name", ["q_learning", "dyna_q_plus"])
+@pytest.mark.parametrize("name", ["q_learning", "dyna_q_plus", "rmax"])
 def test_tabular_agent_under_scale_learns_the_same_states(name):
     """scale=1:2 keys every cell to one state: the table learns as many states as on cells,
     and since only the numbering differs, the very same episodes."""
@@ -170,7 +170,7 @@ def test_tabular_agent_under_scale_learns_the_same_states(name):
     assert runs["scale=1:2"][1] == runs["identity"][1]
 
 
-@pytest.mark.parametrize("name", ["q_learning", "dyna_q_plus", "tmgwr"])
+@pytest.mark.parametrize("name", ["q_learning", "dyna_q_plus", "rmax", "tmgwr"])
 def test_identity_world_runs_as_the_bare_world(name):
     """The experiments' world without --sensor gives the agents what the bare GridWorld
     gave them before --sensor existed: the same training, step for step."""

@@ -4,13 +4,17 @@ optimism about what it has not tried.
 Not in the paper: the rival that knows as much as the TMGWR agent's map, without the map.
 The state ``s`` is the agent's cell (``info.cell``, as for Q-learning and Dyna-Q+); the
 four actions are those of ``maze.ACTIONS``. It is told the goal cell, not the maze.
+Under ``--sensor`` and in other worlds (``sensed_states=True``) the state is the
+discretised sensation, as for Q-learning (:mod:`.q_learning`: keys numbered when first
+seen, ``n_actions`` the world's primitives, a goal key that may leave a component open);
+the goal is then every state whose key falls on the goal's (``at_goal``).
 
 Model (learnt from real steps only). For each pair (s, a) the last outcome seen, ``(s',
 bumped, terminated)``, and ``n(s, a)``, how many times in a row (s, a) led to it. The pair
 is *known* once ``n(s, a) >= m`` (``m_known``). The rewards are those of Eq. 8 (the
 Q-learning agent's), computed from the outcome and the current goal::
 
-    r(s, a) = r_goal if s' is the goal,  r_wall if the move bumped,  r_empty otherwise
+    r(s, a) = r_goal if s' is at the goal,  r_wall if the move bumped,  r_empty otherwise
 
 R-max optimism: an unknown pair leads to an absorbing state worth
 ``V_max = R_max / (1 - gamma)``, ``R_max`` the largest of the three rewards.
@@ -57,7 +61,7 @@ import numpy as np
 
 from maze_sim.maze import Cell, Maze
 from maze_sim.world import StepInfo
-from tmgwr_agent.baselines.q_learning import argmax_ties
+from tmgwr_agent.baselines.q_learning import argmax_ties, key_matches
 from tmgwr_agent.core.exploration import EpsilonGreedy, ExplorationConfig
 from tmgwr_common.params import make_config, param
 
@@ -97,26 +101,34 @@ class RMaxAgent:
     Config = RMaxConfig
 
     def __init__(self, maze: Maze, rng: np.random.Generator,
-                 config: RMaxConfig | Mapping[str, Any] | None = None):
-        """``config``: the agent's config, or a dict of parameter overrides. Only the
+                 config: RMaxConfig | Mapping[str, Any] | None = None,
+                 sensed_states: bool = False, n_actions: int = N_ACTIONS):
+        """``config``: the agent's config, or a dict of parameter overrides;
+        ``sensed_states``: states are sensed keys, not cells (module docstring);
+        ``n_actions``: the world's motor primitives (4: the grid's moves). Only the
         maze's size is read (the number of states), never its walls."""
         if not isinstance(config, self.Config):
             config = make_config(self.Config, config, where=self.name)
         self.config = c = config
         self.rng = rng
-        self.policy = EpsilonGreedy(rng, c)
+        self.n_actions = int(n_actions)
+        self.policy = EpsilonGreedy(rng, c, self.n_actions)
         self.rows, self.cols = maze.shape
         n = self.rows * self.cols
         self.v_max = max(c.r_goal, c.r_wall, c.r_empty) / (1.0 - c.gamma)
         # the model, indexed [s, a]
-        self.count = np.zeros((n, N_ACTIONS), dtype=np.int64)   # n(s, a), 0 = untried
-        self.next = np.zeros((n, N_ACTIONS), dtype=np.intp)     # s' (valid when count > 0)
-        self.bumped = np.zeros((n, N_ACTIONS), dtype=bool)
-        self.ended = np.zeros((n, N_ACTIONS), dtype=bool)       # terminated, not at the goal
-        self.last_tried = np.zeros((n, N_ACTIONS), dtype=np.int64)   # episode
-        self.Q = np.full((n, N_ACTIONS), self.v_max)
+        shape = (n, self.n_actions)
+        self.count = np.zeros(shape, dtype=np.int64)   # n(s, a), 0 = untried
+        self.next = np.zeros(shape, dtype=np.intp)     # s' (valid when count > 0)
+        self.bumped = np.zeros(shape, dtype=bool)
+        self.ended = np.zeros(shape, dtype=bool)       # terminated, not at the goal
+        self.last_tried = np.zeros(shape, dtype=np.int64)   # episode
+        self.Q = np.full(shape, self.v_max)
         self.Q_rows: list[list[float]] = self.Q.tolist()
-        self.goal = -1                   # index of the goal cell, -1 before set_goal
+        self.at_goal = np.zeros(n, dtype=bool)         # the states at the current goal
+        self.tried = np.zeros(n, dtype=bool)           # some action tried from the state
+        self.sensed: dict | None = {} if sensed_states else None   # key -> state index
+        self.goal = None                 # the goal's cell or key, None before set_goal
         self.dirty = True                # the model changed since the last solve
         self.recheck = False             # a path may have been lost: check for one
         self.sweeps = 0                  # sweeps of the last solve
@@ -126,7 +138,33 @@ class RMaxAgent:
 
     # -------------------------------------------------------------- the model
     def index(self, cell: Cell) -> int:
-        return int(cell[0]) * self.cols + int(cell[1])
+        """The state index of a cell (``row * cols + col``) or, with sensed states, of a
+        sensed key (numbered when first seen; the tables grow as needed)."""
+        if self.sensed is None:
+            return int(cell[0]) * self.cols + int(cell[1])
+        s = self.sensed.get(cell)
+        if s is None:
+            s = self.sensed[cell] = len(self.sensed)
+            if s >= len(self.count):
+                self.grow()
+            self.at_goal[s] = self.goal is not None and key_matches(cell, self.goal)
+        return s
+
+    def grow(self) -> None:
+        """Twice as many states in every per-state table (new states: every pair
+        untried, worth ``V_max``, as the solution has it)."""
+        n = len(self.count)
+        for name in ("count", "next", "bumped", "ended", "last_tried"):
+            a = getattr(self, name)
+            setattr(self, name, np.concatenate([a, np.zeros_like(a)]))
+        self.Q = np.concatenate([self.Q, np.full((n, self.n_actions), self.v_max)])
+        self.Q_rows.extend([self.v_max] * self.n_actions for _ in range(n))
+        self.at_goal = np.concatenate([self.at_goal, np.zeros(n, dtype=bool)])
+        self.tried = np.concatenate([self.tried, np.zeros(n, dtype=bool)])
+
+    def states_seen(self) -> int:
+        """States from which some action has been tried."""
+        return int(self.tried.sum())
 
     def known(self) -> np.ndarray:
         return self.count >= self.config.m_known
@@ -134,16 +172,17 @@ class RMaxAgent:
     def rewards(self) -> tuple[np.ndarray, np.ndarray]:
         """(r(s, a), terminal(s, a)) of the stored outcomes for the current goal."""
         c = self.config
-        at_goal = self.next == self.goal
+        at_goal = self.at_goal[self.next]
         r = np.where(at_goal, c.r_goal, np.where(self.bumped, c.r_wall, c.r_empty))
         return r, at_goal | self.ended
 
     def update_model(self, s: int, a: int, s2: int, bumped: bool, terminated: bool) -> None:
         """Count the outcome of (s, a); a different outcome restarts the count at 1."""
-        ended = terminated and s2 != self.goal
+        ended = terminated and not self.at_goal[s2]
         m = self.config.m_known
         n = int(self.count[s, a])
         self.last_tried[s, a] = self.episode
+        self.tried[s] = True
         if n and (self.next[s, a], self.bumped[s, a], self.ended[s, a]) == (s2, bumped, ended):
             self.count[s, a] = n + 1
             self.dirty |= n + 1 == m               # crossed the known-ness threshold
@@ -187,7 +226,7 @@ class RMaxAgent:
         """The states from which a known path leads to the goal or to an unknown pair."""
         known = self.known()
         r, terminal = self.rewards()
-        into_goal = known & (self.next == self.goal) & ~self.bumped
+        into_goal = known & self.at_goal[self.next] & ~self.bumped
         pair_ok = ~known | into_goal
         state_ok = pair_ok.any(axis=1)
         onward = known & ~terminal
@@ -205,7 +244,7 @@ class RMaxAgent:
 
     def greedy(self, s: int) -> int | None:
         """argmax_a Q(s, a), ties broken by the generator; None before a goal is set."""
-        if s < 0 or self.goal < 0:
+        if s < 0 or self.goal is None:
             return None
         if self.dirty:
             self.solve()
@@ -222,9 +261,17 @@ class RMaxAgent:
         return self.policy.epsilon
 
     def set_goal(self, goal_cell: Cell, goal_obs: np.ndarray | None = None) -> None:
-        """A new goal: rewards and terminals are relabelled (the terminations seen away
-        from the old goal are forgotten: the next experience re-teaches them)."""
-        self.goal = self.index(goal_cell)
+        """A new goal (a cell, or with sensed states the goal sensation's key): rewards
+        and terminals are relabelled (the terminations seen away from the old goal are
+        forgotten: the next experience re-teaches them)."""
+        self.at_goal[:] = False
+        if self.sensed is None:
+            self.goal = (int(goal_cell[0]), int(goal_cell[1]))
+            self.at_goal[self.index(goal_cell)] = True
+        else:
+            self.goal = goal_cell
+            for key, s in self.sensed.items():
+                self.at_goal[s] = key_matches(key, goal_cell)
         self.ended[:] = False
         self.dirty = self.recheck = True
 

@@ -17,7 +17,8 @@ world itself). What an agent is handed:
 Which agents run under a transform (:func:`check_sensor`): TMGWR (2-D sensations only
 until its core takes any dimension), and the tabular agents that learn their table online
 (:data:`SENSED_TABLE_AGENTS`). ``model_based`` is given the maze's cells as its model and
-has no model of a sensed space: it runs under identity sensing only.
+has no model of a sensed space, ``freespace`` the grid's cells and four moves: they run
+under identity sensing only.
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ from tmgwr_agent.core.senses import Senses
 from tmgwr_agent.world_senses import maze_senses, world_senses
 
 #: Agents whose table can key on :func:`discretise` of a sensation.
-SENSED_TABLE_AGENTS = ("q_learning", "dyna_q_plus")
+SENSED_TABLE_AGENTS = ("q_learning", "dyna_q_plus", "rmax")
 #: Agents that take the sensation itself, of any dimension (core/senses.py).
 SENSATION_AGENTS = ("tmgwr",)
 
@@ -196,7 +197,7 @@ def given_cells(agents) -> str | None:
 def check_world(agents, world) -> str | None:
     """Why ``agents`` cannot run in ``world`` (a :class:`maze_sim.worlds.WorldSpec`), or
     None: in a world other than the grid only the agents that learn from what they sense
-    run (model_based, rmax and freespace are given the grid's cells and moves)."""
+    run (model_based and freespace are given the grid's cells and moves)."""
     if world is None or world.name == "grid":
         return None
     a = given_cells(agents)
