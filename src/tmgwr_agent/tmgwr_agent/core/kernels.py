@@ -1805,18 +1805,18 @@ def eq6_choices(out_i, E_i, A_i, V, i, exclude_self, R_i, gamma, U, rho, osucc, 
     P = rho.shape[1] if U.shape[0] > i else 0
     stay = R_i + gamma * best_link_value(out_i, E_i, V) if P else 0.0
     with_options = P > 0 and V[i] > 0.0 and not exclude_self
+    ev = np.empty(K + (P if with_options else 0))
     top = 0.0
-    for s in range(K + (P if with_options else 0)):
-        ev = _eq6_term(out_i, E_i, V, i, exclude_self, stay, gamma, U, rho, osucc, onb, ong,
-                       K, s)
-        if ev > top:
-            top = ev
+    for s in range(len(ev)):
+        ev[s] = _eq6_term(out_i, E_i, V, i, exclude_self, stay, gamma, U, rho, osucc, onb,
+                          ong, K, s)
+        if ev[s] > top:
+            top = ev[s]
     c = 0
     if top <= 0.0:
         return c
-    for s in range(K + (P if with_options else 0)):
-        if _eq6_term(out_i, E_i, V, i, exclude_self, stay, gamma, U, rho, osucc, onb, ong,
-                     K, s) == top:
+    for s in range(len(ev)):
+        if ev[s] == top:
             slots[c] = s
             acts[c] = nearest_row(primitives, A_i[s] if s < K else primitives[s - K])
             took[c] = s >= K or out_i[s] == i

@@ -1,8 +1,11 @@
-"""The map's step in few, lean kernel calls (sensorimotor_map.py, ``SensorimotorMap.step``):
-:func:`kernels.map_step` takes the map's hyperparameters in one array, writes the rows it
+"""A step's kernel calls, lean: :func:`kernels.map_step` (sensorimotor_map.py,
+``SensorimotorMap.step``) takes the map's hyperparameters in one array, writes the rows it
 changed into a buffer the map keeps and appends them to the change log itself when they
-fit, as ``RowLog.touch`` would; :func:`kernels.sensed_motion` takes the two sensations.
-The log, the map and the motion statistics come out as the Python path makes them."""
+fit, as ``RowLog.touch`` would; :func:`kernels.sensed_motion` takes the two sensations;
+:func:`kernels.eq6_choices` computes each choice's term once. The log, the map and the
+motion statistics come out as the Python path makes them."""
+
+import re
 
 import numpy as np
 
@@ -67,3 +70,19 @@ def test_sensed_motion_adds_a_finite_displacement_only():
     assert count == 1 and motion[1].tolist() == [1.0, 0.0, 1.0, 0.0]
     _, count = kernels.sensed_motion(motion, 1, x, np.array([1.0, 0.0]), 0.95)
     assert count == 2 and motion[1].tolist() == [2.0, 0.0, 1.5, 0.5]
+
+
+def test_eq6_ranks_each_choice_once():
+    """One call of the term per choice (the second pass reads the first's values): the
+    compiled kernel has one call site of ``_eq6_term``."""
+    from test_kernels_refcount import compiled
+    n, K, P = 6, 4, 4
+    rng = np.random.default_rng(0)
+    out = np.where(rng.random((n, K)) < 0.6, rng.integers(0, n, (n, K)), -1)
+    E, A, V = np.where(out >= 0, 0.9, 0.0), rng.random((n, K, 2)), rng.random(n + 1)
+    U, rho = rng.random((n, P)), rng.random((n, P))
+    osucc, onb, ong = np.full((n, P), -2), np.ones((n, P, P), np.int64), np.full((n, P, P), 0.5)
+    slots, acts, took = (np.empty(K + P, t) for t in (np.int64, np.int64, bool))
+    fn = compiled("eq6_choices", out[1], E[1], A[1], V, 1, False, 0.1, 0.97, U, rho, osucc,
+                  onb, ong, rng.random((P, 2)), slots, acts, took)
+    assert len(re.findall(r"call [^\n]*_eq6_term", fn)) == 1
