@@ -1805,18 +1805,18 @@ def eq6_choices(out_i, E_i, A_i, V, i, exclude_self, R_i, gamma, U, rho, osucc, 
     P = rho.shape[1] if U.shape[0] > i else 0
     stay = R_i + gamma * best_link_value(out_i, E_i, V) if P else 0.0
     with_options = P > 0 and V[i] > 0.0 and not exclude_self
+    ev = np.empty(K + (P if with_options else 0))
     top = 0.0
-    for s in range(K + (P if with_options else 0)):
-        ev = _eq6_term(out_i, E_i, V, i, exclude_self, stay, gamma, U, rho, osucc, onb, ong,
-                       K, s)
-        if ev > top:
-            top = ev
+    for s in range(len(ev)):
+        ev[s] = _eq6_term(out_i, E_i, V, i, exclude_self, stay, gamma, U, rho, osucc, onb,
+                          ong, K, s)
+        if ev[s] > top:
+            top = ev[s]
     c = 0
     if top <= 0.0:
         return c
-    for s in range(K + (P if with_options else 0)):
-        if _eq6_term(out_i, E_i, V, i, exclude_self, stay, gamma, U, rho, osucc, onb, ong,
-                     K, s) == top:
+    for s in range(len(ev)):
+        if ev[s] == top:
             slots[c] = s
             acts[c] = nearest_row(primitives, A_i[s] if s < K else primitives[s - K])
             took[c] = s >= K or out_i[s] == i
@@ -2096,60 +2096,91 @@ def place_activity(motion, a_T):
 
 
 @njit(cache=True)
-def sensed_motion(motion, a, d, a_T):
-    """Add the sensed displacement ``d`` of a move by primitive ``a`` to its running
-    moments in ``motion`` (Welford: count, mean, sum of squared deviations); returns the
-    activity threshold of one place after it (:func:`place_activity`)."""
+def sensed_motion(motion, a, x, x_prev, a_T):
+    """Add the sensed displacement ``d = x - x_prev`` of a move by primitive ``a`` to its
+    running moments in ``motion`` (Welford: count, mean, sum of squared deviations);
+    returns the activity threshold of one place after it (:func:`place_activity`) and the
+    primitive's count of moves; ``(a_T, -1)``, nothing added, when ``d`` is not finite
+    (no sensation before it)."""
     k = motion.shape[1] - 2
+    for j in range(k):
+        if not math.isfinite(x[j] - x_prev[j]):
+            return a_T, -1
     motion[a, 0] += 1.0
     m2 = 0.0
     for j in range(k):
-        dev = d[j] - motion[a, 1 + j]
+        d = x[j] - x_prev[j]
+        dev = d - motion[a, 1 + j]
         motion[a, 1 + j] += dev / motion[a, 0]
-        m2 += dev * (d[j] - motion[a, 1 + j])
+        m2 += dev * (d - motion[a, 1 + j])
     motion[a, k + 1] += m2
-    return place_activity(motion, a_T)
+    return place_activity(motion, a_T), int(motion[a, 0])
 
 
 @njit(cache=True)
-def map_step(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, Sc, beta_c, a_T, h_T, learn,
-             eps_b, eps_n, tau_b, tau_n, kappa, E, A, age, terminal, a, has_action, unblocked,
-             alpha, sigma_a, eta_a, E_init, E_min, max_age, credit, keep, r2, prior, head, node,
-             geom, shape, moves, k):
+def map_step(w, c, h, alive, out, inn, n, prev, x, C, Sc, a_T, learn, hp, E, A, age,
+             terminal, a, has_action, unblocked, keep, r2, prior, head, node, geom, shape,
+             moves, k, changed, log_rows, log_len):
     """One learning step of the map in one call (sensorimotor_map.py) when nothing needs
     Python: :func:`match`, then, reached by action ``a`` (``has_action``) from ``prev``,
     :func:`link_step` on prev -> winner (``keep1`` prev, ``keep2`` ``keep``; none when
     ``unblocked``, the action was not blocked, and the winner is ``prev``: a move within
     one node, sensorimotor_map.py), then, with ``r2`` >= 0, :func:`close_pair` over the
     nodes moved (the merge's first pair). Returns
-    ``(b, insert, moved, done, changes, ends, i, j, linked)``: ``done`` False when the
+    ``(b, insert, n_moved, done, changes, n_ends, i, j, linked, logged)``: the nodes the match
+    moved, then the end nodes of the links deleted, are written to ``changed``
+    (``[:n_moved]``, ``[n_moved:n_moved + n_ends]``; room for ``1 + 6 K`` ids, ``K`` the
+    slots of a row: an array the caller keeps, as returned arrays cost more to hand to
+    Python than the step's own work); ``done`` False when the
     step needs the caller (not learning, a node to insert, a terminal ``prev``, link rows
     to widen: then only the match was made, and the caller goes on from there), else
-    ``linked`` says whether the link stage ran (``changes``, ``ends`` its result) and
+    ``linked`` says whether the link stage ran (``changes`` and the ends its result) and
     ``(i, j)`` is the close pair ((-1, -1): none, or ``r2`` < 0). The node index
     (``head`` ... ``shape``, node_index.py) first follows the rows ``moves[:k]`` (changed
-    since it last did), then the nodes the match moved."""
+    since it last did), then the nodes the match moved. ``hp``: the map's hyperparameters
+    the step reads, in the order of ``sensorimotor_map.STEP_PARAMETERS`` (one array: a
+    call costs per argument). When ``done``, the rows the step changed (the nodes moved,
+    then with the link stage ``prev`` and the ends) are appended to the map's change log
+    (``log_rows``, holding ``log_len`` entries: ``RowLog.buffer``) when they fit in it,
+    as ``RowLog.touch`` would append them, and ``logged`` is the log's new length; else
+    -1 (the caller logs them)."""
+    alpha_c, beta_c, h_T, eps_b, eps_n = hp[0], hp[1], hp[2], hp[3], hp[4]
+    tau_b, tau_n, kappa, alpha, sigma_a = hp[5], hp[6], hp[7], hp[8], hp[9]
+    eta_a, E_init, E_min, max_age, credit = hp[10], hp[11], hp[12], int(hp[13]), hp[14] != 0.0
     index_move(w, alive, n, moves, k, head, node, geom, shape)
     b, insert, moved = match(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, Sc, beta_c, a_T,
                              h_T, learn, eps_b, eps_n, tau_b, tau_n, kappa, prior, head,
                              node, geom, shape)
-    changes, ends, linked = 0, np.empty(0, dtype=np.int64), False
+    nm = len(moved)
+    changed[:nm] = moved
+    changes, linked = 0, False
     if not learn or insert:
-        return b, insert, moved, False, changes, ends, -1, -1, linked
+        return b, insert, nm, False, changes, 0, -1, -1, linked, -1
+    ne = 0
     if prev >= 0 and has_action and not (unblocked and b == prev):
         if terminal[prev]:
-            return b, insert, moved, False, changes, ends, -1, -1, linked
+            return b, insert, nm, False, changes, 0, -1, -1, linked, -1
         changes, ends = link_step(out, E, A, age, inn, alive, terminal, n, prev, b, a, alpha,
                                   sigma_a, eta_a, E_init, E_min, max_age, credit, prev, keep)
         if changes < 0:
-            return b, insert, moved, False, 0, ends, -1, -1, linked
+            return b, insert, nm, False, 0, 0, -1, -1, linked, -1
         linked = True
+        ne = len(ends)
+        changed[nm:nm + ne] = ends
     i, j = -1, -1
-    if r2 >= 0.0 and len(moved):
-        index_move(w, alive, n, moved, len(moved), head, node, geom, shape)
+    if r2 >= 0.0 and nm:
+        index_move(w, alive, n, moved, nm, head, node, geom, shape)
         i, j = indexed_close_pair(w, c, alive, n, moved, alpha_c, Sc, r2, head, node, geom,
                                   shape)
-    return b, insert, moved, True, changes, ends, i, j, linked
+    logged = -1
+    size = nm + (1 + ne if linked else 0)
+    if log_len + size <= log_rows.shape[0]:
+        log_rows[log_len:log_len + nm] = moved
+        if linked:
+            log_rows[log_len + nm] = prev
+            log_rows[log_len + nm + 1:log_len + size] = changed[nm:nm + ne]
+        logged = log_len + size
+    return b, insert, nm, True, changes, ne, i, j, linked, logged
 
 
 @njit(cache=True)

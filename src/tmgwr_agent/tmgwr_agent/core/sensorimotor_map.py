@@ -297,6 +297,15 @@ class RowLog:
         self._rows[self._len: self._len + k] = rows
         self._len += k
 
+    def buffer(self) -> tuple[np.ndarray, int]:
+        """The array of entries and how many it holds, for a kernel that appends rows in
+        place while they fit in it (what :meth:`touch` does then), then :meth:`appended`."""
+        return self._rows, self._len
+
+    def appended(self, length: int) -> None:
+        """A kernel appended entries in place (:meth:`buffer`): it holds ``length``."""
+        self._len = length
+
     def invalidate(self) -> None:
         """Every row may have changed: readers from before compare every row."""
         self._start += self._len + 1
@@ -342,6 +351,10 @@ def survivor(i: int, merges) -> int:
     return i
 
 
+#: The hyperparameters of :func:`kernels.map_step` (``hp``), in its order, then whether the
+#: link rule is ``credit``.
+STEP_PARAMETERS = ("alpha_c", "beta_c", "h_T", "eps_b", "eps_n", "tau_b", "tau_n", "kappa_h",
+                   "alpha", "sigma_a", "eta_a", "E_init", "E_min", "max_age")
 _INITIAL_CAPACITY = 64
 _NO_ROWS = np.zeros(0, dtype=np.int64)
 _INITIAL_DEGREE = 4
@@ -376,6 +389,9 @@ class SensorimotorMap:
         self.link_rule = c.link_rule
         self.merge = c.merge
         self.merges: list[tuple[int, int]] = []   # (keep, gone) of the last step's merges
+        # the hyperparameters kernels.map_step reads, in one array (fixed at construction)
+        self._hp = np.array([float(getattr(self, k)) for k in STEP_PARAMETERS]
+                            + [1.0 if self.link_rule == "credit" else 0.0])
         self._alloc(_INITIAL_CAPACITY, _INITIAL_DEGREE)
         # each primitive's sensed displacement over its moves (not bumps): count, mean,
         # sum of squared deviations (Welford); and the last input (the bump test)
@@ -407,6 +423,7 @@ class SensorimotorMap:
         self.age = np.zeros((cap, degree), dtype=np.int64)
         self.terminal = np.zeros(cap, dtype=bool)   # an episode ended on the node
         self.inn = np.full((cap, degree), -1, dtype=np.int64)   # sources of links in
+        self._changed = np.empty(1 + 6 * degree, dtype=np.int64)  # rows a step changed
 
     def _grow_nodes(self) -> None:
         old = (self.w, self.c, self.h, self.alive, self.out, self.E, self.a, self.age,
@@ -425,6 +442,7 @@ class SensorimotorMap:
         self.a = np.concatenate([self.a, np.zeros((cap, pad, self.action_dim))], axis=1)
         self.age = np.concatenate([self.age, np.zeros((cap, pad), np.int64)], axis=1)
         self.inn = np.concatenate([self.inn, np.full((cap, pad), -1, np.int64)], axis=1)
+        self._changed = np.empty(1 + 6 * self.out.shape[1], dtype=np.int64)
 
     @property
     def size(self) -> int:
@@ -562,21 +580,24 @@ class SensorimotorMap:
         r2 = math.log(self.a_place) ** 2 if self.merge else -1.0
         moves = self.index.pending(self) if self.n >= INDEX_MIN or self.index.shape[3] \
             else _NO_ROWS     # rows the node index is to follow (node_index.py)
-        b, insert, moved, done, changes, ends, ci, cj, linked = kernels.map_step(
+        changed, log = self._changed, self.log
+        b, insert, nm, done, changes, ne, ci, cj, linked, logged = kernels.map_step(
             self.w, self.c, self.h, self.alive, self.out, self.inn, self.n, self.prev, x, C,
-            self.alpha_c, self.Sc, self.beta_c, self.a_place, self.h_T, learn, self.eps_b,
-            self.eps_n, self.tau_b, self.tau_n, self.kappa_h, self.E, self.a, self.age,
-            self.terminal, a, has_action, unblocked, self.alpha, self.sigma_a, self.eta_a,
-            self.E_init, self.E_min, self.max_age, self.link_rule == "credit", self.winner,
-            r2, prior, *self.index.arrays, moves, len(moves))
-        if len(moved):
-            self.log.touch(moved)
+            self.Sc, self.a_place, learn, self._hp, self.E, self.a, self.age, self.terminal,
+            a, has_action, unblocked, self.winner, r2, prior, *self.index.arrays, moves,
+            len(moves), changed, *log.buffer())
+        moved = changed[:nm]        # (views of the step's buffer, read before the next step)
+        if logged >= 0:             # the kernel logged the rows it changed
+            log.appended(logged)
+        elif nm:
+            log.touch(moved)
         if done:
             if linked:
                 self.version += changes
-                self.log.touch(self.prev)
-                if len(ends):
-                    self.log.touch(ends)
+                if logged < 0:
+                    log.touch(self.prev)
+                    if ne:
+                        log.touch(changed[nm:nm + ne])
             if ci >= 0:
                 b = self._merge_close(moved, b, (ci, cj))
             self.prev = self.winner = b
@@ -636,14 +657,15 @@ class SensorimotorMap:
         """After a learning step by primitive ``a`` that moved (no bump) from the sensation
         ``x_prev`` to ``x``: its sensed displacement ``x - x_prev`` joins the primitive's
         statistics (:attr:`motion`), then ``a_place`` (the module docstring)."""
-        d = x - self.x_prev
-        if not all(map(math.isfinite, d.tolist())):     # (a few values: no numpy call)
-            return
         if a >= len(self.motion):           # (a map made or loaded without primitives)
+            if not np.isfinite(x - self.x_prev).all():
+                return
             self.motion = np.concatenate([self.motion,
                                           np.zeros((a + 1 - len(self.motion), self.dim + 2))])
-        self.a_place = kernels.sensed_motion(self.motion, a, d, self.a_T)   # Welford's
-        count = int(self.motion[a, 0])
+        a_place, count = kernels.sensed_motion(self.motion, a, x, self.x_prev, self.a_T)
+        if count < 0:                       # no sensation before it
+            return
+        self.a_place = a_place              # Welford's
         if count >= 2 and count & (count - 1) == 0:   # each doubling of its moves
             self._context_metric()
 
