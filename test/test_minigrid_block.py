@@ -248,3 +248,23 @@ def test_after_the_break_the_bound_counts_the_steps_that_lead_on():
             assert mo.U[i, a] <= mo.v_star * mo.gamma ** (g / nearer) * (1 + 1e-9), (i, a)
             checked += 1
     assert checked > 0
+
+
+def test_after_the_break_moves_are_predicted_by_the_affine_forward_model():
+    """Once the known route broke, a move's successor is predicted by the affine fit over
+    the agent's moves (``_affine``), which MiniGrid's moves obey (a forward steps along
+    the heading the sensation holds: ``w + (w_3, w_2, 0, 0)`` in its scaled units): the
+    forward predicted from every live node lies within a quarter step of where it truly
+    leads. Before: the nearest node whose forward moved predicted it, and where that
+    node faced another way the prediction went off the heading."""
+    from maze_sim.minigrid_world import FORWARD
+    agent = _stuck_after_the_block(GAPS, 0)
+    mo, m = agent.motivation, agent.map
+    n = m.n
+    assert mo.broken and mo._affine(m, FORWARD) is not None
+    rows = np.flatnonzero(m.alive[:n])
+    w = m.w[rows]
+    truth = w + np.stack([w[:, 3], w[:, 2], 0 * w[:, 0], 0 * w[:, 0]], axis=1)
+    x = mo._predicted(m, rows, FORWARD)
+    quarter = 0.25 * np.sqrt(mo.delta_sq[FORWARD])
+    assert (np.linalg.norm(x - truth, axis=1) < quarter).all()

@@ -1056,15 +1056,56 @@ class OptionRules:
         predicts them: ``w_i + (w_j - w_k)``, k the node nearest i (in weights) whose last
         try of a moved it, to j = ``succ[k, a]`` (a move does from a place what it did from
         the place most like it); from the places ``at`` instead of the nodes' weights when
-        given; None before a has moved from any live node."""
+        given; None before a has moved from any live node.
+
+        *After a break* (``broken``) the affine forward model of a instead, when its fit
+        holds (:meth:`_affine`): ``w + [w, 1] B``. A move whose displacement depends on
+        where it is taken through the sensation itself (MiniGrid's forward moves along the
+        heading the sensation holds, its turns rotate it) is predicted from anywhere by
+        one fit over all the agent's moves, where the nearest node whose try of a moved
+        may face another way (at a new place, the nodes facing the same way are often
+        further off): its forward was then predicted off its true direction, a turn
+        looked like the way on, and the agent spun at the places it came to after a
+        block. The fit is checked (the residuals within a quarter step), as the lattice
+        is (frame.py), and a world whose moves it does not fit keeps the nearest node's
+        prediction. In a training episode the nearest node's prediction stands, as the
+        bounds of :meth:`_unplaced_options` do."""
         k, j = self._moves(m, a)
         if not len(k):
             return None
         wr, wk = (m.w[rows] if at is None else at), m.w[k]
+        B = self._affine(m, a) if self.broken else None
+        if B is not None:
+            return wr + wr @ B[:-1] + B[-1]
         d2 = (np.einsum("ij,ij->i", wr, wr)[:, None] - 2.0 * wr @ wk.T
               + np.einsum("ij,ij->i", wk, wk)[None, :])
         near = np.argmin(d2, axis=1)
         return wr + (m.w[j[near]] - wk[near])
+
+    def _affine(self, m: SensorimotorMap, a: int) -> np.ndarray | None:
+        """The affine forward model of primitive a: ``B`` of the least-squares fit
+        ``w_j - w_k = [w_k, 1] B`` over its moves (k, j) (:meth:`_moves`), when it has
+        more moves than ``B`` has rows and the root mean square of the fit's residuals is
+        within a quarter of the shortest step (well inside the half step that tells two
+        places apart, :meth:`_known_place`); else None. Fitted once per step clock and
+        map version: :meth:`_predicted`, *After a break*."""
+        key = (m.version, self.clock)
+        kept = self._affine_fit.get(a)
+        if kept is not None and kept[0] == key:
+            return kept[1]
+        k, j = self._moves(m, a)
+        moved = self.delta_sq[self.delta_sq > 0.0]
+        B = None
+        if len(moved) and len(k) > m.w.shape[1] + 1:
+            X = np.hstack([m.w[k], np.ones((len(k), 1))])
+            Y = m.w[j] - m.w[k]
+            fit = np.linalg.lstsq(X, Y, rcond=None)[0]
+            miss = X @ fit - Y
+            if math.sqrt(float(np.einsum("ij,ij->i", miss, miss).mean())) \
+                    <= 0.25 * math.sqrt(float(moved.min())):
+                B = fit
+        self._affine_fit[a] = (key, B)
+        return B
 
     def open_prior(self, m: SensorimotorMap, n: int) -> float:
         """rho of a primitive never tried (Eq. 5'): ``untried_rho``, or when that is
