@@ -871,6 +871,17 @@ class OptionRules:
         training episode the distance bound stands, as the known place above does: there
         the look round pays.
 
+        *A wall that leads only back*, while stuck in an episode whose known route broke:
+        a remembered wall has no option when every way on from the place it would lead
+        to, over places the map does not know, ends at places the agent reaches already
+        (:meth:`_leads_on`, as the affine forward model predicts the moves). Opening it
+        would lead nowhere the agent cannot walk to now, so it is no way round, whatever
+        the chance it opened: on a lattice a wall's option is valued by its known exits
+        for the same reason (module docstring, ``S``). Without it the agent bumped a pillar
+        inside the region it was stuck in from each of its sides before it walked on to
+        the walls between it and the goal. Only where the affine model fits: the nearest
+        node's prediction, off the true direction, closed walls that led on.
+
         *Steps of the moves that lead on*, in an episode whose known route broke: ``l``
         in these bounds is the most one of the agent's moves has brought it nearer the
         goal sensation, over the moves its outcome memory holds (:meth:`_nearer`; at
@@ -929,6 +940,7 @@ class OptionRules:
         if wall.any():
             lo, hi = self._known_extent(m)
         placed = np.full((len(rows), len(prims)), -1, dtype=np.int64)
+        reach = None
         for c, p in enumerate(prims):
             q = np.flatnonzero(unknown[:, c])
             x = self._predicted(m, rows[q], int(p)) if len(q) and step > 0.0 else None
@@ -948,6 +960,11 @@ class OptionRules:
             t = ~wall[q, c]
             if t.any() and self.broken:
                 placed[q[t], c] = self._known_place(m, x[t], rows[q[t]])
+            s = wall[q, c]
+            if s.any() and self._stuck and self.broken:
+                if reach is None:
+                    reach = self._reached(m)
+                rho_u[q[s][~self._leads_on(m, x[s], reach, step)], c] = 0.0
         j = self.succ[r, a]
         jc = np.maximum(j, 0)
         lost = (live & self.tried[r, a] & (self.bump_t[r, a] < 0) & (j >= 0) & (j != r)
@@ -1019,6 +1036,72 @@ class OptionRules:
         linked = (m.out[rows] == q[:, None]).any(axis=1) | \
             (m.out[q] == rows[:, None]).any(axis=1)
         out[~linked] = -1
+        return out
+
+    def _reached(self, m: SensorimotorMap) -> np.ndarray:
+        """The live nodes the agent's node reaches over the links the outcome memory does
+        not contradict (a mask of the map's rows)."""
+        n = m.n
+        Eb = kernels.contradicted(m.out, m.E, n, self.bump_t, self.succ)
+        ds = np.empty(n, dtype=np.int64)
+        kernels.link_steps(m.out, Eb, n, m.alive, self._absorbing(m, n, closed=False),
+                           self._winner, False, ds)
+        return ds >= 0
+
+    def _leads_on(self, m: SensorimotorMap, x: np.ndarray, reach: np.ndarray,
+                  step: float) -> np.ndarray:
+        """For each place ``x[k]``: some way on from it, over places the map does not
+        know, as the forward model predicts the moves (:meth:`_predicted`), leads to a
+        known place the agent does not reach (``reach``, :meth:`_reached`), or further
+        than twice ``step`` from x (the way leaves the place's surroundings: unknown
+        space, valued by its bound); True for every place while some primitive has no
+        affine model (:meth:`_affine`). A place is known when a live node lies within
+        half the shortest step of it (as in :meth:`_known_place`). Breadth-first over the
+        predicted places, each met once: :meth:`_unplaced_options`, *A wall that leads
+        only back*."""
+        n = m.n
+        moved = self.delta_sq[self.delta_sq > 0.0]
+        out = np.ones(len(x), dtype=bool)
+        if not len(moved) or not len(x) or not m.alive[:n].any():
+            return out
+        if any(self._affine(m, b) is None for b in range(self.n_primitives)):
+            return out
+        half2 = 0.25 * float(moved.min())
+        r2 = (2.0 * step) ** 2
+        live = np.flatnonzero(m.alive[:n])
+        wl = m.w[live]
+        wl2 = np.einsum("ij,ij->i", wl, wl)
+        for k in range(len(x)):
+            seen, frontier, found = x[k][None, :], x[k][None, :], False
+            while len(frontier):
+                d2 = (np.einsum("ij,ij->i", frontier, frontier)[:, None]
+                      - 2.0 * frontier @ wl.T + wl2[None, :])
+                q = np.argmin(d2, axis=1)
+                known = d2[np.arange(len(frontier)), q] < half2
+                far = np.einsum("ij,ij->i", frontier - x[k], frontier - x[k]) > r2
+                if (known & ~reach[live[q]]).any() or (far & ~known).any():
+                    found = True
+                    break
+                frontier = frontier[~known]
+                nxt = []
+                for b in range(self.n_primitives):
+                    z = self._predicted(m, None, b, at=frontier) if len(frontier) else None
+                    if z is None and len(frontier):
+                        found = True
+                        break
+                    if z is not None:
+                        nxt.append(z)
+                if found or not nxt:
+                    break
+                z = np.vstack(nxt)
+                new = []
+                for y in z:                       # places not met yet, once each
+                    dv = seen - y
+                    if (np.einsum("ij,ij->i", dv, dv) >= half2).all():
+                        seen = np.vstack([seen, y])
+                        new.append(y)
+                frontier = np.array(new).reshape(len(new), x.shape[1])
+            out[k] = found
         return out
 
     def _known_extent(self, m: SensorimotorMap) -> tuple[np.ndarray, np.ndarray]:
