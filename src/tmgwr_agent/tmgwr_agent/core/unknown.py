@@ -429,6 +429,7 @@ class OutcomeMemory:
                 self._winner = keep
         if len(merges):
             self._closed = None
+            self._affine_fit = {}
             self._options_key = ()
 
     def _close_cell(self, node: int, a: int, w: np.ndarray) -> None:
@@ -508,6 +509,7 @@ class OutcomeMemory:
             np.einsum("ij,ij->i", self.delta, self.delta) if self.delta.size else \
             np.zeros(self.n_primitives)
         self.moves = np.array(d["moves"], dtype=np.int64)
+        self._affine_fit = {}             # fitted again on the loaded memory
         self._options_key = ()
         self._inc = None                  # the next solve is a full one
 
