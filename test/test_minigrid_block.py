@@ -80,12 +80,14 @@ def test_while_stuck_walls_known_before_the_break_are_doubted_alike():
     (the wall prior; before: less the more recent its bump, so the walls nearest the
     opening, bumped last in training, were re-tested last), and a wall whose cell lies
     beyond the places the map and the goal span (the maze's outer wall) is not doubted
-    (before: re-tested as unknown space as near the goal as the opening)."""
+    (before: re-tested as unknown space as near the goal as the opening). Walls that lead
+    only back to places the agent reaches: the next tests."""
     agent = _stuck_after_the_block(GAPS, 0)
     mo, m = agent.motivation, agent.map
     n, prior = m.n, mo.wall_prior()
     lo, hi = mo._known_extent(m)
     step = float(np.sqrt(mo.delta_sq.max()))
+    reach = mo._reached(m)
     before = beyond = 0
     for i in np.flatnonzero(m.alive[:n]):
         for a in range(mo.n_primitives):
@@ -95,7 +97,7 @@ def test_while_stuck_walls_known_before_the_break_are_doubted_alike():
             if ((x < lo - 0.5 * step) | (x > hi + 0.5 * step)).any():
                 beyond += 1
                 assert mo.rho[i, a] == 0.0, (i, a, x)
-            else:
+            elif mo._leads_on(m, x[None, :], reach, step)[0]:    # else no way round
                 before += 1
                 assert mo.rho[i, a] == prior, (i, a, mo.rho[i, a], prior)
     assert before > 0 and beyond > 0
@@ -248,3 +250,65 @@ def test_after_the_break_the_bound_counts_the_steps_that_lead_on():
             assert mo.U[i, a] <= mo.v_star * mo.gamma ** (g / nearer) * (1 + 1e-9), (i, a)
             checked += 1
     assert checked > 0
+
+
+#: GAPS with a pillar in the start's room: once the route broke, the pillar's cell is
+#: walled in by places the agent reaches, so opening it would lead nowhere new.
+PILLAR = ("#########\n"
+          "#S......#\n"
+          "#...#...#\n"
+          "#.......#\n"
+          "#A#####a#\n"
+          "#......G#\n"
+          "#########\n")
+
+
+def test_while_stuck_a_wall_that_leads_only_back_has_no_option():
+    """Stuck after the block: a remembered wall whose ways on, over places the map does
+    not know (the affine forward model's moves), all end at places the agent reaches
+    already is no way round and has no option (``_leads_on``); walls whose ways on reach
+    a place beyond are doubted. Before: every remembered wall was doubted alike, and the
+    agent bumped a pillar inside its own room from each of its sides."""
+    agent = _stuck_after_the_block(PILLAR, 0)
+    mo, m = agent.motivation, agent.map
+    n = m.n
+    mo._options_key = ()
+    mo.refresh_options(m, n)
+    reach = mo._reached(m)
+    step = float(np.sqrt(mo.delta_sq.max()))
+    lo, hi = mo._known_extent(m)
+    closed = doubted = 0
+    for i in np.flatnonzero(m.alive[:n]):
+        for a in range(mo.n_primitives):
+            if not (mo.tried[i, a] and 0 <= mo.bump_t[i, a] < mo.break_t):
+                continue
+            x = mo._predicted(m, np.array([i]), a)
+            if ((x < lo - 0.5 * step) | (x > hi + 0.5 * step)).any():
+                continue
+            if mo._leads_on(m, x, reach, step)[0]:
+                doubted += 1
+                assert mo.rho[i, a] > 0.0, (i, a)
+            else:
+                closed += 1
+                assert mo.rho[i, a] == 0.0, (i, a, x)
+    assert closed > 0 and doubted > 0
+
+
+def test_after_the_break_moves_are_predicted_by_the_affine_forward_model():
+    """Once the known route broke, a move's successor is predicted by the affine fit over
+    the agent's moves (``_affine``), which MiniGrid's moves obey (a forward steps along
+    the heading the sensation holds: ``w + (w_3, w_2, 0, 0)`` in its scaled units): the
+    forward predicted from every live node lies within a quarter step of where it truly
+    leads. Before: the nearest node whose forward moved predicted it, and where that
+    node faced another way the prediction went off the heading."""
+    from maze_sim.minigrid_world import FORWARD
+    agent = _stuck_after_the_block(GAPS, 0)
+    mo, m = agent.motivation, agent.map
+    n = m.n
+    assert mo.broken and mo._affine(m, FORWARD) is not None
+    rows = np.flatnonzero(m.alive[:n])
+    w = m.w[rows]
+    truth = w + np.stack([w[:, 3], w[:, 2], 0 * w[:, 0], 0 * w[:, 0]], axis=1)
+    x = mo._predicted(m, rows, FORWARD)
+    quarter = 0.25 * np.sqrt(mo.delta_sq[FORWARD])
+    assert (np.linalg.norm(x - truth, axis=1) < quarter).all()

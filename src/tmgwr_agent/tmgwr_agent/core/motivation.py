@@ -310,6 +310,7 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         self.break_t = -1             # the clock of the last such bump, ever
         self._route_due = False       # the route is read off V0 at the episode's first solve
         self._stuck = False           # stuck when the last update solved Eq. 5'
+        self._affine_fit = {}         # per primitive: (key, its affine forward model)
         self.delta = np.zeros((P, 0))     # mean sensed displacement per primitive
         self.delta_sq = np.zeros(P)       # and the mean of its squared length
         self.moves = np.zeros(P, dtype=np.int64)

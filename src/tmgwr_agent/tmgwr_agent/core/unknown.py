@@ -429,6 +429,7 @@ class OutcomeMemory:
                 self._winner = keep
         if len(merges):
             self._closed = None
+            self._affine_fit = {}
             self._options_key = ()
 
     def _close_cell(self, node: int, a: int, w: np.ndarray) -> None:
@@ -508,6 +509,7 @@ class OutcomeMemory:
             np.einsum("ij,ij->i", self.delta, self.delta) if self.delta.size else \
             np.zeros(self.n_primitives)
         self.moves = np.array(d["moves"], dtype=np.int64)
+        self._affine_fit = {}             # fitted again on the loaded memory
         self._options_key = ()
         self._inc = None                  # the next solve is a full one
 
@@ -871,6 +873,17 @@ class OptionRules:
         training episode the distance bound stands, as the known place above does: there
         the look round pays.
 
+        *A wall that leads only back*, while stuck in an episode whose known route broke:
+        a remembered wall has no option when every way on from the place it would lead
+        to, over places the map does not know, ends at places the agent reaches already
+        (:meth:`_leads_on`, as the affine forward model predicts the moves). Opening it
+        would lead nowhere the agent cannot walk to now, so it is no way round, whatever
+        the chance it opened: on a lattice a wall's option is valued by its known exits
+        for the same reason (module docstring, ``S``). Without it the agent bumped a pillar
+        inside the region it was stuck in from each of its sides before it walked on to
+        the walls between it and the goal. Only where the affine model fits: the nearest
+        node's prediction, off the true direction, closed walls that led on.
+
         *Steps of the moves that lead on*, in an episode whose known route broke: ``l``
         in these bounds is the most one of the agent's moves has brought it nearer the
         goal sensation, over the moves its outcome memory holds (:meth:`_nearer`; at
@@ -929,6 +942,7 @@ class OptionRules:
         if wall.any():
             lo, hi = self._known_extent(m)
         placed = np.full((len(rows), len(prims)), -1, dtype=np.int64)
+        reach = None
         for c, p in enumerate(prims):
             q = np.flatnonzero(unknown[:, c])
             x = self._predicted(m, rows[q], int(p)) if len(q) and step > 0.0 else None
@@ -948,6 +962,11 @@ class OptionRules:
             t = ~wall[q, c]
             if t.any() and self.broken:
                 placed[q[t], c] = self._known_place(m, x[t], rows[q[t]])
+            s = wall[q, c]
+            if s.any() and self._stuck and self.broken:
+                if reach is None:
+                    reach = self._reached(m)
+                rho_u[q[s][~self._leads_on(m, x[s], reach, step)], c] = 0.0
         j = self.succ[r, a]
         jc = np.maximum(j, 0)
         lost = (live & self.tried[r, a] & (self.bump_t[r, a] < 0) & (j >= 0) & (j != r)
@@ -1021,6 +1040,72 @@ class OptionRules:
         out[~linked] = -1
         return out
 
+    def _reached(self, m: SensorimotorMap) -> np.ndarray:
+        """The live nodes the agent's node reaches over the links the outcome memory does
+        not contradict (a mask of the map's rows)."""
+        n = m.n
+        Eb = kernels.contradicted(m.out, m.E, n, self.bump_t, self.succ)
+        ds = np.empty(n, dtype=np.int64)
+        kernels.link_steps(m.out, Eb, n, m.alive, self._absorbing(m, n, closed=False),
+                           self._winner, False, ds)
+        return ds >= 0
+
+    def _leads_on(self, m: SensorimotorMap, x: np.ndarray, reach: np.ndarray,
+                  step: float) -> np.ndarray:
+        """For each place ``x[k]``: some way on from it, over places the map does not
+        know, as the forward model predicts the moves (:meth:`_predicted`), leads to a
+        known place the agent does not reach (``reach``, :meth:`_reached`), or further
+        than twice ``step`` from x (the way leaves the place's surroundings: unknown
+        space, valued by its bound); True for every place while some primitive has no
+        affine model (:meth:`_affine`). A place is known when a live node lies within
+        half the shortest step of it (as in :meth:`_known_place`). Breadth-first over the
+        predicted places, each met once: :meth:`_unplaced_options`, *A wall that leads
+        only back*."""
+        n = m.n
+        moved = self.delta_sq[self.delta_sq > 0.0]
+        out = np.ones(len(x), dtype=bool)
+        if not len(moved) or not len(x) or not m.alive[:n].any():
+            return out
+        if any(self._affine(m, b) is None for b in range(self.n_primitives)):
+            return out
+        half2 = 0.25 * float(moved.min())
+        r2 = (2.0 * step) ** 2
+        live = np.flatnonzero(m.alive[:n])
+        wl = m.w[live]
+        wl2 = np.einsum("ij,ij->i", wl, wl)
+        for k in range(len(x)):
+            seen, frontier, found = x[k][None, :], x[k][None, :], False
+            while len(frontier):
+                d2 = (np.einsum("ij,ij->i", frontier, frontier)[:, None]
+                      - 2.0 * frontier @ wl.T + wl2[None, :])
+                q = np.argmin(d2, axis=1)
+                known = d2[np.arange(len(frontier)), q] < half2
+                far = np.einsum("ij,ij->i", frontier - x[k], frontier - x[k]) > r2
+                if (known & ~reach[live[q]]).any() or (far & ~known).any():
+                    found = True
+                    break
+                frontier = frontier[~known]
+                nxt = []
+                for b in range(self.n_primitives):
+                    z = self._predicted(m, None, b, at=frontier) if len(frontier) else None
+                    if z is None and len(frontier):
+                        found = True
+                        break
+                    if z is not None:
+                        nxt.append(z)
+                if found or not nxt:
+                    break
+                z = np.vstack(nxt)
+                new = []
+                for y in z:                       # places not met yet, once each
+                    dv = seen - y
+                    if (np.einsum("ij,ij->i", dv, dv) >= half2).all():
+                        seen = np.vstack([seen, y])
+                        new.append(y)
+                frontier = np.array(new).reshape(len(new), x.shape[1])
+            out[k] = found
+        return out
+
     def _known_extent(self, m: SensorimotorMap) -> tuple[np.ndarray, np.ndarray]:
         """The box the live nodes' places and the goal sensation span (lower, upper)."""
         w = m.w[:m.n][m.alive[:m.n]]
@@ -1056,15 +1141,56 @@ class OptionRules:
         predicts them: ``w_i + (w_j - w_k)``, k the node nearest i (in weights) whose last
         try of a moved it, to j = ``succ[k, a]`` (a move does from a place what it did from
         the place most like it); from the places ``at`` instead of the nodes' weights when
-        given; None before a has moved from any live node."""
+        given; None before a has moved from any live node.
+
+        *After a break* (``broken``) the affine forward model of a instead, when its fit
+        holds (:meth:`_affine`): ``w + [w, 1] B``. A move whose displacement depends on
+        where it is taken through the sensation itself (MiniGrid's forward moves along the
+        heading the sensation holds, its turns rotate it) is predicted from anywhere by
+        one fit over all the agent's moves, where the nearest node whose try of a moved
+        may face another way (at a new place, the nodes facing the same way are often
+        further off): its forward was then predicted off its true direction, a turn
+        looked like the way on, and the agent spun at the places it came to after a
+        block. The fit is checked (the residuals within a quarter step), as the lattice
+        is (frame.py), and a world whose moves it does not fit keeps the nearest node's
+        prediction. In a training episode the nearest node's prediction stands, as the
+        bounds of :meth:`_unplaced_options` do."""
         k, j = self._moves(m, a)
         if not len(k):
             return None
         wr, wk = (m.w[rows] if at is None else at), m.w[k]
+        B = self._affine(m, a) if self.broken else None
+        if B is not None:
+            return wr + wr @ B[:-1] + B[-1]
         d2 = (np.einsum("ij,ij->i", wr, wr)[:, None] - 2.0 * wr @ wk.T
               + np.einsum("ij,ij->i", wk, wk)[None, :])
         near = np.argmin(d2, axis=1)
         return wr + (m.w[j[near]] - wk[near])
+
+    def _affine(self, m: SensorimotorMap, a: int) -> np.ndarray | None:
+        """The affine forward model of primitive a: ``B`` of the least-squares fit
+        ``w_j - w_k = [w_k, 1] B`` over its moves (k, j) (:meth:`_moves`), when it has
+        more moves than ``B`` has rows and the root mean square of the fit's residuals is
+        within a quarter of the shortest step (well inside the half step that tells two
+        places apart, :meth:`_known_place`); else None. Fitted once per step clock and
+        map version: :meth:`_predicted`, *After a break*."""
+        key = (m.version, self.clock)
+        kept = self._affine_fit.get(a)
+        if kept is not None and kept[0] == key:
+            return kept[1]
+        k, j = self._moves(m, a)
+        moved = self.delta_sq[self.delta_sq > 0.0]
+        B = None
+        if len(moved) and len(k) > m.w.shape[1] + 1:
+            X = np.hstack([m.w[k], np.ones((len(k), 1))])
+            Y = m.w[j] - m.w[k]
+            fit = np.linalg.lstsq(X, Y, rcond=None)[0]
+            miss = X @ fit - Y
+            if math.sqrt(float(np.einsum("ij,ij->i", miss, miss).mean())) \
+                    <= 0.25 * math.sqrt(float(moved.min())):
+                B = fit
+        self._affine_fit[a] = (key, B)
+        return B
 
     def open_prior(self, m: SensorimotorMap, n: int) -> float:
         """rho of a primitive never tried (Eq. 5'): ``untried_rho``, or when that is
