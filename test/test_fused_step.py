@@ -15,7 +15,7 @@ from tmgwr_agent.world_senses import maze_senses
 
 #: What must be equal after each step: the estimator's and the map's arrays.
 ESTIMATOR = ("V", "R", "U", "rho", "osucc", "onb", "ong", "_abs", "_abs_terminal", "delta")
-MAP = ("w", "c", "h", "alive", "out", "E", "a", "age", "terminal")
+MAP = ("w", "c", "h", "won", "alive", "out", "E", "a", "age", "terminal")
 
 
 def sense(obs, A, rng, noise):

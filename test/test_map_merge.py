@@ -157,6 +157,7 @@ def elsewhere_map(spread: float) -> SensorimotorMap:
         m._insert(np.array(x), np.array(x))
     m.out[0, 0], m.E[0, 0], m.a[0, 0] = 2, 1.0, RIGHT
     m.h[:3] = (0.1, 0.1, 0.1)
+    m.won[:3] = 100.0                  # settled at the means of many samples
     m.rebuild_in_links()
     m.motion[1] = (10, 0.1, 0.0, 10 * spread)
     m.prev = m.winner = 0
@@ -299,6 +300,29 @@ def test_a_place_is_as_wide_as_the_sensing_scatter(spread, mean, inserts):
     m.experience(np.array([0.0, 0.0]), EPISODE_START)
     m.experience(np.array([0.0, 0.055]), Outcome(action=0))
     assert m.inserted == inserts
+
+
+@pytest.mark.parametrize("spread, mean", [
+    (0.0016, True),     # noise of 0.2 cell: the place radius is the scatter's
+    (0.0, False),       # no noise: GWR's radius and rate
+    (0.003, False),     # moves hardly stand out of the scatter: no place radius
+])
+def test_under_noise_a_node_is_the_mean_of_the_samples_it_won(spread, mean):
+    """A node inserted at one sample of its place then wins the place's next samples:
+    under a place radius its weight is their mean (GWR's rate keeps much of the first
+    sample's offset), its count the samples it won; a merge adds the counts."""
+    m = SensorimotorMap(dim=2, config=MapConfig(alpha_c=0.0),
+                        primitives=np.array([LEFT, RIGHT]))
+    m.motion[1] = (10, 0.1, 0.0, 10 * spread)
+    m._place_radius()
+    xs = 0.01 * np.random.default_rng(0).normal(size=(40, 2))   # within GWR's radius
+    for x in xs:
+        m.step(x, None)
+    assert m.size == 1 and m.won[0] == len(xs)
+    assert np.allclose(m.w[0], xs.mean(axis=0), atol=1e-12) == mean
+    m._insert(np.array([0.5, 0.0]), np.zeros(2))
+    m._merge(0, 1)
+    assert m.won[0] == len(xs) + 1
 
 
 def test_the_map_stays_near_one_node_a_cell_under_noise():

@@ -66,8 +66,9 @@ _ARRAYS = {           # name -> (dtype kind, number of dimensions)
     "w": ("f", 2), "c": ("f", 2), "h": ("f", 1), "alive": ("b", 1), "out": ("i", 2),
     "E": ("f", 2), "a": ("f", 3), "age": ("i", 2), "terminal": ("b", 1), "meta": ("i", 1),
     "step_id": ("iu", 0), "run_id": ("iu", 0), "motion": ("f", 2), "x_prev": ("f", 1),
+    "won": ("f", 1),
 }
-_OPTIONAL = {"terminal", "motion", "x_prev", FORMAT_KEY}   # absent from older maps
+_OPTIONAL = {"terminal", "motion", "x_prev", "won", FORMAT_KEY}   # absent from older maps
 
 
 class MapStoreError(ValueError):
@@ -147,13 +148,15 @@ def validate_state(s: dict[str, np.ndarray], what: str = "map") -> None:
     if k < 1 or dim < 1 or action_dim < 1:
         bad(f"empty dimension (degree {k}, dim {dim}, action dim {action_dim})")
     shapes = {"w": (n, dim), "c": (n, dim), "h": (n,), "alive": (n,), "E": (n, k),
-              "a": (n, k, action_dim), "age": (n, k), "terminal": (n,), "meta": (3,)}
+              "a": (n, k, action_dim), "age": (n, k), "terminal": (n,), "meta": (3,),
+              "won": (n,)}
     for name, shape in shapes.items():
         if name in s and s[name].shape != shape:
             bad(f"array {name} has shape {s[name].shape}, expected {shape} "
                 f"({n} nodes, {k} links per node, dim {dim})")
-    for name in ("w", "c", "h", "E", "a", "motion", "x_prev"):  # (the last two: optional,
-        if name in s and not np.isfinite(s[name]).all():       # ignored if of other shape)
+    # (motion and x_prev: optional, ignored if of another shape)
+    for name in ("w", "c", "h", "won", "E", "a", "motion", "x_prev"):
+        if name in s and not np.isfinite(s[name]).all():
             bad(f"array {name} holds {int((~np.isfinite(s[name])).sum())} values that are "
                 "not finite")
     if ((s["E"] < 0) | (s["E"] > 1)).any():

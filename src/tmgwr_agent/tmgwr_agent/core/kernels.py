@@ -1847,10 +1847,15 @@ def habituate(h, i, tau, kappa):
 
 
 @njit(cache=True)
-def adapt(w, c, h, out, inn, n, b, x, C, eps_b, eps_n, tau_b, tau_n, kappa):
+def adapt(w, c, h, won, mean, out, inn, n, b, x, C, eps_b, eps_n, tau_b, tau_n, kappa):
     """Move the winner and its linked neighbours towards (x, C), then habituate them;
-    returns the nodes moved (b first)."""
+    returns the nodes moved (b first). ``won``: the samples each node won; with ``mean``
+    the winner moves at least at ``1 / won``, the running mean of its samples
+    (sensorimotor_map.py, "The mean of a place's samples")."""
     rate = eps_b * h[b]
+    won[b] += 1.0
+    if mean and 1.0 / won[b] > rate:
+        rate = 1.0 / won[b]
     for k in range(x.shape[0]):
         w[b, k] += rate * (x[k] - w[b, k])
         c[b, k] += rate * (C[k] - c[b, k])
@@ -2002,8 +2007,8 @@ def update_links(out, E, A, age, inn, n, i, j, a, alpha, sigma_a, eta_a, E_init,
 
 
 @njit(cache=True)
-def match(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, Sc, beta_c, a_T, h_T, learn,
-          eps_b, eps_n, tau_b, tau_n, kappa, prior, head, node, geom, shape):
+def match(w, c, h, won, mean, alive, out, inn, n, prev, x, C, alpha_c, Sc, beta_c, a_T, h_T,
+          learn, eps_b, eps_n, tau_b, tau_n, kappa, prior, head, node, geom, shape):
     """The matching and adaptation of one input x (sensorimotor_map.py, one call a step):
     writes its Merge-GNG context ``C_t = (1 - beta_c) w_prev + beta_c c_prev`` into C (x
     itself at an episode start, ``prev`` < 0), finds the winner b = argmin d_n and, when
@@ -2037,7 +2042,8 @@ def match(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, Sc, beta_c, a_T, h_T
         return b, False, none
     if b < 0 or (np.exp(-np.sqrt(d_b)) < a_T and h[b] <= h_T):
         return b, True, none
-    return b, False, adapt(w, c, h, out, inn, n, b, x, C, eps_b, eps_n, tau_b, tau_n, kappa)
+    return b, False, adapt(w, c, h, won, mean, out, inn, n, b, x, C, eps_b, eps_n, tau_b,
+                           tau_n, kappa)
 
 
 @njit(cache=True)
@@ -2118,9 +2124,9 @@ def sensed_motion(motion, a, x, x_prev, a_T):
 
 
 @njit(cache=True)
-def map_step(w, c, h, alive, out, inn, n, prev, x, C, Sc, a_T, learn, hp, E, A, age,
-             terminal, a, has_action, unblocked, keep, r2, prior, head, node, geom, shape,
-             moves, k, changed, log_rows, log_len):
+def map_step(w, c, h, won, mean, alive, out, inn, n, prev, x, C, Sc, a_T, learn, hp, E, A,
+             age, terminal, a, has_action, unblocked, keep, r2, prior, head, node, geom,
+             shape, moves, k, changed, log_rows, log_len):
     """One learning step of the map in one call (sensorimotor_map.py) when nothing needs
     Python: :func:`match`, then, reached by action ``a`` (``has_action``) from ``prev``,
     :func:`link_step` on prev -> winner (``keep1`` prev, ``keep2`` ``keep``; none when
@@ -2148,9 +2154,9 @@ def map_step(w, c, h, alive, out, inn, n, prev, x, C, Sc, a_T, learn, hp, E, A, 
     tau_b, tau_n, kappa, alpha, sigma_a = hp[5], hp[6], hp[7], hp[8], hp[9]
     eta_a, E_init, E_min, max_age, credit = hp[10], hp[11], hp[12], int(hp[13]), hp[14] != 0.0
     index_move(w, alive, n, moves, k, head, node, geom, shape)
-    b, insert, moved = match(w, c, h, alive, out, inn, n, prev, x, C, alpha_c, Sc, beta_c, a_T,
-                             h_T, learn, eps_b, eps_n, tau_b, tau_n, kappa, prior, head,
-                             node, geom, shape)
+    b, insert, moved = match(w, c, h, won, mean, alive, out, inn, n, prev, x, C, alpha_c, Sc,
+                             beta_c, a_T, h_T, learn, eps_b, eps_n, tau_b, tau_n, kappa, prior,
+                             head, node, geom, shape)
     nm = len(moved)
     changed[:nm] = moved
     changes, linked = 0, False

@@ -158,6 +158,24 @@ links into the place split their reliability between them (the duplicates of iss
 Only while the radius is the sensing scatter's (``a_place < a_T``): without noise the
 nearest node wins, and GWR's test inserts, as in GWR.
 
+**The mean of a place's samples.** GWR moves the winner ``eps_b h_b`` of the way to each
+input, and habituation brings ``h_b`` down to ``1 - 1/kappa`` within a few wins: a node's
+weight is then an average in which its first samples keep much of their weight for about
+``1 / (eps_b (1 - 1/kappa))`` wins. Without noise the samples of a place coincide and
+this is no matter. Under noise a node inserted at one sample stays off its place's centre
+by a share of that sample's scatter, for long: nodes of neighbouring places stand nearer
+each other than their places do, so a place's samples win a neighbour's node, and a
+duplicate inserted from a tail sample stays apart from its twin (the merges never join
+them); the links of one action into a place then split between two nodes, and Eq. 5-6
+read the split as an unreliable move. So while the place radius is the sensing scatter's
+(``a_place < a_T``; with ``merge``, as every rule of one node a place), the winner moves
+at least ``1 / n_b`` of the way, ``n_b`` the samples it has won (:attr:`won`; the sample
+it was inserted at is its first; :func:`kernels.adapt`): while that is the larger rate,
+its weight and context are the mean of its samples, the estimate of its place's centre
+whose error falls as the square root of their number; then GWR's rate takes over, a
+moving average over about as many samples. A merge adds the two counts. Without noise,
+or with a scatter inside GWR's radius, the rule is off.
+
 **The context in primitive steps.** Merge-GNG's context term tells apart nodes of one
 sensation by where the agent came from; measured in the sensor's units, ``|C_t - c_n|^2``
 weighs a step along an axis by the square of that axis's unit, so a sensor whose axes
@@ -416,6 +434,7 @@ class SensorimotorMap:
         self.w = np.zeros((cap, self.dim))          # sensory weight w_n
         self.c = np.zeros((cap, self.dim))          # temporal context c_n
         self.h = np.ones(cap)                       # habituation h_n
+        self.won = np.zeros(cap)                    # samples won (its insertion's first)
         self.alive = np.zeros(cap, dtype=bool)
         self.out = np.full((cap, degree), -1, dtype=np.int64)   # link targets
         self.E = np.zeros((cap, degree))            # reliability E[i, j]
@@ -426,12 +445,12 @@ class SensorimotorMap:
         self._changed = np.empty(1 + 6 * degree, dtype=np.int64)  # rows a step changed
 
     def _grow_nodes(self) -> None:
-        old = (self.w, self.c, self.h, self.alive, self.out, self.E, self.a, self.age,
-               self.terminal, self.inn)
+        old = (self.w, self.c, self.h, self.won, self.alive, self.out, self.E, self.a,
+               self.age, self.terminal, self.inn)
         cap = 2 * len(self.w)
         self._alloc(cap, self.out.shape[1])
-        for new, arr in zip((self.w, self.c, self.h, self.alive, self.out, self.E, self.a,
-                             self.age, self.terminal, self.inn), old):
+        for new, arr in zip((self.w, self.c, self.h, self.won, self.alive, self.out, self.E,
+                             self.a, self.age, self.terminal, self.inn), old):
             new[: len(arr)] = arr
 
     def _grow_degree(self) -> None:
@@ -582,10 +601,11 @@ class SensorimotorMap:
             else _NO_ROWS     # rows the node index is to follow (node_index.py)
         changed, log = self._changed, self.log
         b, insert, nm, done, changes, ne, ci, cj, linked, logged = kernels.map_step(
-            self.w, self.c, self.h, self.alive, self.out, self.inn, self.n, self.prev, x, C,
-            self.Sc, self.a_place, learn, self._hp, self.E, self.a, self.age, self.terminal,
-            a, has_action, unblocked, self.winner, r2, prior, *self.index.arrays, moves,
-            len(moves), changed, *log.buffer())
+            self.w, self.c, self.h, self.won, self.merge and self.a_place < self.a_T,
+            self.alive, self.out, self.inn, self.n, self.prev, x, C, self.Sc, self.a_place,
+            learn, self._hp, self.E, self.a, self.age, self.terminal, a, has_action,
+            unblocked, self.winner, r2, prior, *self.index.arrays, moves, len(moves),
+            changed, *log.buffer())
         moved = changed[:nm]        # (views of the step's buffer, read before the next step)
         if logged >= 0:             # the kernel logged the rows it changed
             log.appended(logged)
@@ -786,6 +806,7 @@ class SensorimotorMap:
         self.w[i] = 0.5 * (self.w[i] + self.w[j])
         self.c[i] = 0.5 * (self.c[i] + self.c[j])
         self.h[i] = max(self.h[i], self.h[j])
+        self.won[i] += self.won[j]
         self.terminal[i] = self.terminal[i] or self.terminal[j]
         for s in np.flatnonzero(self.out[j] >= 0):          # j -> t becomes i -> t
             t = int(self.out[j, s])
@@ -841,7 +862,7 @@ class SensorimotorMap:
                 self._grow_nodes()
             r = self.n
             self.n += 1
-        self.w[r], self.c[r], self.h[r], self.alive[r] = w, c, 1.0, True
+        self.w[r], self.c[r], self.h[r], self.won[r], self.alive[r] = w, c, 1.0, 1.0, True
         self.terminal[r] = False
         stale = bool((self.out[r] >= 0).any() or (self.inn[r] >= 0).any())
         self.out[r] = -1
@@ -881,6 +902,7 @@ class SensorimotorMap:
         n = self.n
         last = {"x_prev": self.x_prev.copy()} if np.isfinite(self.x_prev).all() else {}
         return {**last, "w": self.w[:n].copy(), "c": self.c[:n].copy(), "h": self.h[:n].copy(),
+                "won": self.won[:n].copy(),
                 "alive": self.alive[:n].copy(), "out": self.out[:n].copy(),
                 "E": self.E[:n].copy(), "a": self.a[:n].copy(), "age": self.age[:n].copy(),
                 "terminal": self.terminal[:n].copy(), "motion": self.motion.copy(),
@@ -896,6 +918,9 @@ class SensorimotorMap:
             getattr(self, name)[:n] = s[name]
         if "terminal" in s:                 # maps saved before the flag have none set
             self.terminal[:n] = s["terminal"]
+        # samples won (maps saved before the count: as many as GWR's rate stands for)
+        self.won[:n] = s["won"] if "won" in s else \
+            1.0 / np.maximum(self.eps_b * self.h[:n], _ROUNDING)
         # the sensed moves' statistics and the last input (absent from older maps, or
         # of another dimension: learnt anew)
         if "motion" in s and s["motion"].shape[1:] == (self.dim + 2,):
