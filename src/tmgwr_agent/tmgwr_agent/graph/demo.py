@@ -36,6 +36,10 @@ from tmgwr_common import topics
 DEMO_SEED = 1
 NEW_GOAL = "2"                                # the goal-change target (a named goal cell)
 EVENT = "a"
+#: The simulator refuses an event that would wall in the agent or cut its last route
+#: (maze_sim.world.GridWorld.check_layout): where the agent stands when the call arrives
+#: is a matter of timing, so the demo asks again a few steps later, this many times.
+EVENT_RETRIES = 20
 NOISY = re.compile(r"\b(WARN|WARNING|ERROR|FATAL|Traceback|cannot)\b")
 
 
@@ -116,14 +120,26 @@ class _Demo:
         self._interrupted()
         return int(not res["reliable"])
 
-    def _request(self, key: str, srv, name: str, req, label: str, refused: str) -> None:
-        """Call a service of the graph, say and record its answer; a refusal ends the demo."""
+    def _request(self, key: str, srv, name: str, req, label: str, refused: str,
+                 retry_while: str | None = None) -> None:
+        """Call a service of the graph, say and record its answer; a refusal ends the demo.
+        ``retry_while``: a refusal whose message holds this text depends on where the agent
+        stands, so the call is made again after the agent has moved on (at most
+        EVENT_RETRIES times)."""
         from tmgwr_agent.graph.supervisor import GraphError
 
-        resp = self.graph.call(srv, name, req)
-        say(f"{label}: {'accepted' if resp.accepted else 'refused'}: {resp.message}")
-        self.report[key] = {"accepted": bool(resp.accepted), "message": resp.message,
-                            "at_step": self.mon.last_step_id}
+        for _ in range(EVENT_RETRIES + 1):
+            resp = self.graph.call(srv, name, req)
+            say(f"{label}: {'accepted' if resp.accepted else 'refused'}: {resp.message}")
+            self.report[key] = {"accepted": bool(resp.accepted), "message": resp.message,
+                                "at_step": self.mon.last_step_id}
+            if resp.accepted or retry_while is None or retry_while not in resp.message:
+                break
+            step = self.mon.last_step_id
+            deadline = time.monotonic() + 10.0
+            while self.mon.last_step_id < step + 3 and time.monotonic() < deadline:
+                self._interrupted()
+                time.sleep(0.05)
         if not resp.accepted:
             raise GraphError(f"{refused}: {resp.message}")
 
@@ -150,7 +166,7 @@ class _Demo:
         srv, req = fire_event_request(EVENT)
         self._request("event", srv, topics.of_node(topics.SIMULATOR, topics.FIRE_EVENT), req,
                       f"event {EVENT!r}",
-                      f"event {EVENT!r} refused")
+                      f"event {EVENT!r} refused", retry_while="the agent")
         res = self.wait_phase("event", self.mon.last_step_id)
         self.describe("event", res, f"after event {EVENT!r}")
         return int(res["first_goal_steps_after"] is None)
