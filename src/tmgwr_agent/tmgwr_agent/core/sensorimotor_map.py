@@ -445,13 +445,11 @@ class SensorimotorMap:
         self._changed = np.empty(1 + 6 * degree, dtype=np.int64)  # rows a step changed
 
     def _grow_nodes(self) -> None:
-        old = (self.w, self.c, self.h, self.won, self.alive, self.out, self.E, self.a,
-               self.age, self.terminal, self.inn)
-        cap = 2 * len(self.w)
-        self._alloc(cap, self.out.shape[1])
-        for new, arr in zip((self.w, self.c, self.h, self.won, self.alive, self.out, self.E,
-                             self.a, self.age, self.terminal, self.inn), old):
-            new[: len(arr)] = arr
+        names = ("w", "c", "h", "won", "alive", "out", "E", "a", "age", "terminal", "inn")
+        old = [getattr(self, name) for name in names]
+        self._alloc(2 * len(self.w), self.out.shape[1])
+        for name, arr in zip(names, old):
+            getattr(self, name)[: len(arr)] = arr
 
     def _grow_degree(self) -> None:
         cap, k = self.out.shape
