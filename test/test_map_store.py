@@ -216,6 +216,7 @@ def test_load_validates_the_whole_content_first(tmp_path):
         "unknown": (arrays(m, extra=np.zeros(1)), "unknown arrays extra"),
         "version": (arrays(m, **{FORMAT_KEY: np.array(2)}), "format version 2"),
         "negative_age": (arrays(m, age=-np.ones((n, k), dtype=np.int64)), "negative"),
+        "won_below_1": (arrays(m, won=np.zeros(n)), "samples won below 1"),
     }
     for name, (state, _) in cases.items():
         if state:

@@ -163,6 +163,8 @@ def validate_state(s: dict[str, np.ndarray], what: str = "map") -> None:
         bad("a reliability E outside [0, 1]")
     if (s["age"] < 0).any():
         bad("a negative link age")
+    if "won" in s and (s["won"] < 1).any():    # (a node's first sample is its insertion)
+        bad("a node's count of samples won below 1")
     out, alive = s["out"], s["alive"]
     if ((out < -1) | (out >= n)).any():
         bad(f"a link target outside [-1, {n})")
