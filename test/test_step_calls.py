@@ -86,3 +86,39 @@ def test_eq6_ranks_each_choice_once():
     fn = compiled("eq6_choices", out[1], E[1], A[1], V, 1, False, 0.1, 0.97, U, rho, osucc,
                   onb, ong, rng.random((P, 2)), slots, acts, took)
     assert len(re.findall(r"call [^\n]*_eq6_term", fn)) == 1
+
+
+def test_a_converged_update_is_one_kernel_call(monkeypatch):
+    """Once the map has converged, the estimator's update of most steps is one kernel call
+    (kernels.converged_step: the preparation of the rows that changed and the incremental
+    solve, motivation.py's ``_fused_update``), not one per stage."""
+    maze = Maze.from_file(maze_file())
+    agent = TMGWRAgent(maze_senses(), np.random.default_rng(3))
+    world = GridWorld(maze, "G", seed=0, max_episode_steps=300)
+    agent.set_goal(world.goal, world.goal_observation())
+    agent.begin_episode(world.reset()[0])
+
+    def run(steps):
+        for _ in range(steps):
+            obs, _, terminated, truncated, info = world.step(agent.act())
+            agent.observe(obs, info)
+            if terminated or truncated:
+                agent.begin_episode(world.reset()[0])
+    run(8000)
+    calls, per_update = [], []
+    for name, kernel in kernels.KERNELS.items():
+        def counted(*args, kernel=kernel, name=name):
+            calls.append(name)
+            return kernel(*args)
+        monkeypatch.setattr(kernels, name, counted)
+    update = agent.motivation.update
+
+    def counted_update(*args, **kw):
+        calls.clear()
+        result = update(*args, **kw)
+        if agent.motivation.solved:
+            per_update.append(tuple(calls))
+        return result
+    monkeypatch.setattr(agent.motivation, "update", counted_update)
+    run(500)
+    assert per_update.count(("converged_step",)) > len(per_update) // 2

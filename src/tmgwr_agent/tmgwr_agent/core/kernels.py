@@ -2236,6 +2236,32 @@ def prepare_rows(w, alive, T, x, delta, frame_delta_out, rows, k, goal_x, g0, si
     return g, count
 
 
+@njit(cache=True)
+def converged_step(w, alive, T, x, delta, frame_delta_out, rows, k, goal_x, g0, sigma, floor,
+                   R, terminal, use_terminal, closed, use_closed, goal_r, n, abs_rows, abs_k,
+                   absorbing, terminal_only, count, out, E, R_, absorbing_, out0, E0, R0,
+                   absorbing0, n_, seeds, logged, k_logged, sweep, V, gamma, tol, v_floor,
+                   alive_, U, rho, osucc, onb, ong, first, pred, max_updates, heap, pos, key):
+    """The motivation estimator's update of a converged step in one call (motivation.py,
+    ``MotivationEstimator._fused_update``), :func:`prepare_rows`'s arguments followed by
+    :func:`changed_rows_sweep`'s: the preparation of the changed rows (Eq. 10 on them,
+    their absorbing flags), then, when the goal's node ``g0`` and the terminal-only
+    ``count`` held (else the caller's general path goes on from the preparation), Eq.
+    4-5' from the rows that changed since the last solve. The general path calls the two
+    kernels one by one. Returns ``(g, count, c, lost, relinked, swept, done)``, ``c`` -1
+    when the solve was left to the caller."""
+    g, count_now = prepare_rows(w, alive, T, x, delta, frame_delta_out, rows, k, goal_x, g0,
+                                sigma, floor, R, terminal, use_terminal, closed, use_closed,
+                                goal_r, n, abs_rows, abs_k, absorbing, terminal_only, count)
+    if g != g0 or count_now != count:
+        return g, count_now, -1, False, False, False, 0
+    c, lost, relinked, swept, done = changed_rows_sweep(                  # Eq. 4-5'
+        out, E, R_, absorbing_, out0, E0, R0, absorbing0, n_, seeds, logged, k_logged, sweep,
+        V, gamma, tol, v_floor, alive_, U, rho, osucc, onb, ong, first, pred, max_updates,
+        heap, pos, key)
+    return g, count_now, c, lost, relinked, swept, done
+
+
 # ---------------------------------------------------------------- the on-disk cache
 #: Every kernel, by name (what the warm-up must compile); those numba inlines into their
 #: callers (``inline="always"``) are never compiled on their own, and keep no cache of their
