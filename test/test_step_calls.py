@@ -86,3 +86,68 @@ def test_eq6_ranks_each_choice_once():
     fn = compiled("eq6_choices", out[1], E[1], A[1], V, 1, False, 0.1, 0.97, U, rho, osucc,
                   onb, ong, rng.random((P, 2)), slots, acts, took)
     assert len(re.findall(r"call [^\n]*_eq6_term", fn)) == 1
+
+
+def test_a_converged_update_is_one_kernel_call(monkeypatch):
+    """Once the map has converged, the estimator's update of most steps is one kernel call
+    (kernels.converged_step: the preparation of the rows that changed and the incremental
+    solve, motivation.py's ``_fused_update``), not one per stage."""
+    maze = Maze.from_file(maze_file())
+    agent = TMGWRAgent(maze_senses(), np.random.default_rng(3))
+    world = GridWorld(maze, "G", seed=0, max_episode_steps=300)
+    agent.set_goal(world.goal, world.goal_observation())
+    agent.begin_episode(world.reset()[0])
+
+    def run(steps):
+        for _ in range(steps):
+            obs, _, terminated, truncated, info = world.step(agent.act())
+            agent.observe(obs, info)
+            if terminated or truncated:
+                agent.begin_episode(world.reset()[0])
+    run(8000)
+    calls, per_update = [], []
+    for name, kernel in kernels.KERNELS.items():
+        def counted(*args, kernel=kernel, name=name):
+            calls.append(name)
+            return kernel(*args)
+        monkeypatch.setattr(kernels, name, counted)
+    update = agent.motivation.update
+
+    def counted_update(*args, **kw):
+        calls.clear()
+        result = update(*args, **kw)
+        if agent.motivation.solved:
+            per_update.append(tuple(calls))
+        return result
+    monkeypatch.setattr(agent.motivation, "update", counted_update)
+    run(500)
+    assert per_update.count(("converged_step",)) > len(per_update) // 2
+
+
+def test_the_sensed_move_joins_the_step_call(monkeypatch):
+    """A move that was not blocked adds its sensed displacement to the primitive's
+    statistics once (``SensorimotorMap.motion``), in the step's own kernel call
+    (kernels.map_step) when that makes the whole step: kernels.sensed_motion is called
+    from Python only on the steps the map finishes in Python (an insertion, a row to
+    widen, ...)."""
+    calls = []
+    sensed_motion = kernels.sensed_motion
+
+    def counted(*args):
+        calls.append(args[1])
+        return sensed_motion(*args)
+    monkeypatch.setattr(kernels, "sensed_motion", counted)
+    maze = Maze.from_file(maze_file())
+    agent = TMGWRAgent(maze_senses(), np.random.default_rng(3))
+    world = GridWorld(maze, "G", seed=0, max_episode_steps=300)
+    agent.set_goal(world.goal, world.goal_observation())
+    agent.begin_episode(world.reset()[0])
+    moves = np.zeros(len(agent.map.motion))
+    for _ in range(3000):
+        obs, _, terminated, truncated, info = world.step(agent.act())
+        agent.observe(obs, info)
+        moves[info.action] += not info.bumped
+        if terminated or truncated:
+            agent.begin_episode(world.reset()[0])
+    assert agent.map.motion[:, 0].tolist() == moves.tolist()
+    assert 0 < len(calls) < moves.sum() / 4

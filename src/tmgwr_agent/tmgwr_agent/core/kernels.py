@@ -2126,7 +2126,7 @@ def sensed_motion(motion, a, x, x_prev, a_T):
 @njit(cache=True)
 def map_step(w, c, h, won, mean, alive, out, inn, n, prev, x, C, Sc, a_T, learn, hp, E, A,
              age, terminal, a, has_action, unblocked, keep, r2, prior, head, node, geom,
-             shape, moves, k, changed, log_rows, log_len):
+             shape, moves, k, changed, log_rows, log_len, motion, sensed, x_prev, a_T_gwr):
     """One learning step of the map in one call (sensorimotor_map.py) when nothing needs
     Python: :func:`match`, then, reached by action ``a`` (``has_action``) from ``prev``,
     :func:`link_step` on prev -> winner (``keep1`` prev, ``keep2`` ``keep``; none when
@@ -2149,7 +2149,11 @@ def map_step(w, c, h, won, mean, alive, out, inn, n, prev, x, C, Sc, a_T, learn,
     then with the link stage ``prev`` and the ends) are appended to the map's change log
     (``log_rows``, holding ``log_len`` entries: ``RowLog.buffer``) when they fit in it,
     as ``RowLog.touch`` would append them, and ``logged`` is the log's new length; else
-    -1 (the caller logs them)."""
+    -1 (the caller logs them). With ``sensed`` >= 0 (a move by that primitive, not
+    blocked) and ``done``, its sensed displacement ``x - x_prev`` then joins its statistics
+    (:func:`sensed_motion` with GWR's ``a_T_gwr``), and two more values are returned,
+    ``(a_place, count)``, :func:`sensed_motion`'s; ``(a_T_gwr, -2)`` when it was not
+    called (the caller calls it after its part of the step)."""
     alpha_c, beta_c, h_T, eps_b, eps_n = hp[0], hp[1], hp[2], hp[3], hp[4]
     tau_b, tau_n, kappa, alpha, sigma_a = hp[5], hp[6], hp[7], hp[8], hp[9]
     eta_a, E_init, E_min, max_age, credit = hp[10], hp[11], hp[12], int(hp[13]), hp[14] != 0.0
@@ -2161,15 +2165,15 @@ def map_step(w, c, h, won, mean, alive, out, inn, n, prev, x, C, Sc, a_T, learn,
     changed[:nm] = moved
     changes, linked = 0, False
     if not learn or insert:
-        return b, insert, nm, False, changes, 0, -1, -1, linked, -1
+        return b, insert, nm, False, changes, 0, -1, -1, linked, -1, a_T_gwr, -2
     ne = 0
     if prev >= 0 and has_action and not (unblocked and b == prev):
         if terminal[prev]:
-            return b, insert, nm, False, changes, 0, -1, -1, linked, -1
+            return b, insert, nm, False, changes, 0, -1, -1, linked, -1, a_T_gwr, -2
         changes, ends = link_step(out, E, A, age, inn, alive, terminal, n, prev, b, a, alpha,
                                   sigma_a, eta_a, E_init, E_min, max_age, credit, prev, keep)
         if changes < 0:
-            return b, insert, nm, False, 0, 0, -1, -1, linked, -1
+            return b, insert, nm, False, 0, 0, -1, -1, linked, -1, a_T_gwr, -2
         linked = True
         ne = len(ends)
         changed[nm:nm + ne] = ends
@@ -2186,7 +2190,10 @@ def map_step(w, c, h, won, mean, alive, out, inn, n, prev, x, C, Sc, a_T, learn,
             log_rows[log_len + nm] = prev
             log_rows[log_len + nm + 1:log_len + size] = changed[nm:nm + ne]
         logged = log_len + size
-    return b, insert, nm, True, changes, ne, i, j, linked, logged
+    a_place, count = a_T_gwr, -2
+    if sensed >= 0:
+        a_place, count = sensed_motion(motion, sensed, x, x_prev, a_T_gwr)
+    return b, insert, nm, True, changes, ne, i, j, linked, logged, a_place, count
 
 
 @njit(cache=True)
@@ -2234,6 +2241,32 @@ def prepare_rows(w, alive, T, x, delta, frame_delta_out, rows, k, goal_x, g0, si
         count = absorbing_flags(terminal, use_terminal, closed, use_closed, R, goal_r, n,
                                 abs_rows, abs_k, absorbing, terminal_only, count)
     return g, count
+
+
+@njit(cache=True)
+def converged_step(w, alive, T, x, delta, frame_delta_out, rows, k, goal_x, g0, sigma, floor,
+                   R, terminal, use_terminal, closed, use_closed, goal_r, n, abs_rows, abs_k,
+                   absorbing, terminal_only, count, out, E, R_, absorbing_, out0, E0, R0,
+                   absorbing0, n_, seeds, logged, k_logged, sweep, V, gamma, tol, v_floor,
+                   alive_, U, rho, osucc, onb, ong, first, pred, max_updates, heap, pos, key):
+    """The motivation estimator's update of a converged step in one call (motivation.py,
+    ``MotivationEstimator._fused_update``), :func:`prepare_rows`'s arguments followed by
+    :func:`changed_rows_sweep`'s: the preparation of the changed rows (Eq. 10 on them,
+    their absorbing flags), then, when the goal's node ``g0`` and the terminal-only
+    ``count`` held (else the caller's general path goes on from the preparation), Eq.
+    4-5' from the rows that changed since the last solve. The general path calls the two
+    kernels one by one. Returns ``(g, count, c, lost, relinked, swept, done)``, ``c`` -1
+    when the solve was left to the caller."""
+    g, count_now = prepare_rows(w, alive, T, x, delta, frame_delta_out, rows, k, goal_x, g0,
+                                sigma, floor, R, terminal, use_terminal, closed, use_closed,
+                                goal_r, n, abs_rows, abs_k, absorbing, terminal_only, count)
+    if g != g0 or count_now != count:
+        return g, count_now, -1, False, False, False, 0
+    c, lost, relinked, swept, done = changed_rows_sweep(                  # Eq. 4-5'
+        out, E, R_, absorbing_, out0, E0, R0, absorbing0, n_, seeds, logged, k_logged, sweep,
+        V, gamma, tol, v_floor, alive_, U, rho, osucc, onb, ong, first, pred, max_updates,
+        heap, pos, key)
+    return g, count_now, c, lost, relinked, swept, done
 
 
 # ---------------------------------------------------------------- the on-disk cache

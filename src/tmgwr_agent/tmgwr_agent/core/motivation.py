@@ -236,8 +236,8 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
     (:class:`~tmgwr_agent.core.unknown.OutcomeMemory`, whose ``record`` notes what an
     action did) and its option rules (:class:`~tmgwr_agent.core.unknown.OptionRules`)."""
 
-    #: The fused paths of a converged step (:meth:`_prepare_rows`); False: the general
-    #: path every step (the same state to the bit: test_fused_step.py).
+    #: The fused paths of a converged step (:meth:`_fused_update`, :meth:`_prepare_rows`);
+    #: False: the general path every step (the same state to the bit: test_fused_step.py).
     fused = True
 
     def __init__(self, config: MotivationConfig = MotivationConfig(), *,
@@ -507,9 +507,20 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         with nothing changed: the general path (the rest of :meth:`_prepare`) then runs.
         When the nearest node to the goal moved, the general path's end
         (:meth:`_goal_rewards`, in full) follows the kernel's row updates."""
+        prep = self._rows_to_prepare(m)
+        if prep is None:
+            return -1
+        args, F, abs_k = prep
+        return self._rows_prepared(m, F, abs_k, *kernels.prepare_rows(*args))
+
+    def _rows_to_prepare(self, m: SensorimotorMap) -> tuple | None:
+        """The arguments of :func:`kernels.prepare_rows` for this step, the frame it
+        writes and the count of absorbing rows it brings up to date (-1: none), when
+        :meth:`_prepare_rows` applies (the log's position then taken as prepared); None
+        when the general path is to run."""
         log = getattr(m, "log", None)
         if log is None or log is not self._prep_log or self.goal_x is None:
-            return -1
+            return None
         rows = log.since(self._prep_pos)
         n, g0 = m.n, self._g_raw
         if rows is None or len(self.V) != n + 1 or len(self.U) < n \
@@ -519,10 +530,10 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
                 or self._represented != g0 or not 0 <= g0 < n or not m.alive[g0] \
                 or self._R_key != (n, g0, 1.0, self.frame.version) or len(self.R) != n \
                 or g0 in rows.tolist():
-            return -1
+            return None
         cached = self.frame.cached(m.w, self.goal_x, self.delta)
         if cached is None:
-            return -1
+            return None
         T, x, goal, delta = cached
         # the absorbing flags' rows (_absorbing), when their key holds
         cells = self._closed if self.value_unknown else self._no_cells(n)
@@ -537,19 +548,26 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
             abs_k = len(abs_rows)
         if cells is None:           # marks changed, recomputed at the solve: no flags now
             cells = self._no_cells(n)           # (an array all the same: numba types it)
-        self._prep_pos = pos = log.pos
-        g, count = kernels.prepare_rows(
-            m.w, m.alive, T, x, self.delta, delta, rows, len(rows), self.goal_x, g0,
-            self.goal_sigma, self.goal_sim_floor, self.R, self.terminal_of(m, n),
-            self.absorbing_terminals, cells, self.value_unknown, GOAL_R, n, abs_rows, abs_k,
-            self._abs, self._abs_terminal, self._abs_count)
-        F = self._F = Frame(x, goal, delta, 1.0)
+        self._prep_pos = log.pos
+        return ((m.w, m.alive, T, x, self.delta, delta, rows, len(rows), self.goal_x, g0,
+                 self.goal_sigma, self.goal_sim_floor, self.R, self.terminal_of(m, n),
+                 self.absorbing_terminals, cells, self.value_unknown, GOAL_R, n, abs_rows,
+                 abs_k, self._abs, self._abs_terminal, self._abs_count),
+                Frame(x, goal, delta, 1.0), abs_k)
+
+    def _rows_prepared(self, m: SensorimotorMap, F: Frame, abs_k: int, g: int, count: int
+                       ) -> int:
+        """The end of :meth:`_prepare_rows` after its kernel (the nearest node ``g``, the
+        terminal-only ``count``); returns n."""
+        n, g0 = m.n, self._g_raw
+        self._F = F
         self._g_raw = g
         self.goal_node = -1
         if g != g0:
             return self._goal_rewards(F, m, n, g, None)
         self.goal_node = g
         if abs_k >= 0:
+            pos = self._prep_pos
             self._abs_count = count
             self._abs_pos = pos
             self._abs_seen = (pos, pos, True)
@@ -682,7 +700,11 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         if skip:
             self.goal_node = -1
             return None
-        n = self._prepare(m)
+        n, solved = self._fused_update(m) if self.fused else (-1, False)
+        if solved:
+            return self.V[:n]
+        if n < 0:
+            n = self._prepare(m)
         if self.goal_x is None or n == 0:
             self.V[:] = 0.0
             return self.V[:n]
@@ -701,8 +723,74 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         self.sweeps = self._solve(m, n, R, absorbing)          # Eq. 4-5'
         return self.V[:n]
 
-    def _solve(self, m: SensorimotorMap, n: int, R: np.ndarray, absorbing: np.ndarray
-               ) -> int:
+    def _fused_update(self, m: SensorimotorMap) -> tuple[int, bool]:
+        """:meth:`update` of a converged step in one kernel call
+        (:func:`kernels.converged_step`: :func:`kernels.prepare_rows`, then
+        :func:`kernels.changed_rows_sweep`), when :meth:`_prepare_rows` applies, the
+        absorbing flags come up to date with it, nothing else is due before the solve
+        (no route to read, no option to recompute: :meth:`refresh_options` would return
+        at once, its stuck test answered without a search) and the incremental solve has
+        its copy of this map's inputs. Returns ``(n, solved)``: n -1 with nothing done
+        (the general path runs); with ``solved`` False, the map prepared and the rest of
+        the general path (from the absorbing flags on) to run, as when the goal's node
+        or the terminal count changed in the kernel."""
+        prep = self._rows_to_prepare(m)
+        if prep is None:
+            return -1, False
+        args, F, abs_k = prep
+        n, g0 = m.n, self._g_raw
+        stuck = False
+        if abs_k < 0 or self._opt_rows is not None or not self.vi_incremental \
+                or self.broken or self._broken_solved:
+            sweep = None
+        elif self.value_unknown and (self._route_due or self._dirty or (
+                stuck := self.stuck_known(m, n, g0)) is None
+                or self.options_key(m, n, stuck)[0] != self._options_key):
+            sweep = None
+        elif self._no_last_solution(m, n, g0):
+            sweep = None
+        else:
+            sweep = self._sweep_args(m, n, self.R, self._abs, True)
+        if sweep is None:
+            return self._rows_prepared(m, F, abs_k, *kernels.prepare_rows(*args)), False
+        g, count, *found = kernels.converged_step(*args, *sweep)
+        n = self._rows_prepared(m, F, abs_k, g, count)
+        if found[0] < 0:                        # the goal's node or the count changed
+            return n, False
+        if self.value_unknown:
+            self._stuck = stuck                 # (refresh_options: nothing to recompute)
+        self.sweeps = 0 if self._incremental(m, n, self.R, self._abs, None, found) else \
+            self._solve(m, n, self.R, self._abs, incremental=False)
+        return n, True
+
+    def _sweep_args(self, m: SensorimotorMap, n: int, R: np.ndarray, absorbing: np.ndarray,
+                    sweep: bool) -> tuple:
+        """The arguments of :func:`kernels.changed_rows_sweep` on this map, from the last
+        solution (:meth:`_no_last_solution` finds one); ``sweep``: no option rows to
+        compare, so a change that needs nothing more is swept at once."""
+        inc, log = self._inc, getattr(m, "log", None)
+        logged = log.since(inc.log_pos) if log is not None and log is inc.log and \
+            inc.epoch == self._epoch else None       # None: compare every row
+        return (m.out, m.E, R, absorbing, inc.out0, inc.E0, inc.R0, inc.abs0, n, inc.seeds,
+                _NO_ROWS if logged is None else logged, -1 if logged is None else len(logged),
+                sweep, self.V, self.gamma, self._sweep_tol, V_FLOOR, m.alive, self.U,
+                self.rho, self.osucc, self.onb, self.ong, inc.first, inc.pred,
+                INCREMENTAL_BUDGET * n, inc.heap, inc.pos, inc.key)
+
+    def _no_last_solution(self, m: SensorimotorMap, n: int, g: int) -> str:
+        """Why the incremental solve has no last solution to go on from ("": it has one):
+        none, or of another goal node than ``g`` ("goal"), or of a map of another size
+        ("size")."""
+        inc = self._inc
+        if inc is None or inc.goal_node != g:
+            return "goal"
+        if inc.n != n or inc.out0.shape[1] != m.out.shape[1] or \
+                inc.rho0.shape != self.rho.shape:
+            return "size"
+        return ""
+
+    def _solve(self, m: SensorimotorMap, n: int, R: np.ndarray, absorbing: np.ndarray,
+               incremental: bool = True) -> int:
         """Eq. 4-5' on this map: with ``vi_incremental`` by prioritized sweeping from the
         last solution (:meth:`_incremental`), and when that declines (a goal change, a new
         map size, a sweep over budget) by an ordered solve from V = 0 (:meth:`_ordered`);
@@ -712,7 +800,8 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         ``|beta (T(i) - V(i))| <= vi_tol V(i)`` (``T``: the right-hand side of Eq. 4-5',
         :func:`kernels.node_target`), the synchronous solve's stopping rule."""
         rows, self._opt_rows = self._opt_rows, None
-        if self.vi_incremental and (self._incremental(m, n, R, absorbing, rows)
+        if self.vi_incremental and ((incremental and self._incremental(m, n, R, absorbing,
+                                                                       rows))
                                     or self._ordered(m, n, R, absorbing)):
             return 0
         sweeps = kernels.value_iteration(
@@ -739,7 +828,7 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         return True
 
     def _incremental(self, m: SensorimotorMap, n: int, R: np.ndarray, absorbing: np.ndarray,
-                     rows: np.ndarray | None) -> bool:
+                     rows: np.ndarray | None, found: tuple | None = None) -> bool:
         """Prioritized sweeping from the last solution, seeded with the rows that changed
         since (:func:`kernels.changed_rows`, and :func:`kernels.changed_options` over the
         option rows recomputed since), at most ``INCREMENTAL_BUDGET`` updates a node. A
@@ -748,24 +837,17 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         (:func:`kernels.invalidate`; lowered by sweeping, two nodes that held each other
         up fall only geometrically) and solves them again in order of value
         (:func:`kernels.ordered_solve`). Declines (False) without a last solution of a
-        map of this size and goal, or when the sweep outgrows its budget."""
-        inc = self._inc
-        if inc is None or inc.goal_node != self.goal_node:
-            return self._declined("goal")
-        if inc.n != n or inc.out0.shape[1] != m.out.shape[1] or \
-                inc.rho0.shape != self.rho.shape:
-            return self._declined("size")
-        log = getattr(m, "log", None)
-        logged = log.since(inc.log_pos) if log is not None and log is inc.log and \
-            inc.epoch == self._epoch else None       # None: compare every row
-        tol = self._sweep_tol
-        # with no option rows to compare, a change that needs nothing more is swept at once
-        c, lost, relinked, swept, done = kernels.changed_rows_sweep(
-            m.out, m.E, R, absorbing, inc.out0, inc.E0, inc.R0, inc.abs0, n, inc.seeds,
-            _NO_ROWS if logged is None else logged, -1 if logged is None else len(logged),
-            rows is None, self.V, self.gamma, tol, V_FLOOR, m.alive, self.U, self.rho,
-            self.osucc, self.onb, self.ong, inc.first, inc.pred, INCREMENTAL_BUDGET * n,
-            inc.heap, inc.pos, inc.key)
+        map of this size and goal, or when the sweep outgrows its budget. ``found``: what
+        :func:`kernels.changed_rows_sweep` returned on this map when the fused step
+        (:meth:`_fused_update`) called it."""
+        if found is None:
+            why = self._no_last_solution(m, n, self.goal_node)
+            if why:
+                return self._declined(why)
+            found = kernels.changed_rows_sweep(*self._sweep_args(m, n, R, absorbing,
+                                                                 rows is None))
+        c, lost, relinked, swept, done = found
+        inc, log, tol = self._inc, getattr(m, "log", None), self._sweep_tol
         inc.log, inc.log_pos, inc.epoch = log, (log.pos if log is not None else -1), self._epoch
         if swept:
             if done < 0:

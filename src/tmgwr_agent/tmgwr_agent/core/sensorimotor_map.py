@@ -562,26 +562,28 @@ class SensorimotorMap:
         prior = -1
         if motor is not None and self.merge and self.a_place < self.a_T and not elsewhere:
             prior = before if outcome.bumped else self.link_target(before, outcome.action)
+        moved = learn and motor is not None and not outcome.bumped   # (then not elsewhere)
         winner = self.step(x, None if elsewhere else motor, learn=learn, prior=prior,
-                           unblocked=not outcome.bumped)
+                           unblocked=not outcome.bumped,
+                           sensed=outcome.action if moved else -1)
         if elsewhere:
             winner = self._bump_elsewhere(before, winner, motor, outcome.action, at)
-        elif learn and motor is not None and not outcome.bumped:
-            self._sensed_move(np.asarray(x, dtype=float), outcome.action)
         self.x_prev[:] = x
         if learn and outcome.ends_episode:
             self.mark_terminal(winner)
         return winner
 
     def step(self, x: np.ndarray, action: np.ndarray | None, learn: bool = True,
-             prior: int = -1, unblocked: bool = False) -> int:
+             prior: int = -1, unblocked: bool = False, sensed: int = -1) -> int:
         """Present input x reached by motor vector ``action``; returns the winner.
         ``prior``: the node the links predict (``experience``), the winner when x lies
         within the radius of its place; when it is the nearest node, none is inserted
         (the module docstring, "The place the links predict"). ``unblocked``: the touch
         sensor said the action was not blocked, so a winner equal to the previous one is
         no transition the links learn (the module docstring, "A move within one node");
-        else it is a bump.
+        else it is a bump. ``sensed`` >= 0: the primitive of a move that was not blocked,
+        whose sensed displacement from ``x_prev`` joins its statistics after the step
+        (:meth:`_sensed_move`; in the step's own kernel call when it makes the whole step).
 
         With ``learn`` False only the winner is found (greedy rollouts).
         """
@@ -598,12 +600,15 @@ class SensorimotorMap:
         moves = self.index.pending(self) if self.n >= INDEX_MIN or self.index.shape[3] \
             else _NO_ROWS     # rows the node index is to follow (node_index.py)
         changed, log = self._changed, self.log
-        b, insert, nm, done, changes, ne, ci, cj, linked, logged = kernels.map_step(
+        motion = self.motion
+        (b, insert, nm, done, changes, ne, ci, cj, linked, logged, a_place,
+         count) = kernels.map_step(
             self.w, self.c, self.h, self.won, self.merge and self.a_place < self.a_T,
             self.alive, self.out, self.inn, self.n, self.prev, x, C, self.Sc, self.a_place,
             learn, self._hp, self.E, self.a, self.age, self.terminal, a, has_action,
             unblocked, self.winner, r2, prior, *self.index.arrays, moves, len(moves),
-            changed, *log.buffer())
+            changed, *log.buffer(), motion, sensed if sensed < len(motion) else -1,
+            self.x_prev, self.a_T)
         moved = changed[:nm]        # (views of the step's buffer, read before the next step)
         if logged >= 0:             # the kernel logged the rows it changed
             log.appended(logged)
@@ -619,6 +624,10 @@ class SensorimotorMap:
             if ci >= 0:
                 b = self._merge_close(moved, b, (ci, cj))
             self.prev = self.winner = b
+            if count > -2:
+                self._moved(a_place, count)     # the kernel added the sensed move
+            elif sensed >= 0:
+                self._sensed_move(x, sensed)
             return b
         if not learn or not insert or b == prior >= 0:   # (the links' place: no insertion)
             winner = b
@@ -641,6 +650,8 @@ class SensorimotorMap:
         if learn and self.merge and len(moved):
             winner = self._merge_close(moved, winner)
         self.prev = self.winner = winner
+        if sensed >= 0:
+            self._sensed_move(x, sensed)
         return winner
 
     def _sync_index(self) -> None:
@@ -680,7 +691,11 @@ class SensorimotorMap:
                 return
             self.motion = np.concatenate([self.motion,
                                           np.zeros((a + 1 - len(self.motion), self.dim + 2))])
-        a_place, count = kernels.sensed_motion(self.motion, a, x, self.x_prev, self.a_T)
+        self._moved(*kernels.sensed_motion(self.motion, a, x, self.x_prev, self.a_T))
+
+    def _moved(self, a_place: float, count: int) -> None:
+        """The end of :meth:`_sensed_move` after :func:`kernels.sensed_motion` (the place's
+        activity threshold, the primitive's count of moves after it)."""
         if count < 0:                       # no sensation before it
             return
         self.a_place = a_place              # Welford's

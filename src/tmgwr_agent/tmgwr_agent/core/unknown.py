@@ -723,14 +723,8 @@ class OptionRules:
         pair and step would dominate the step time). Absorbing nodes keep theirs unused
         (Eq. 5' gives them no successor)."""
         stuck = self._stuck = self.stuck(m, n)
-        nodes = self.nodes_alive(m, n)
-        clock, T = self.stuck_clock(nodes)
-        spent = not stuck and self.budget_spent(nodes)
-        rho_max = self.wall_prior() if stuck else 0.0 if spent else self.stale_prior
+        key, clock, T, rho_max = self.options_key(m, n, stuck)
         F = self._F
-        # a break re-values the moves off the lattice (_unplaced_options reads ``broken``)
-        key = ((m.version, self.frame.version), clock if stuck else self.episode, n, stuck,
-               spent, rho_max, self.broken and not self.lattice.all())
         if key != self._options_key:
             rows = None
             if self._options_key[:1] != key[:1]:
@@ -765,6 +759,20 @@ class OptionRules:
                                    rho_max if stuck else 0.0, clock, T)
         if self.bounds is not None:
             self.outside_options(m, n)
+
+    def options_key(self, m: SensorimotorMap, n: int, stuck: bool
+                    ) -> tuple[tuple, int, float, float]:
+        """What the options of :meth:`refresh_options` depend on beyond the rows that
+        changed, as a key (a change recomputes them), with the stuck clock and its T
+        (:meth:`stuck_clock`) and rho's limit for a remembered wall."""
+        nodes = self.nodes_alive(m, n)
+        clock, T = self.stuck_clock(nodes)
+        spent = not stuck and self.budget_spent(nodes)
+        rho_max = self.wall_prior() if stuck else 0.0 if spent else self.stale_prior
+        # a break re-values the moves off the lattice (_unplaced_options reads ``broken``)
+        key = ((m.version, self.frame.version), clock if stuck else self.episode, n, stuck,
+               spent, rho_max, self.broken and not self.lattice.all())
+        return key, clock, T, rho_max
 
     def outside_options(self, m: SensorimotorMap, n: int) -> None:
         """No option whose predicted successor ``w_i + delta_a`` (the forward model's, in
@@ -1237,14 +1245,27 @@ class OptionRules:
                 self._reach, self._reach_seen = (np.zeros(2 * n, np.int64) for _ in "ks")
                 self._reach_stack = np.empty(2 * n, np.int64)
             self._reach_stamp += 1
-        known = self._reach[self._winner]
-        if known == self._reach_stamp or known == -self._reach_stamp:
-            return known < 0
+        known = self.stuck_known(m, n, self.goal_node)
+        if known is not None:
+            return known
         self._reach_search += 1
         return not kernels.reaches_source_from(
             m.out, m.E, n, self._reach_abs, m.alive, self._reach_src, self.bump_t, self.succ,
             self.V, self._winner, self._reach, self._reach_stamp, self._reach_seen,
             self._reach_search, self._reach_stack)
+
+    def stuck_known(self, m: SensorimotorMap, n: int, g: int) -> bool | None:
+        """What :meth:`stuck` would answer for the goal node ``g`` when it needs no
+        search (its key held and the agent's node was searched from, or no goal or
+        node); None when it would search or start a new key."""
+        if g < 0 or not 0 <= self._winner < n:
+            return False
+        if self._reach_key != (m.version, g, self._abs_count, self._epoch, self._bumps):
+            return None
+        known = self._reach[self._winner]
+        if known == self._reach_stamp or known == -self._reach_stamp:
+            return bool(known < 0)
+        return None
 
     def nodes_alive(self, m: SensorimotorMap, n: int) -> int:
         if self._alive_version != m.version:
