@@ -312,3 +312,61 @@ def test_after_the_break_moves_are_predicted_by_the_affine_forward_model():
     x = mo._predicted(m, rows, FORWARD)
     quarter = 0.25 * np.sqrt(mo.delta_sq[FORWARD])
     assert (np.linalg.norm(x - truth, axis=1) < quarter).all()
+
+
+#: A long wall (column 4) between the start's corridor and the goal's room: event a
+#: blocks its gap at the top and opens one at the bottom (A), so the agent tests the
+#: wall cell by cell on its way down, and meets those cells again from below.
+LONG_WALL = ("#######\n"
+             "#G..a.#\n"
+             "#...#.#\n"
+             "#...#.#\n"
+             "#...#S#\n"
+             "#...#.#\n"
+             "#...#.#\n"
+             "#...A.#\n"
+             "#######\n")
+
+#: MiniGrid's headings as (row, col) steps (0 east, 1 south, 2 west, 3 north).
+HEADING = ((0, 1), (1, 0), (0, -1), (-1, 0))
+
+
+def _after_the_block(maze_text: str, seed: int):
+    """The post-block episode of an agent trained on ``maze_text``: the cells its
+    forwards bumped into (in order, with the heading) and the agent at the end."""
+    world = MiniGridWorld(Maze.from_text(maze_text), "G", max_episode_steps=3000)
+    agent = TMGWRAgent(world_senses(world), np.random.default_rng(seed))
+    agent.set_goal(world.goal, world.goal_observation())
+    for _ in range(8):
+        run_episode(world, agent)
+    world.fire_event("a")
+    obs, _ = world.reset()
+    agent.begin_episode(obs)
+    bumps = []
+    for _ in range(400):
+        row, col, h = world.pose
+        obs, _, terminated, _, info = world.step(agent.act())
+        agent.observe(obs, info)
+        if info.bumped:
+            bumps.append(((row + HEADING[h][0], col + HEADING[h][1]), h))
+        if terminated:
+            break
+    return bumps, agent
+
+
+def test_after_the_break_a_cell_bumped_from_one_side_is_shut_from_the_others():
+    """Once the route broke, a place the agent bumped into is shut, and so is every place
+    the turns (moves that never bumped) join with it (``_shut_places``): no forward
+    after the break bumps again into a cell it bumped into from another heading. Before:
+    the headings put those places far apart in sensation, and the agent, having tested
+    the wall's cells from the side, bumped into one of them again from below after it
+    passed the opening."""
+    again = 0
+    for seed in range(6):
+        bumps, agent = _after_the_block(LONG_WALL, seed)
+        seen = {}
+        for cell, h in bumps:
+            again += cell in seen and seen[cell] != h
+            seen[cell] = h
+        assert agent.motivation.broken
+    assert again == 0

@@ -769,9 +769,13 @@ class OptionRules:
         clock, T = self.stuck_clock(nodes)
         spent = not stuck and self.budget_spent(nodes)
         rho_max = self.wall_prior() if stuck else 0.0 if spent else self.stale_prior
-        # a break re-values the moves off the lattice (_unplaced_options reads ``broken``)
+        # a break re-values the moves off the lattice (_unplaced_options reads ``broken``),
+        # and so does each pair found shut since (its place shuts others: _shut_places)
+        off = self.broken and not self.lattice.all()
+        shut = int(np.count_nonzero(self.bump_t[:n] >= self.break_t)) \
+            if off and self._turns(m) else -1
         key = ((m.version, self.frame.version), clock if stuck else self.episode, n, stuck,
-               spent, rho_max, self.broken and not self.lattice.all())
+               spent, rho_max, off, shut)
         return key, clock, T, rho_max
 
     def outside_options(self, m: SensorimotorMap, n: int) -> None:
@@ -892,6 +896,25 @@ class OptionRules:
         the walls between it and the goal. Only where the affine model fits: the nearest
         node's prediction, off the true direction, closed walls that led on.
 
+        *A place shut from one side is shut from the others*, in an episode whose known
+        route broke: a place a move bumped into since the break (``break_t``) is shut
+        (:meth:`_shut_places`), and so is every place that a primitive which only turns
+        the agent (:meth:`_turns`: it never bumped, and repeated it comes back to where
+        it started, as the affine forward model predicts it) leads to from it, again and
+        again. Such a move is stopped by no wall and goes nowhere, so the places it joins
+        are one location, and the closing of a cell is a closing from every side (*A cell
+        that closed*, module docstring). An untried move or a wall bumped before the break
+        whose successor lies within half the shortest step of a shut place is doubted as
+        that bump is (the clock above from the bump, ``rho`` 0 while not stuck), and no
+        way on leads through a shut place in the bound one move on. MiniGrid's
+        sensation holds the heading, so the places of one cell faced four ways lie far
+        apart: without the rule the agent, having tested a wall's cell from the side,
+        bumped into it again from below once it had passed the opening, and turned
+        towards such a cell (a turn whose forward led into it looked a move nearer the
+        goal) before it walked on. Only where the affine fit holds (the bumping primitive's
+        and those that never bumped): the nearest node's prediction may lie off the true
+        direction.
+
         *Steps of the moves that lead on*, in an episode whose known route broke: ``l``
         in these bounds is the most one of the agent's moves has brought it nearer the
         goal sensation, over the moves its outcome memory holds (:meth:`_nearer`; at
@@ -950,7 +973,7 @@ class OptionRules:
         if wall.any():
             lo, hi = self._known_extent(m)
         placed = np.full((len(rows), len(prims)), -1, dtype=np.int64)
-        reach = None
+        reach = shut = None
         for c, p in enumerate(prims):
             q = np.flatnonzero(unknown[:, c])
             x = self._predicted(m, rows[q], int(p)) if len(q) and step > 0.0 else None
@@ -958,8 +981,11 @@ class OptionRules:
                 continue
             h[q, c] = self._steps_bound(x, nearer)
             if self.broken:
+                if shut is None:
+                    shut = self._shut_places(m)
                 h[q, c] = np.where(h[q, c] > 0.0,
-                                   np.maximum(h[q, c], self._one_move_on(m, x, nearer)), 0.0)
+                                   np.maximum(h[q, c], self._one_move_on(m, x, nearer, shut)),
+                                   0.0)
             if len(self._region_x):
                 d = x[:, None, :] - self._region_x[None, :, :]
                 ends = (np.einsum("ijk,ijk->ij", d, d) <= self.goal_tolerance ** 2).any(axis=1)
@@ -975,6 +1001,12 @@ class OptionRules:
                 if reach is None:
                     reach = self._reached(m)
                 rho_u[q[s][~self._leads_on(m, x[s], reach, step)], c] = 0.0
+            if self.broken:
+                tc = self._shut_since(m, x, *shut)
+                hit = (tc >= 0) & (tc > np.where(wall[q, c], bump[q, c], -1))
+                if hit.any():
+                    fresh_c = 1.0 - np.exp(-(clock - tc[hit]) / T) if T > 0.0 else 0.0
+                    rho_u[q[hit], c] = np.minimum(rho_u[q[hit], c], doubt * fresh_c)
         j = self.succ[r, a]
         jc = np.maximum(j, 0)
         lost = (live & self.tried[r, a] & (self.bump_t[r, a] < 0) & (j >= 0) & (j != r)
@@ -1011,17 +1043,22 @@ class OptionRules:
         gx = np.sqrt(np.einsum("ij,ij->i", dx, dx))
         return np.where(gx <= self.goal_tolerance, 0.0, gx / step)
 
-    def _one_move_on(self, m: SensorimotorMap, x: np.ndarray, step: float) -> np.ndarray:
+    def _one_move_on(self, m: SensorimotorMap, x: np.ndarray, step: float,
+                     shut: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """The same bound one move further on: ``1 + min_b`` :meth:`_steps_bound` of
         ``x_b``, the successor of primitive b from ``x`` as the local forward model
-        predicts it (:meth:`_predicted` from those places); ``-inf`` (no bound) while some
-        primitive has not moved from any live node."""
+        predicts it (:meth:`_predicted` from those places), over the ``x_b`` that are no
+        place found shut (``shut``, :meth:`_shut_places`: no way on leads through one);
+        ``-inf`` (no bound) while some primitive has not moved from any live node."""
         best = np.full(len(x), np.inf)
         for b in range(self.n_primitives):
             y = self._predicted(m, None, b, at=x)
             if y is None:
                 return np.full(len(x), -np.inf)
-            best = np.minimum(best, self._steps_bound(y, step))
+            bound = self._steps_bound(y, step)
+            if shut is not None:
+                bound = np.where(self._shut_since(m, y, *shut) >= 0, np.inf, bound)
+            best = np.minimum(best, bound)
         return 1.0 + best
 
     def _known_place(self, m: SensorimotorMap, x: np.ndarray, rows: np.ndarray) -> np.ndarray:
@@ -1113,6 +1150,100 @@ class OptionRules:
                 frontier = np.array(new).reshape(len(new), x.shape[1])
             out[k] = found
         return out
+
+    def _turns(self, m: SensorimotorMap) -> list[int]:
+        """The primitives that only turn the agent where it stands, as its own outcome
+        memory and forward model tell: tried from some live node, never bumped (no live
+        pair whose last try of it bumped), and its affine model (:meth:`_affine`),
+        repeated, brings every live node's place back within half the shortest step of
+        itself within ``2 P`` moves (P primitives); none while some such primitive has no
+        affine model. A move through space never comes back by repeating itself."""
+        n = m.n
+        moved = self.delta_sq[self.delta_sq > 0.0]
+        live = m.alive[:n]
+        if not len(moved) or not live.any():
+            return []
+        half2 = 0.25 * float(moved.min())
+        w = m.w[:n][live]
+        out = []
+        for b in range(self.n_primitives):
+            tried = self.tried[:n, b] & live
+            if not tried.any() or (tried & (self.bump_t[:n, b] >= 0)).any():
+                continue
+            B = self._affine(m, b)
+            if B is None:
+                return []
+            x = w
+            for _ in range(2 * self.n_primitives):
+                x = x + x @ B[:-1] + B[-1]
+                d = x - w
+                if (np.einsum("ij,ij->i", d, d) < half2).all():
+                    out.append(b)
+                    break
+        return out
+
+    def _shut_places(self, m: SensorimotorMap) -> tuple[np.ndarray, np.ndarray]:
+        """The places found shut since the route broke, and the clock of each: the
+        successor (:meth:`_predicted`) of every pair whose last try bumped at or after
+        ``break_t``, and every place a primitive that only turns the agent
+        (:meth:`_turns`) leads to from one of them, again and again (the places of one
+        location), each met once (within half the shortest step); only over primitives
+        with an affine model (:meth:`_affine`), none without a turn:
+        :meth:`_unplaced_options`, *A place shut from one side*."""
+        n = m.n
+        moved = self.delta_sq[self.delta_sq > 0.0]
+        none = np.zeros((0, m.w.shape[1])), np.zeros(0, dtype=np.int64)
+        if self.break_t < 0 or not len(moved) or not m.alive[:n].any():
+            return none
+        free = self._turns(m)
+        if not free:
+            return none
+        half2 = 0.25 * float(moved.min())
+        xs, ts = [], []
+        for a in range(self.n_primitives):
+            k = np.flatnonzero(m.alive[:n] & self.tried[:n, a]
+                               & (self.bump_t[:n, a] >= self.break_t))
+            x = self._predicted(m, k, a) if len(k) and self._affine(m, a) is not None \
+                else None
+            if x is not None:
+                xs.append(x)
+                ts.append(self.bump_t[k, a])
+        if not xs:
+            return none
+        seen, when = np.vstack(xs), np.concatenate(ts)
+        frontier, ft = seen, when
+        for _ in range(4 * len(free)):
+            nxt, nt = [], []
+            for b in free:
+                z = self._predicted(m, None, b, at=frontier)
+                for y, t in zip(z, ft):
+                    dv = seen - y
+                    d2 = np.einsum("ij,ij->i", dv, dv)
+                    if (d2 >= half2).all():
+                        seen, when = np.vstack([seen, y]), np.append(when, t)
+                        nxt.append(y)
+                        nt.append(t)
+                    else:
+                        near = d2 < half2
+                        when[near] = np.maximum(when[near], t)
+            if not nxt:
+                break
+            frontier, ft = np.array(nxt), np.array(nt)
+        return seen, when
+
+    def _shut_since(self, m: SensorimotorMap, x: np.ndarray, seen: np.ndarray,
+                    when: np.ndarray) -> np.ndarray:
+        """For each place ``x[k]``: the clock at which a place within half the shortest
+        step of it was found shut (:meth:`_shut_places`, the latest), else -1."""
+        out = np.full(len(x), -1, dtype=np.int64)
+        moved = self.delta_sq[self.delta_sq > 0.0]
+        if not len(seen) or not len(x) or not len(moved):
+            return out
+        half2 = 0.25 * float(moved.min())
+        d2 = (np.einsum("ij,ij->i", x, x)[:, None] - 2.0 * x @ seen.T
+              + np.einsum("ij,ij->i", seen, seen)[None, :])
+        near = d2 < half2
+        return np.where(near.any(axis=1), np.where(near, when[None, :], -1).max(axis=1), -1)
 
     def _known_extent(self, m: SensorimotorMap) -> tuple[np.ndarray, np.ndarray]:
         """The box the live nodes' places and the goal sensation span (lower, upper)."""
