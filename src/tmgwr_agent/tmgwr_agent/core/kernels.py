@@ -2124,14 +2124,31 @@ def sensed_motion(motion, a, x, x_prev, a_T):
 
 
 @njit(cache=True)
+def stray_move(w, i, j, step, step_r2):
+    """Whether node j lies farther than ``sqrt(step_r2)`` from ``w_i + step`` (``step_r2``
+    < 0: never): a move from i's place by ``step`` does not reach j's place
+    (sensorimotor_map.py, "A move between other places")."""
+    if step_r2 < 0.0 or i < 0 or j < 0:
+        return False
+    d2 = 0.0
+    for q in range(w.shape[1]):
+        e = w[j, q] - w[i, q] - step[q]
+        d2 += e * e
+    return d2 > step_r2
+
+
+@njit(cache=True)
 def map_step(w, c, h, won, mean, alive, out, inn, n, prev, x, C, Sc, a_T, learn, hp, E, A,
-             age, terminal, a, has_action, unblocked, keep, r2, prior, head, node, geom,
-             shape, moves, k, changed, log_rows, log_len, motion, sensed, x_prev, a_T_gwr):
+             age, terminal, a, has_action, unblocked, step, step_r2, keep, r2, prior, head,
+             node, geom, shape, moves, k, changed, log_rows, log_len, motion, sensed, x_prev,
+             a_T_gwr):
     """One learning step of the map in one call (sensorimotor_map.py) when nothing needs
     Python: :func:`match`, then, reached by action ``a`` (``has_action``) from ``prev``,
     :func:`link_step` on prev -> winner (``keep1`` prev, ``keep2`` ``keep``; none when
     ``unblocked``, the action was not blocked, and the winner is ``prev``: a move within
-    one node, sensorimotor_map.py), then, with ``r2`` >= 0, :func:`close_pair` over the
+    one node, or, with ``step_r2`` >= 0, lies farther than ``sqrt(step_r2)`` from where
+    the action's mean move ``step`` leads from it: a move between other places,
+    sensorimotor_map.py), then, with ``r2`` >= 0, :func:`close_pair` over the
     nodes moved (the merge's first pair). Returns
     ``(b, insert, n_moved, done, changes, n_ends, i, j, linked, logged)``: the nodes the match
     moved, then the end nodes of the links deleted, are written to ``changed``
@@ -2167,7 +2184,8 @@ def map_step(w, c, h, won, mean, alive, out, inn, n, prev, x, C, Sc, a_T, learn,
     if not learn or insert:
         return b, insert, nm, False, changes, 0, -1, -1, linked, -1, a_T_gwr, -2
     ne = 0
-    if prev >= 0 and has_action and not (unblocked and b == prev):
+    if prev >= 0 and has_action and not (unblocked and (
+            b == prev or stray_move(w, prev, b, step, step_r2))):
         if terminal[prev]:
             return b, insert, nm, False, changes, 0, -1, -1, linked, -1, a_T_gwr, -2
         changes, ends = link_step(out, E, A, age, inn, alive, terminal, n, prev, b, a, alpha,

@@ -140,6 +140,29 @@ changes the winner (two places are a step apart, far beyond the matching radius,
 GWR inserts a node for a sample beyond it while ``h_T`` lets every winner insert, as
 the default does), so there the rule does not apply.
 
+**A move between other places.** Likewise a move whose two winners lie farther apart
+than the primitive moves: a primitive moves the sensation by its mean sensed move ``m``
+(:attr:`motion`) wherever it is taken, so from node i's place it leads to the place about
+``w_i + m``, and a winner ``j`` more than half a step ``|m| / 2`` from there (the line
+between two places of a lattice of steps ``m``, as for a bump taken elsewhere) is not
+where a move from i's place ends: one of the two samples was scattered into another
+place's node (a diagonal or a two-step link). Learnt as a transition, one such sample
+made a link ``i -> j`` of reliability ``E_init`` and, by the credit rule, cut the
+reliability of the primitive's true link by ``alpha``; Eq. 6 then ranked a detour above
+the true move, and as the greedy walk no longer took it, nothing repaired it (a greedy
+probe failed at the same step episode after episode). Such a step changes no link, as a
+move within one node (:meth:`SensorimotorMap.mean_step`, :func:`kernels.stray_move`),
+when the map can tell which sample strayed: the map has a node where the move leads
+from i (the node nearest ``w_i + m`` lies within half a step of it: ``x`` strayed), or
+the move started at another node's place (the node nearest the mean of its two
+estimates of where it started, ``x_prev`` and ``x - m``, is not i: ``x_prev`` strayed
+into i). Otherwise (no node where the move leads, a start at i's place: a node left
+between two places stands for both, and the move is the only link the map can make
+there) the transition is learnt as before; a move never learnt would be tried again and
+again. Only for a primitive whose moves stand out of their scatter (``|m| > 2 sqrt(s)``)
+while the place radius is the sensing scatter's (``a_place < a_T``): without noise
+places are a step apart and every move reaches one (the rule is off).
+
 **The place the links predict.** A sample scattered nearer a neighbouring node than its
 own makes that node the winner, and the action chosen from it is the neighbour's (a
 greedy walk then bumps or turns off its route). The links say where the move just made
@@ -584,6 +607,8 @@ class SensorimotorMap:
         else it is a bump. ``sensed`` >= 0: the primitive of a move that was not blocked,
         whose sensed displacement from ``x_prev`` joins its statistics after the step
         (:meth:`_sensed_move`; in the step's own kernel call when it makes the whole step).
+        Its mean sensed move also tells a move between other places (the module
+        docstring, :meth:`mean_step`).
 
         With ``learn`` False only the winner is found (greedy rollouts).
         """
@@ -601,13 +626,20 @@ class SensorimotorMap:
             else _NO_ROWS     # rows the node index is to follow (node_index.py)
         changed, log = self._changed, self.log
         motion = self.motion
+        step, step_r2 = self.mean_step(sensed) if unblocked and learn and self.prev >= 0 \
+            else (x, -1.0)
+        if step_r2 >= 0.0 and self.nearest_by_weight(
+                0.5 * (self.x_prev + x - step)) == self.prev:
+            t = self.nearest_by_weight(self.w[self.prev] + step)
+            if t < 0 or kernels.stray_move(self.w, self.prev, t, step, step_r2):
+                step_r2 = -1.0      # (from prev's place to no node's: learnt as before)
         (b, insert, nm, done, changes, ne, ci, cj, linked, logged, a_place,
          count) = kernels.map_step(
             self.w, self.c, self.h, self.won, self.merge and self.a_place < self.a_T,
             self.alive, self.out, self.inn, self.n, self.prev, x, C, self.Sc, self.a_place,
             learn, self._hp, self.E, self.a, self.age, self.terminal, a, has_action,
-            unblocked, self.winner, r2, prior, *self.index.arrays, moves, len(moves),
-            changed, *log.buffer(), motion, sensed if sensed < len(motion) else -1,
+            unblocked, step, step_r2, self.winner, r2, prior, *self.index.arrays, moves,
+            len(moves), changed, *log.buffer(), motion, sensed if sensed < len(motion) else -1,
             self.x_prev, self.a_T)
         moved = changed[:nm]        # (views of the step's buffer, read before the next step)
         if logged >= 0:             # the kernel logged the rows it changed
@@ -638,8 +670,9 @@ class SensorimotorMap:
             winner = self._insert(self.w[b] + lam * (x - self.w[b]),
                                   self.c[b] + lam * (C - self.c[b]))
             self._habituate(b, self.tau_b)
-        if learn and self.prev >= 0 and action is not None \
-                and not (unblocked and winner == self.prev):
+        if learn and self.prev >= 0 and action is not None and not (unblocked and (
+                winner == self.prev
+                or kernels.stray_move(self.w, self.prev, winner, step, step_r2))):
             if self.terminal[self.prev]:        # walked on from prev: its place is not an
                 at = self.nodes_at(self.prev)                              # episode end
                 self.terminal[at] = False
@@ -764,6 +797,21 @@ class SensorimotorMap:
             return False
         d = self.x_prev - (self.w[j] - m)
         return bool(d @ d > 0.25 * mm)
+
+    def mean_step(self, a: int) -> tuple[np.ndarray, float]:
+        """``(m, r2)``: primitive ``a``'s mean sensed move and the squared distance, a
+        quarter of ``|m|^2`` (half a step), beyond which a move by it from one node's place
+        does not reach another node's (the module docstring, "A move between other
+        places"); ``r2`` -1 (no test) unless its moves stand out of their scatter
+        (``|m| > 2 sqrt(s)``) while the place radius is the sensing scatter's
+        (``a_place < a_T``), with ``merge``, as every rule of one node a place."""
+        if a < 0 or a >= len(self.motion) or not self.merge or not self.a_place < self.a_T:
+            return self.x_prev, -1.0
+        count, m, m2 = self.motion[a, 0], self.motion[a, 1:-1], self.motion[a, -1]
+        mm = float(m @ m)
+        if count < 2 or not 4.0 * m2 / count < mm:
+            return self.x_prev, -1.0
+        return np.ascontiguousarray(m), 0.25 * mm
 
     def link_target(self, i: int, a: int) -> int:
         """The target of node i's most reliable link labelled with primitive ``a``
