@@ -30,17 +30,24 @@ GAPS = ("#########\n"
         "#########\n")
 
 
-def _stuck_after_the_block(maze_text: str, seed: int):
-    """An agent trained on ``maze_text`` until its route is learnt, then walked after
-    event a until it is stuck (the known route broke and no link leads to the goal)."""
+def _episode_after_the_block(maze_text: str, seed: int, trained: int):
+    """A world built from ``maze_text`` and an agent trained there for ``trained``
+    episodes (its route learnt), event a fired and the next episode begun."""
     world = MiniGridWorld(Maze.from_text(maze_text), "G", max_episode_steps=3000)
     agent = TMGWRAgent(world_senses(world), np.random.default_rng(seed))
     agent.set_goal(world.goal, world.goal_observation())
-    for _ in range(6):
+    for _ in range(trained):
         run_episode(world, agent)
     world.fire_event("a")
     obs, _ = world.reset()
     agent.begin_episode(obs)
+    return world, agent
+
+
+def _stuck_after_the_block(maze_text: str, seed: int):
+    """An agent trained on ``maze_text`` until its route is learnt, then walked after
+    event a until it is stuck (the known route broke and no link leads to the goal)."""
+    world, agent = _episode_after_the_block(maze_text, seed, 6)
     for _ in range(200):
         obs, _, terminated, _, info = world.step(agent.act())
         agent.observe(obs, info)
@@ -334,14 +341,7 @@ HEADING = ((0, 1), (1, 0), (0, -1), (-1, 0))
 def _after_the_block(maze_text: str, seed: int):
     """The post-block episode of an agent trained on ``maze_text``: the cells its
     forwards bumped into (in order, with the heading) and the agent at the end."""
-    world = MiniGridWorld(Maze.from_text(maze_text), "G", max_episode_steps=3000)
-    agent = TMGWRAgent(world_senses(world), np.random.default_rng(seed))
-    agent.set_goal(world.goal, world.goal_observation())
-    for _ in range(8):
-        run_episode(world, agent)
-    world.fire_event("a")
-    obs, _ = world.reset()
-    agent.begin_episode(obs)
+    world, agent = _episode_after_the_block(maze_text, seed, 8)
     bumps = []
     for _ in range(400):
         row, col, h = world.pose
