@@ -1070,10 +1070,10 @@ class OptionRules:
         successor (no successors x nodes matrix: a full refresh asks for every row)."""
         n = m.n
         out = np.full(len(x), -1, dtype=np.int64)
-        moved = self.delta_sq[self.delta_sq > 0.0]
-        if not len(x) or not len(moved) or not m.alive[:n].any():
+        s2 = self._shortest_step2()
+        if not len(x) or not s2 or not m.alive[:n].any():
             return out
-        half2 = 0.25 * float(moved.min())
+        half2 = 0.25 * s2
         for k in range(len(x)):
             q = kernels.nearest_weight(m.w, m.alive, n, x[k])
             d = x[k] - m.w[q]
@@ -1107,13 +1107,13 @@ class OptionRules:
         predicted places, each met once: :meth:`_unplaced_options`, *A wall that leads
         only back*."""
         n = m.n
-        moved = self.delta_sq[self.delta_sq > 0.0]
+        s2 = self._shortest_step2()
         out = np.ones(len(x), dtype=bool)
-        if not len(moved) or not len(x) or not m.alive[:n].any():
+        if not s2 or not len(x) or not m.alive[:n].any():
             return out
         if any(self._affine(m, b) is None for b in range(self.n_primitives)):
             return out
-        half2 = 0.25 * float(moved.min())
+        half2 = 0.25 * s2
         r2 = (2.0 * step) ** 2
         live = np.flatnonzero(m.alive[:n])
         wl = m.w[live]
@@ -1159,11 +1159,11 @@ class OptionRules:
         itself within ``2 P`` moves (P primitives); none while some such primitive has no
         affine model. A move through space never comes back by repeating itself."""
         n = m.n
-        moved = self.delta_sq[self.delta_sq > 0.0]
+        s2 = self._shortest_step2()
         live = m.alive[:n]
-        if not len(moved) or not live.any():
+        if not s2 or not live.any():
             return []
-        half2 = 0.25 * float(moved.min())
+        half2 = 0.25 * s2
         w = m.w[:n][live]
         out = []
         for b in range(self.n_primitives):
@@ -1191,14 +1191,14 @@ class OptionRules:
         with an affine model (:meth:`_affine`), none without a turn:
         :meth:`_unplaced_options`, *A place shut from one side*."""
         n = m.n
-        moved = self.delta_sq[self.delta_sq > 0.0]
+        s2 = self._shortest_step2()
         none = np.zeros((0, m.w.shape[1])), np.zeros(0, dtype=np.int64)
-        if self.break_t < 0 or not len(moved) or not m.alive[:n].any():
+        if self.break_t < 0 or not s2 or not m.alive[:n].any():
             return none
         free = self._turns(m)
         if not free:
             return none
-        half2 = 0.25 * float(moved.min())
+        half2 = 0.25 * s2
         xs, ts = [], []
         for a in range(self.n_primitives):
             k = np.flatnonzero(m.alive[:n] & self.tried[:n, a]
@@ -1236,14 +1236,21 @@ class OptionRules:
         """For each place ``x[k]``: the clock at which a place within half the shortest
         step of it was found shut (:meth:`_shut_places`, the latest), else -1."""
         out = np.full(len(x), -1, dtype=np.int64)
-        moved = self.delta_sq[self.delta_sq > 0.0]
-        if not len(seen) or not len(x) or not len(moved):
+        s2 = self._shortest_step2()
+        if not len(seen) or not len(x) or not s2:
             return out
-        half2 = 0.25 * float(moved.min())
+        half2 = 0.25 * s2
         d2 = (np.einsum("ij,ij->i", x, x)[:, None] - 2.0 * x @ seen.T
               + np.einsum("ij,ij->i", seen, seen)[None, :])
         near = d2 < half2
         return np.where(near.any(axis=1), np.where(near, when[None, :], -1).max(axis=1), -1)
+
+    def _shortest_step2(self) -> float:
+        """The squared length of the shortest step the primitives have sensed (the least
+        positive ``delta_sq``), 0 before any move: half of it, the line between two places
+        a step apart, is what tells a known place or a shut one (:meth:`_known_place`)."""
+        moved = self.delta_sq[self.delta_sq > 0.0]
+        return float(moved.min()) if len(moved) else 0.0
 
     def _known_extent(self, m: SensorimotorMap) -> tuple[np.ndarray, np.ndarray]:
         """The box the live nodes' places and the goal sensation span (lower, upper)."""
@@ -1318,15 +1325,15 @@ class OptionRules:
         if kept is not None and kept[0] == key:
             return kept[1]
         k, j = self._moves(m, a)
-        moved = self.delta_sq[self.delta_sq > 0.0]
+        s2 = self._shortest_step2()
         B = None
-        if len(moved) and len(k) > m.w.shape[1] + 1:
+        if s2 and len(k) > m.w.shape[1] + 1:
             X = np.hstack([m.w[k], np.ones((len(k), 1))])
             Y = m.w[j] - m.w[k]
             fit = np.linalg.lstsq(X, Y, rcond=None)[0]
             miss = X @ fit - Y
             if math.sqrt(float(np.einsum("ij,ij->i", miss, miss).mean())) \
-                    <= 0.25 * math.sqrt(float(moved.min())):
+                    <= 0.25 * math.sqrt(s2):
                 B = fit
         self._affine_fit[a] = (key, B)
         return B
@@ -1368,7 +1375,7 @@ class OptionRules:
         if self.goal_node < 0 or not 0 <= self._winner < n:
             return False
         absorbing = self._absorbing(m, n, closed=False)
-        key = (m.version, self.goal_node, self._abs_count, self._epoch, self._bumps)
+        key = self._reach_key_for(m, self.goal_node)
         if key != self._reach_key:
             self._reach_key = key
             self._reach_abs, self._reach_src = absorbing.copy(), self.R >= GOAL_R
@@ -1385,13 +1392,18 @@ class OptionRules:
             self.V, self._winner, self._reach, self._reach_stamp, self._reach_seen,
             self._reach_search, self._reach_stack)
 
+    def _reach_key_for(self, m: SensorimotorMap, g: int) -> tuple:
+        """What :meth:`stuck`'s search reads, for goal node ``g``: the map version, the
+        goal node, the terminal flags (and regions: ``_epoch``) and the bump count."""
+        return (m.version, g, self._abs_count, self._epoch, self._bumps)
+
     def stuck_known(self, m: SensorimotorMap, n: int, g: int) -> bool | None:
         """What :meth:`stuck` would answer for the goal node ``g`` when it needs no
         search (its key held and the agent's node was searched from, or no goal or
         node); None when it would search or start a new key."""
         if g < 0 or not 0 <= self._winner < n:
             return False
-        if self._reach_key != (m.version, g, self._abs_count, self._epoch, self._bumps):
+        if self._reach_key != self._reach_key_for(m, g):
             return None
         known = self._reach[self._winner]
         if known == self._reach_stamp or known == -self._reach_stamp:
