@@ -626,8 +626,9 @@ class SensorimotorMap:
             else _NO_ROWS     # rows the node index is to follow (node_index.py)
         changed, log = self._changed, self.log
         motion = self.motion
-        step, step_r2 = self.mean_step(sensed) if unblocked and learn and self.prev >= 0 \
-            else (x, -1.0)
+        step, step_r2 = self.mean_step(sensed) \
+            if unblocked and learn and self.merge and self.prev >= 0 else (x, -1.0)
+        # (with ``merge``, as every rule of one node a place: "A move between other places")
         if step_r2 >= 0.0 and self.nearest_by_weight(
                 0.5 * (self.x_prev + x - step)) == self.prev:
             t = self.nearest_by_weight(self.w[self.prev] + step)
@@ -783,33 +784,31 @@ class SensorimotorMap:
         their scatter (``|m| > 2 sqrt(s)``, ``s`` their spread), while the place radius is
         the sensing scatter's (``a_place < a_T``: below GWR's radius a node does not win
         samples of two places a step apart)."""
-        if i < 0 or not self.alive[i] or a >= len(self.motion) or self.primitives is None \
+        if i < 0 or not self.alive[i] or self.primitives is None \
                 or not np.isfinite(self.x_prev).all():
             return False
-        count, m, m2 = self.motion[a, 0], self.motion[a, 1:-1], self.motion[a, -1]
-        if count < 2:
-            return False
-        s, mm = m2 / count, float(m @ m)
-        if not (self.a_place < self.a_T and 4.0 * s < mm):
+        m, r2 = self.mean_step(a)
+        if r2 < 0.0:
             return False
         j = self.link_target(i, a)
         if j < 0:
             return False
         d = self.x_prev - (self.w[j] - m)
-        return bool(d @ d > 0.25 * mm)
+        return bool(d @ d > r2)
 
     def mean_step(self, a: int) -> tuple[np.ndarray, float]:
         """``(m, r2)``: primitive ``a``'s mean sensed move and the squared distance, a
         quarter of ``|m|^2`` (half a step), beyond which a move by it from one node's place
         does not reach another node's (the module docstring, "A move between other
-        places"); ``r2`` -1 (no test) unless its moves stand out of their scatter
-        (``|m| > 2 sqrt(s)``) while the place radius is the sensing scatter's
-        (``a_place < a_T``), with ``merge``, as every rule of one node a place."""
-        if a < 0 or a >= len(self.motion) or not self.merge or not self.a_place < self.a_T:
+        places", "A bump from another place"); ``r2`` -1 (no test) unless its moves
+        stand out of their scatter (``|m| > 2 sqrt(s)``, ``s`` their spread) while the place
+        radius is the sensing scatter's (``a_place < a_T``: below GWR's radius a node does
+        not win samples of two places a step apart)."""
+        if a < 0 or a >= len(self.motion) or not self.a_place < self.a_T:
             return self.x_prev, -1.0
         count, m, m2 = self.motion[a, 0], self.motion[a, 1:-1], self.motion[a, -1]
         mm = float(m @ m)
-        if count < 2 or not 4.0 * m2 / count < mm:
+        if count < 2 or not 4.0 * (m2 / count) < mm:
             return self.x_prev, -1.0
         return np.ascontiguousarray(m), 0.25 * mm
 
