@@ -118,6 +118,31 @@ def test_ros2_launch_with_a_namespace_then_ctrl_c(ros_domain, tmp_path):
     assert list((tmp_path / "tmgwr" / f"domain{ros_domain}_a").glob("launch_*/map.npz")), out
 
 
+def test_nodes_that_finish_together_shut_the_launch_down_once():
+    """A terminal's Ctrl-C stops every node at once. Each clean exit (code 0) asked for a
+    Shutdown, and a second one queued before launch handled the first made launch_ros shut
+    its ROS adapter twice: 'Cannot shutdown a ROS adapter that is not running', exit code
+    1 (one Ctrl-C in about 30 here). Real launch events and context, the launch file's own
+    handler."""
+    import importlib.util
+
+    from launch import LaunchContext
+    from launch.actions import Shutdown
+    from launch.events.process import ProcessExited
+
+    path = ROOT / "src" / "tmgwr_agent" / "launch" / "agent.launch.py"
+    spec = importlib.util.spec_from_file_location("agent_launch", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    watch, context = module.ExitWatch(), LaunchContext()
+    answers = [watch.on_exit(ProcessExited(action=None, name=f"{node}-{i}", cmd=[node],
+                                           cwd=None, env=None, pid=100 + i, returncode=0),
+                             context)
+               for i, node in enumerate(NODES, 1)]
+    shutdowns = [a for a in answers if a]
+    assert len(shutdowns) == 1 and isinstance(shutdowns[0][0], Shutdown), answers
+
+
 @pytest.mark.timeout(120)
 @pytest.mark.parametrize("arg, reason", [
     ("maze:=no_such_maze.txt", "no_such_maze.txt"),

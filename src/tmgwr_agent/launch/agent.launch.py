@@ -105,6 +105,7 @@ class ExitWatch:
         self.ready: set[str] = set()              # process names that printed a ready line
         self.deaths: dict[str, list[float]] = {}
         self.respawned: set[str] = set()          # node names launch respawns
+        self.shutdown_sent = False                # a Shutdown is on its way
 
     def on_output(self, event) -> None:
         lines = [ln.strip() for ln in event.text.decode(errors="replace").splitlines()]
@@ -116,11 +117,15 @@ class ExitWatch:
 
     def on_exit(self, event, context):
         import time
-        if context.is_shutdown:
+        if context.is_shutdown or self.shutdown_sent:
             return None
         name = event.process_name.rsplit("-", 1)[0]          # maze_sim-2 -> maze_sim
         code = event.returncode
         if code == 0:
+            # once: a terminal's Ctrl-C stops every node at once, and a second Shutdown
+            # queued before the first is handled made launch_ros shut its ROS adapter
+            # twice ('Cannot shutdown a ROS adapter that is not running', exit code 1)
+            self.shutdown_sent = True
             return [Shutdown(reason=f"{name} finished (exit code 0)")]
         why = self.last_line.get(event.process_name, "no output")
         if event.process_name not in self.ready or name not in self.respawned:
