@@ -118,6 +118,30 @@ def test_ros2_launch_with_a_namespace_then_ctrl_c(ros_domain, tmp_path):
     assert list((tmp_path / "tmgwr" / f"domain{ros_domain}_a").glob("launch_*/map.npz")), out
 
 
+@pytest.mark.timeout(240)
+def test_ctrl_c_pressed_again_and_again_ends_the_launch_cleanly(ros_domain, tmp_path):
+    """launch leaves Python's default SIGINT handler in place, so every Ctrl-C raised
+    KeyboardInterrupt wherever launch's main thread was. Inside asyncio's own code that
+    lost the wakeup of launch's event queue: the Shutdown was never handled, the nodes
+    never told, and ``ros2 launch`` hung (a burst of Ctrl-C to the launch process: every
+    try; twice, 0.3 s apart: one try in two), or it destroyed a task and exited 1 ('Task
+    was destroyed but it is pending!', CI). The launch file now lets SIGINT reach launch
+    through its wakeup fd only (ctrl_c_through_launch_only)."""
+    p = launch(ros_domain, "seed:=1", env={"ROS_HOME": str(tmp_path)})
+    with p:
+        p.wait_for_line(r"\[maze_sim-\d+\].*goal \(\d+, \d+\) reached", timeout=120)
+        for _ in range(20):                             # to the launch process alone
+            if p.proc.poll() is not None:
+                break
+            os.kill(p.proc.pid, signal.SIGINT)
+            time.sleep(0.02)
+        out = p.wait(timeout=90)                        # exit code 0 or it raises
+    assert "again, ignoring" in out, out                # launch saw the repeated Ctrl-C
+    for node in NODES:
+        assert re.search(rf"\[{node}-\d+\]: process has finished cleanly", out), (node, out)
+    assert not re.search(r"Traceback|KeyboardInterrupt|Task was destroyed", out), out
+
+
 def test_nodes_that_finish_together_shut_the_launch_down_once():
     """A terminal's Ctrl-C stops every node at once. Each clean exit (code 0) asked for a
     Shutdown, and a second one queued before launch handled the first made launch_ros shut

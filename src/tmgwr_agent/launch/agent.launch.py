@@ -235,7 +235,28 @@ def graph_nodes(context, watch: ExitWatch):
     ]
 
 
+def ctrl_c_through_launch_only() -> None:
+    """Let a Ctrl-C reach ``ros2 launch`` only through launch's own signal handling.
+
+    launch handles SIGINT through a wakeup fd (launch.utilities.AsyncSafeSignalManager),
+    yet it leaves Python's default handler in place, which raises KeyboardInterrupt at
+    whatever bytecode the main thread runs. launch catches it around its loop, but one
+    raised inside asyncio's own code breaks the loop's state: inside ``loop.create_task``
+    it destroys a task ('Task was destroyed but it is pending!', and launch exits 1), and
+    between a queue's wakeup and the waiting task it loses the wakeup, so launch never
+    handles its Shutdown and hangs. A terminal's Ctrl-C reaches launch and every node at
+    once, and a second Ctrl-C is common. With a Python handler that does nothing, the
+    signal still reaches launch through the wakeup fd, and no exception is raised."""
+    import signal
+    import threading
+
+    if (threading.current_thread() is threading.main_thread()
+            and signal.getsignal(signal.SIGINT) is signal.default_int_handler):
+        signal.signal(signal.SIGINT, lambda signum, frame: None)
+
+
 def generate_launch_description():
+    ctrl_c_through_launch_only()
     arguments = [
         DeclareLaunchArgument("maze", default_value="paper_13x17.txt",
                               description="maze file: a path, or a file name in "
