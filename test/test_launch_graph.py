@@ -130,7 +130,7 @@ def test_ctrl_c_pressed_again_and_again_ends_the_launch_cleanly(ros_domain, tmp_
     p = launch(ros_domain, "seed:=1", env={"ROS_HOME": str(tmp_path)})
     with p:
         p.wait_for_line(r"\[maze_sim-\d+\].*goal \(\d+, \d+\) reached", timeout=120)
-        for _ in range(20):                             # to the launch process alone
+        for _ in range(10):                             # to the launch process alone
             if p.proc.poll() is not None:
                 break
             os.kill(p.proc.pid, signal.SIGINT)
