@@ -136,6 +136,7 @@ def test_an_untried_move_into_a_known_linked_place_is_worth_that_place():
     mo, m = agent.motivation, agent.map
     n = m.n
     half = 0.5 * np.sqrt(mo.delta_sq[mo.delta_sq > 0.0].min())
+    turns = mo._turns(m)                       # a turn needs no link (the test below)
     placed = 0
     for i in np.flatnonzero(m.alive[:n]):
         for a in range(mo.n_primitives):
@@ -145,7 +146,7 @@ def test_an_untried_move_into_a_known_linked_place_is_worth_that_place():
             placed += 1
             x = mo._predicted(m, np.array([i]), a)[0]
             assert np.linalg.norm(x - m.w[q]) < half
-            assert q in m.out[i] or i in m.out[q]
+            assert a in turns or q in m.out[i] or i in m.out[q]
             assert mo.U[i, a] == 0.0 and mo.rho[i, a] > 0.0
     assert placed > 0
 
@@ -370,3 +371,39 @@ def test_after_the_break_a_cell_bumped_from_one_side_is_shut_from_the_others():
             seen[cell] = h
         assert agent.motivation.broken
     assert again == 0
+
+
+def test_after_the_break_an_untried_turn_into_a_known_place_is_worth_it_unlinked():
+    """Once the known route broke, an untried turn (a primitive that never bumped and,
+    repeated, comes back where it started: ``_turns``) whose predicted successor is the
+    place of a live node is valued by that node's potential (``osucc``), whether or not
+    the map links the two; some such pair is unlinked. Before: only a linked place
+    counted, and an untried turn at a cell whose headings the agent had met by different
+    ways was unknown space, so the agent turned a full circle through them."""
+    world, agent = _episode_after_the_block(LONG_WALL, 0, 8)
+    for _ in range(20):                        # the route broke; the wall is being tested
+        obs, _, terminated, _, info = world.step(agent.act())
+        agent.observe(obs, info)
+        assert not terminated
+    mo, m = agent.motivation, agent.map
+    n = m.n
+    assert mo.broken
+    mo._options_key = ()                       # a full pass, on the weights of now
+    mo.refresh_options(m, n)
+    turns = mo._turns(m)
+    assert turns
+    half = 0.5 * np.sqrt(mo.delta_sq[mo.delta_sq > 0.0].min())
+    unlinked = 0
+    for i in np.flatnonzero(m.alive[:n]):
+        for a in turns:
+            if mo.tried[i, a]:
+                continue
+            x = mo._predicted(m, np.array([i]), a)[0]
+            d = np.linalg.norm(m.w[:n] - x, axis=1)
+            d[~m.alive[:n]] = np.inf
+            q = int(np.argmin(d))
+            if q == i or d[q] >= half:
+                continue
+            assert mo.osucc[i, a] == q and mo.U[i, a] == 0.0, (i, a, q, mo.osucc[i, a])
+            unlinked += not (q in m.out[i] or i in m.out[q])
+    assert unlinked > 0

@@ -868,6 +868,15 @@ class OptionRules:
         known place): it lost to the known route, the agent kept the first route it found,
         and a registered MiniGrid id took more episodes to learn a shortest one.
 
+        *A turn needs no link*: a primitive that only turns the agent where it stands
+        (:meth:`_turns`: it never bumped, and repeated it comes back to where it started,
+        as the affine forward model predicts it) is stopped by no wall and does not leave
+        the location, so the known place it is predicted onto is the place it reaches,
+        whether or not the map links the two (the agent met that heading there coming
+        another way). Without it an untried turn at a cell whose headings the agent had
+        met by different ways was unknown space, and after a block the agent turned a
+        full circle through the headings it knew there before it walked on.
+
         *One move on*, in an episode whose known route broke: ``h`` is at least ``1 +
         min_b h(x_b)`` (:meth:`_one_move_on`), ``x_b`` the successor of primitive b from x
         as the local forward model predicts it. Every way from x to the goal (x outside
@@ -973,7 +982,7 @@ class OptionRules:
         if wall.any():
             lo, hi = self._known_extent(m)
         placed = np.full((len(rows), len(prims)), -1, dtype=np.int64)
-        reach = shut = None
+        reach = shut = turns = None
         for c, p in enumerate(prims):
             q = np.flatnonzero(unknown[:, c])
             x = self._predicted(m, rows[q], int(p)) if len(q) and step > 0.0 else None
@@ -995,7 +1004,10 @@ class OptionRules:
                 rho_u[q[beyond & wall[q, c]], c] = 0.0
             t = ~wall[q, c]
             if t.any() and self.broken:
-                placed[q[t], c] = self._known_place(m, x[t], rows[q[t]])
+                if turns is None:
+                    turns = self._turns(m)
+                placed[q[t], c] = self._known_place(m, x[t], rows[q[t]],
+                                                    need_link=int(p) not in turns)
             s = wall[q, c]
             if s.any() and self._stuck and self.broken:
                 if reach is None:
@@ -1061,13 +1073,15 @@ class OptionRules:
             best = np.minimum(best, bound)
         return 1.0 + best
 
-    def _known_place(self, m: SensorimotorMap, x: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    def _known_place(self, m: SensorimotorMap, x: np.ndarray, rows: np.ndarray,
+                     need_link: bool = True) -> np.ndarray:
         """For each predicted successor ``x[k]`` of a move from node ``rows[k]``: the live
         node nearest it when within half the shortest step of the forward model (the
         places a move joins lie a step apart, so half a step is the line between two) and
-        the map links it with ``rows[k]`` either way; else -1 (also for ``rows[k]``
-        itself). The nearest node by :func:`kernels.nearest_weight`, a scan per
-        successor (no successors x nodes matrix: a full refresh asks for every row)."""
+        the map links it with ``rows[k]`` either way (asked only when ``need_link``);
+        else -1 (also for ``rows[k]`` itself). The nearest node by
+        :func:`kernels.nearest_weight`, a scan per successor (no successors x nodes
+        matrix: a full refresh asks for every row)."""
         n = m.n
         out = np.full(len(x), -1, dtype=np.int64)
         s2 = self._shortest_step2()
@@ -1079,6 +1093,8 @@ class OptionRules:
             d = x[k] - m.w[q]
             if q != rows[k] and d @ d < half2:
                 out[k] = q
+        if not need_link:
+            return out
         q = np.maximum(out, 0)
         linked = (m.out[rows] == q[:, None]).any(axis=1) | \
             (m.out[q] == rows[:, None]).any(axis=1)
