@@ -40,7 +40,7 @@ def test_the_graph_runs_on_minigrid_and_the_bag_reads_back(ros_domain, tmp_path)
     errors = [line for line in up.lines if "Exception in" in line or "Traceback" in line]
     assert not errors, errors                # e.g. the simulator's checkpoint of the world
 
-    msgs = read_bag(bag, ("/observation", "/maze_grid"))
+    msgs = read_bag(bag, ("/observation", "/maze_grid"), up.output)
     poses = np.array([np.array(m.sensors, dtype=float) for m in msgs["/observation"]])
     assert poses.shape[1] == 4
     free = ~np.array([[ch == "#" for ch in line] for line in MAZE.splitlines()])

@@ -52,7 +52,7 @@ def test_the_graph_runs_on_pointmaze_and_the_bag_reads_back(ros_domain, tmp_path
     assert up.proc.returncode == 0, up.describe("./tmgwr up failed")
 
     msgs = read_bag(bag, ("/observation", "/features", "/agent_pose", "/maze_grid",
-                          "/map_markers"))
+                          "/map_markers"), up.output)
     sensed = [np.array(m.sensors, dtype=float) for m in msgs["/observation"]]
     poses = [(m.pose.position.x, m.pose.position.y) for m in msgs["/agent_pose"]]
     grids, markers = msgs["/maze_grid"], msgs["/map_markers"]

@@ -47,9 +47,10 @@ def ctrl_c(up: RosProcess) -> None:
     up.wait(timeout=60, check=False)
 
 
-def read_bag(bag: Path, topics: tuple[str, ...]) -> dict[str, list]:
+def read_bag(bag: Path, topics: tuple[str, ...], log: str = "") -> dict[str, list]:
     """Every message of ``topics`` in the bag, in order; asserts that the ring answered
-    every step (each per-step topic's step ids run 0, 1, ... without a gap)."""
+    every step (each per-step topic's step ids run 0, 1, ... without a gap). ``log``: the
+    run's output, whose recorder and simulator lines a failure quotes."""
     from rosbags.highlevel import AnyReader
     steps: dict[str, list[int]] = {}
     msgs: dict[str, list] = {t: [] for t in topics}
@@ -60,15 +61,23 @@ def read_bag(bag: Path, topics: tuple[str, ...]) -> dict[str, list]:
                 steps.setdefault(conn.topic, []).append(int(msg.step_id))
             if conn.topic in msgs:
                 msgs[conn.topic].append(msg)
-    assert_every_step_answered(steps)
+    assert_every_step_answered(steps, log)
     return msgs
 
 
-def assert_every_step_answered(steps: dict[str, list[int]]) -> None:
+def assert_every_step_answered(steps: dict[str, list[int]], log: str = "") -> None:
     """Each per-step topic's step ids (as recorded) run 0, 1, ... without a gap, up to the
-    newest observation but one: the newest step may still be in flight at the stop."""
+    newest observation but one: the newest step may still be in flight at the stop. A
+    failure names the missing ids and quotes ``log``'s recorder, gap, resend and event
+    lines (where a step was lost: at the start, at an event, mid-run)."""
     last = max(steps["/observation"])
     for topic in PER_STEP:
         ids = sorted(set(steps[topic]))
-        assert ids[0] == 0 and ids == list(range(ids[-1] + 1)), topic
+        missing = sorted(set(range(ids[-1] + 1)) - set(ids))
+        said = [ln for ln in log.splitlines()
+                if re.search(r"recorder|recording|gap|resend|event|ready", ln)]
+        assert ids[0] == 0 and not missing, (
+            f"{topic}: {len(ids)} step ids from {ids[0]} to {ids[-1]}, missing "
+            f"{missing[:20]}; recorded ids of every topic from 0: "
+            f"{ {t: sorted(set(v))[:3] for t, v in steps.items()} }\n" + "\n".join(said[-60:]))
         assert ids[-1] >= last - 1, (topic, ids[-1], last)
