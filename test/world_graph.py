@@ -74,10 +74,17 @@ def assert_every_step_answered(steps: dict[str, list[int]], log: str = "") -> No
     for topic in PER_STEP:
         ids = sorted(set(steps[topic]))
         missing = sorted(set(range(ids[-1] + 1)) - set(ids))
-        said = [ln for ln in log.splitlines()
-                if re.search(r"recorder|recording|gap|resend|event|ready", ln)]
-        assert ids[0] == 0 and not missing, (
-            f"{topic}: {len(ids)} step ids from {ids[0]} to {ids[-1]}, missing "
-            f"{missing[:20]}; recorded ids of every topic from 0: "
-            f"{ {t: sorted(set(v))[:3] for t, v in steps.items()} }\n" + "\n".join(said[-60:]))
+        assert ids[0] == 0 and not missing, _lost_steps(topic, ids, missing, steps, log)
         assert ids[-1] >= last - 1, (topic, ids[-1], last)
+
+
+def _lost_steps(topic: str, ids: list[int], missing: list[int],
+                steps: dict[str, list[int]], log: str) -> str:
+    """The message of a topic whose recorded step ids do not run 0, 1, ...: its range and
+    missing ids, the first ids of every topic, and ``log``'s recorder, gap, resend and
+    event lines (read only when the check fails)."""
+    said = [ln for ln in log.splitlines()
+            if re.search(r"recorder|recording|gap|resend|event|ready", ln)]
+    first = {t: sorted(set(v))[:3] for t, v in steps.items()}
+    return (f"{topic}: {len(ids)} step ids from {ids[0]} to {ids[-1]}, missing "
+            f"{missing[:20]}; the first ids of every topic: {first}\n" + "\n".join(said[-60:]))
