@@ -303,6 +303,38 @@ def test_a_hung_teardown_after_the_node_end_is_cut_with_its_reason(ros_domain, h
     assert took < TEARDOWN_LIMIT + NATIVE_GRACE + 30, took
 
 
+REFUSED_START = r"""
+import threading
+import time
+from rclpy.node import Node
+from tmgwr_common.node import run
+
+class Refused(Node):
+    def __init__(self):
+        super().__init__("refused")
+        # something the interpreter's exit would wait for: a thread that does not end
+        threading.Thread(target=time.sleep, args=(60,), daemon=False).start()
+        raise ValueError("parameter 'goal' = 'Z': no goal named 'Z'")
+
+raise SystemExit(run(Refused, "refused"))
+"""
+
+
+@pytest.mark.timeout(60)
+def test_a_node_that_cannot_start_exits_2_whatever_its_constructor_left(ros_domain):
+    """CI: maze_sim printed why it could not start and then never exited, so ros2 launch
+    waited for it. A refused start now ends the process right after its bounded teardown:
+    nothing the constructor left (here a thread the interpreter's exit would wait for) can
+    keep it alive."""
+    t0 = time.monotonic()
+    p = spawn_python(REFUSED_START, domain=ros_domain, name="refused")
+    out = p.wait(timeout=40, check=False)
+    assert p.proc.returncode == 2, p.describe(f"exit code {p.proc.returncode}, not 2")
+    assert "[refused] cannot start: parameter 'goal'" in out, out
+    assert "Traceback" not in out, out
+    assert time.monotonic() - t0 < 35
+
+
 @pytest.mark.timeout(300)
 def test_each_fresh_launch_keeps_its_own_maps(ros_domain, tmp_path):
     """Issue 24: each fresh launch in a domain overwrote the previous run's map.npz. Each

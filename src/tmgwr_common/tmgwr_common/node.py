@@ -486,7 +486,9 @@ def freeze_startup_objects() -> None:
 
 def run(factory: Callable[[], Any], name: str, args=None,
         executor_factory: Callable[[], Any] | None = None) -> int:
-    """Init rclpy, build the node, spin it; exit code 2 when it cannot start.
+    """Init rclpy, build the node, spin it; returns the exit code. A node that cannot
+    start (its constructor raises ParamError, ValueError or OSError) ends the process with
+    code 2 right after its bounded teardown (:func:`guard_teardown`).
 
     A node may define ``on_shutdown()`` (called once after spinning stops, for any reason:
     Ctrl-C or SIGTERM (:class:`StopSignals`), ``rclpy.shutdown``; a lifecycle node takes its
@@ -514,12 +516,14 @@ def run(factory: Callable[[], Any], name: str, args=None,
         return 2
     node = None
     code = 0
+    refused = False
     try:
         try:
             node = factory()
         except (ParamError, ValueError, OSError) as exc:
             print(f"[{name}] cannot start: {exc}", file=sys.stderr, flush=True)
-            return 2
+            code, refused = 2, True
+            return code
         executor = (executor_factory or make_executor)()
         executor.add_node(node)
         freeze_startup_objects()
@@ -547,6 +551,15 @@ def run(factory: Callable[[], Any], name: str, args=None,
         # shuts down, not later by the interpreter's exit, where nothing bounds a hang.
         gc.collect()
         rclpy.try_shutdown()
+        if refused:
+            # Nothing ran and nothing is to be saved: the process ends here, still under
+            # the guard. The interpreter's own exit would destroy whatever the refused
+            # constructor left (DDS entities it still holds, a thread it started), and
+            # nothing bounds that (CI: maze_sim said why it could not start, then never
+            # exited, and ros2 launch waited for it).
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(code)
         disarm()
         stop.ignore_from_now()
     return code
