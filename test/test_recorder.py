@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from ros_helpers import ROOT, RosProcess, base_env, ros2_run, ros_env, spawn_python
+from ros_helpers import ROOT, RosProcess, base_env, ros2_run, ros_env, spawn_python, stop_all
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -413,4 +413,46 @@ def test_a_ring_told_to_await_the_recorder_starts_only_when_it_has_every_topic(
     for name in topics.STEP_TOPICS:
         steps = read_step_ids(mcap_files(bag), "/" + name)
         assert steps and min(steps) == 0 and set(range(150)) <= set(steps), \
+            (name, sorted(set(steps))[:5])
+
+
+
+def test_a_ring_awaiting_the_recorder_holds_its_first_step_until_the_bag_has_it_all(
+        ros_domain, tmp_path):
+    """A recorder's matched reader does not prove that the publisher has matched it: under
+    load a node's first messages can go out before its publisher knows the recorder (CI:
+    a MiniGrid graph's bag lacked an /action step). Played here by an /action publisher
+    that the recorder takes only after it said ready: it does not ``expect`` /action and
+    the action selector starts once the recorder said ready, so the recorder subscribes to
+    /action at its next discovery (2 s later) while the ring answers at once. The simulator
+    holds the run's first step, resending it, until the recorder says on ``recorder_run``
+    that it has the run on every ring topic, so the bag holds step 0 on all five."""
+    from tmgwr_agent.nodes.recorder import GRAPH_STEP_TOPICS
+    from tmgwr_common import topics
+    early = [e for e in GRAPH_STEP_TOPICS if not e.startswith(f"{topics.ACTION}=")]
+    bag = tmp_path / "late_action"
+    procs = [start_recorder(ros_domain, bag, "discovery_period:=2.0",
+                            "expect:=[" + ",".join(f"'{e}'" for e in early) + "]")]
+    procs.append(ros2_run("maze_sim", "maze_sim", "--ros-args", "-p", "await_recorder:=true",
+                          "-p", "max_steps:=100", "-p", "exit_when_done:=true",
+                          domain=ros_domain))
+    for name in ("sensory_preprocessor", "map_learner", "motivation_estimator"):
+        procs.append(ros2_run("tmgwr_agent", name, domain=ros_domain))
+    recorder, sim = procs[0], procs[1]
+    try:
+        recorder.wait_for_line(r"matched a publisher on every expected topic \(4\)",
+                               timeout=120)
+        sim.wait_for_line(r"the recorder is ready", timeout=60)
+        procs.append(ros2_run("tmgwr_agent", "action_selector", domain=ros_domain))
+        line = recorder.wait_for_line(r"run \d+ is in the bag on every ring topic \(5\)",
+                                      timeout=120)
+        assert "from step 0" in line, line
+        sim.wait(timeout=120)
+        recorder.stop()
+    finally:
+        stop_all(reversed(procs))
+    assert "step 0 answered: held until the recorder has run" in sim.output, sim.output
+    for name in topics.STEP_TOPICS:
+        steps = read_step_ids(mcap_files(bag), "/" + name)
+        assert steps and min(steps) == 0 and set(range(90)) <= set(steps), \
             (name, sorted(set(steps))[:5])

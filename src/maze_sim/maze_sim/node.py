@@ -53,7 +53,7 @@ from geometry_msgs.msg import PointStamped, PoseStamped
 from nav_msgs.msg import OccupancyGrid
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
-from std_msgs.msg import String
+from std_msgs.msg import String, UInt64
 from std_srvs.srv import Trigger
 
 from maze_sim.maze import DEFAULT_MAZE, N_ACTIONS, Maze, MazeError, maze_file
@@ -117,7 +117,9 @@ SPECS = (
           low=0.0, high=3600.0),
     Param("await_recorder", False, "publish the first observation only once a recorder said "
           "on 'recorder_ready' that it has matched every per-step publisher (and start_delay "
-          "has passed), so the bag holds step 0 on every topic"),
+          "has passed), and go past it only once the recorder said on 'recorder_run' that "
+          "it has this run on every per-step topic, so the bag holds the run's first step "
+          "on every topic"),
     *CHECKPOINT_SPECS,
 )
 
@@ -208,8 +210,13 @@ class MazeSimNode(Node):
         # the first observation waits for start_delay and, when asked, for the recorder
         self.delay_over = False
         self.recorder_ready = not p["await_recorder"]
+        # ... and the first step is held (resent) until the recorder has it on every topic
+        self.run_recorded = not p["await_recorder"]
+        self.held: Action | None = None      # the first step's action, while held
         if p["await_recorder"]:
             self.create_subscription(String, topics.RECORDER_READY, self.on_recorder_ready,
+                                     LATCHED_QOS)
+            self.create_subscription(UInt64, topics.RECORDER_RUN, self.on_recorder_run,
                                      LATCHED_QOS)
             self._waiting_timer = self.create_timer(RECORDER_WAIT_LOG, self.say_waiting)
         self._start_timer = self.create_timer(max(p["start_delay"], 0.01), self.on_delay_over)
@@ -231,6 +238,18 @@ class MazeSimNode(Node):
             self._waiting_timer.cancel()
             self.get_logger().info(f"the recorder is ready ({shown(msg.data)})")
             self.start()
+
+    def on_recorder_run(self, msg: UInt64):
+        """The recorder has a run on every ring topic (0: it records none of them): a held
+        first step goes on."""
+        if self.run_recorded or msg.data not in (0, self.run_id):
+            return
+        self.run_recorded = True
+        self.get_logger().info(f"the recorder has run {self.run_id} on every ring topic"
+                               if msg.data else "the recorder records no ring topic")
+        held, self.held = self.held, None
+        if held is not None:
+            self.on_action(held)
 
     def say_waiting(self):
         self.get_logger().warning(
@@ -260,6 +279,13 @@ class MazeSimNode(Node):
             return
         if msg.step_id != self.step_id or self.current is None or self.finished:
             return                          # a duplicate answer to a resent observation
+        if not self.run_recorded:           # resent until the recorder has every topic
+            if self.held is None:
+                self.get_logger().info(
+                    f"step {msg.step_id} answered: held until the recorder has run "
+                    f"{self.run_id} on every ring topic (the observation is resent)")
+            self.held = msg
+            return
         self.answered(msg.step_id)
         with self.timer:
             if self.pending_reset or msg.action == Action.NONE:
@@ -367,6 +393,9 @@ class MazeSimNode(Node):
             if now - self.logged_at >= self.p["resend_period"]:
                 self.logged_at = now
                 self.get_logger().info(
+                    f"step {self.step_id} of run {self.run_id} held for the recorder "
+                    f"{now - self.first_sent:.1f} s: resending the observation"
+                    if self.held is not None else
                     f"no action for step {self.step_id} of run {self.run_id} within "
                     f"{now - self.first_sent:.1f} s: resending the observation "
                     f"({self.ring_status(now)})")

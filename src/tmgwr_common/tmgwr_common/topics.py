@@ -43,6 +43,12 @@ FEATURE_SENSES = "feature_senses"     # tmgwr_interfaces/msg/SensorInfo, preproc
 # bag's directory), latched: a simulator told to wait for it (maze_sim's await_recorder) starts
 # the ring only then, so step 0 is in the bag on every topic (docs/graph.md, Recording)
 RECORDER_READY = "recorder_ready"     # std_msgs/msg/String, recorder, latched
+# The recorder's word that it has recorded a message of this run (run_id) on every per-step
+# topic it records; 0: it records none of them. Latched. A reader matched to a publisher is
+# no proof that the publisher has matched the reader (discovery runs on both sides, each
+# at its own pace), a recorded message is: maze_sim's await_recorder holds its run's first
+# step, resending it, until the recorder says so (docs/graph.md, Recording)
+RECORDER_RUN = "recorder_run"         # std_msgs/msg/UInt64, recorder, latched
 
 # Services: the graph's goal (relative), then the nodes' own (private, "~/": node/name)
 SET_GOAL = "set_goal"                 # tmgwr_interfaces/srv/SetGoal, maze_sim (the graph's)

@@ -30,6 +30,14 @@ goes by before the recorder could take it (a reliable volatile reader matched la
 nothing of what was published before). A graph node that starts after the recorder's
 discovery of the others is the race this closes.
 
+Run recorded: a matched reader does not prove that the publisher has matched it (each side
+of discovery runs at its own pace: under load a publisher's first messages can go out
+before it knows the recorder, and a volatile reader never gets them). Once every ring topic
+it records (``gap_topics`` in its own namespace) has a message of a run, the recorder says
+so, latched, on ``recorder_run`` (std_msgs/UInt64: the run id; 0 at start when it records
+none of them). A simulator with ``await_recorder`` holds its run's first step, resending
+it, until then; the ring answers a resend from its cache, so what was missed is recorded.
+
 Gaps: on the per-step topics (``gap_topics``: the ring's five, and the same names and types
 in any namespace below the recorder's, each topic on its own) every message's (run_id,
 step_id) is read from its bytes (:mod:`tmgwr_agent.bag.gaps`); a step id that jumps ahead
@@ -49,17 +57,18 @@ from __future__ import annotations
 
 import json
 import re
+import struct
 import time
 from datetime import datetime, timezone
 from pathlib import Path
 
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from std_msgs.msg import String
+from std_msgs.msg import String, UInt64
 
 from tmgwr_agent.bag import definitions
 from tmgwr_agent.bag import qos as bag_qos
-from tmgwr_agent.bag.gaps import StepGaps
+from tmgwr_agent.bag.gaps import StepGaps, header_step
 from tmgwr_agent.bag.writer import COMPRESSIONS, BagWriter, TopicInfo
 from tmgwr_common import topics
 from tmgwr_common.node import LATCHED_QOS, NODE_OPTIONS, declare_parameters, run
@@ -150,7 +159,13 @@ class Recorder(Node):
         self.ready_pub = self.create_publisher(String, topics.RECORDER_READY, LATCHED_QOS)
         self.ready_topic = self.resolve_topic_name(topics.RECORDER_READY)
         self.ready = False
+        self.run_pub = self.create_publisher(UInt64, topics.RECORDER_RUN, LATCHED_QOS)
+        self.run_topic = self.resolve_topic_name(topics.RECORDER_RUN)
+        self.runs_said: set[int] = set()
         self.gap_topics = {self.resolve_topic_name(t) for t in p["gap_topics"] if t}
+        # the ring's topics that this recorder records: a run is in the bag once each has
+        # a message of it (recorder_run)
+        self.ring_topics = {t for t in self.gap_topics if self._wanted(t)}
         # their types (from ``expect``): the same name in a nested namespace is checked too
         self.gap_types = {t: type_name for t, type_name in p["expect"].items()
                           if t in self.gap_topics}
@@ -162,6 +177,8 @@ class Recorder(Node):
                     self._subscribe(topic, type_name, infos=None)
                 except definitions.DefinitionError as exc:
                     self._warn_once(topic, f"{topic} not recorded: {exc}")
+        if not self.ring_topics:
+            self.run_pub.publish(UInt64(data=0))       # no run to wait for
         self.discover()
         # The line the graph supervisor waits for: the writer is open and the expected
         # topics are subscribed.
@@ -200,7 +217,7 @@ class Recorder(Node):
 
     # ------------------------------------------------------------------ discovery
     def _wanted(self, topic: str) -> bool:
-        if topic == self.ready_topic:                      # the recorder's own word
+        if topic in (self.ready_topic, self.run_topic):    # the recorder's own word
             return False
         if self.topic_list:
             return topic in self.topic_list
@@ -239,6 +256,23 @@ class Recorder(Node):
         self.ready_pub.publish(String(data=where))
         self.get_logger().info(f"matched a publisher on every expected topic "
                                f"({len(self.early)}): said so on {self.ready_topic}")
+
+    def _say_run(self, data: bytes) -> None:
+        """Once every ring topic recorded has a message of this message's run: publish the
+        run id on ``recorder_run`` (latched) and log it."""
+        try:
+            run_id, _step = header_step(data)
+        except (struct.error, IndexError):
+            return                        # counted as unreadable by the gap check
+        if run_id in self.runs_said or not all(
+                run_id in self.gaps.topics.get(t, ()) for t in self.ring_topics):
+            return
+        self.runs_said.add(run_id)
+        self.run_pub.publish(UInt64(data=run_id))
+        first = min(self.gaps.topics[t][run_id].first for t in self.ring_topics)
+        self.get_logger().info(f"run {run_id} is in the bag on every ring topic "
+                               f"({len(self.ring_topics)}) from step {first}: said so on "
+                               f"{self.run_topic}")
 
     def _checks_gaps(self, topic: str, type_name: str) -> bool:
         """Whether ``topic``'s step ids are checked: a ``gap_topics`` name, or the same
@@ -306,6 +340,7 @@ class Recorder(Node):
         write = self.writer.write
         received = self.received
         count_gaps = self._checks_gaps(topic, type_name)
+        on_ring = topic in self.ring_topics
 
         def store(data: bytes, msg_info: dict) -> None:
             if topic not in self.writer.topics:             # first message of an early one
@@ -316,6 +351,8 @@ class Recorder(Node):
                 gap = self.gaps.add(topic, data)
                 if gap is not None:
                     self._warn_gap(topic, *gap)
+            if on_ring:
+                self._say_run(data)
             try:
                 write(topic, data, msg_info["received_timestamp"],
                       msg_info["source_timestamp"], msg_info["publication_sequence_number"])
