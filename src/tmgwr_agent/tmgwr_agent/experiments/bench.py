@@ -140,7 +140,7 @@ def time_split(world, agent, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 #: The worlds whose agent and world CPU per step ``bench_worlds`` measures.
-BENCH_WORLDS = ("grid", "pointmaze")
+BENCH_WORLDS = ("grid", "minigrid", "pointmaze")
 
 
 def bench_worlds(seed: int, steps: int, warmup: int = 2000) -> dict:
