@@ -770,10 +770,11 @@ class OptionRules:
         spent = not stuck and self.budget_spent(nodes)
         rho_max = self.wall_prior() if stuck else 0.0 if spent else self.stale_prior
         # a break re-values the moves off the lattice (_unplaced_options reads ``broken``),
-        # and so does each pair found shut since (its place shuts others: _shut_places)
+        # and so does each pair found shut since (its place shuts others: _shut_places,
+        # when some primitive only turns; without one such a refresh is in vain, and
+        # cheaper than finding the turns, which refits their forward models, every step)
         off = self.broken and not self.lattice.all()
-        shut = int(np.count_nonzero(self.bump_t[:n] >= self.break_t)) \
-            if off and self._turns(m) else -1
+        shut = int(np.count_nonzero(self.bump_t[:n] >= self.break_t)) if off else -1
         key = ((m.version, self.frame.version), clock if stuck else self.episode, n, stuck,
                spent, rho_max, off, shut)
         return key, clock, T, rho_max
