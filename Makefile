@@ -19,8 +19,11 @@ demo:
 test: bootstrap
 	@source tools/env.sh && python -m pytest -q test $(PYTEST_ARGS)
 
+# The benchmark, recorded with its command, commit and load (results/bench.json), then
+# every table rendered again (docs/benchmarks.md shows it).
 bench:
-	./tmgwr bench
+	./tmgwr results record bench -- bench
+	./tmgwr results
 
 # The documentation (mkdocs.yml, docs/): strict, so a warning (a broken link, an unknown
 # API reference, a page missing from the nav) fails the build. Output in site/.
