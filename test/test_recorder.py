@@ -416,7 +416,6 @@ def test_a_ring_told_to_await_the_recorder_starts_only_when_it_has_every_topic(
             (name, sorted(set(steps))[:5])
 
 
-
 def test_a_ring_awaiting_the_recorder_holds_its_first_step_until_the_bag_has_it_all(
         ros_domain, tmp_path):
     """A recorder's matched reader does not prove that the publisher has matched it: under

@@ -55,6 +55,7 @@ class StepGaps:
     def __init__(self):
         self.topics: dict[str, dict[int, RunSteps]] = {}
         self.unreadable: dict[str, int] = {}
+        self.newest_run: dict[str, int | None] = {}   # run of each topic's newest message
 
     def add(self, topic: str, cdr: bytes) -> tuple[int, int, int] | None:
         """Count one message; returns ``(run_id, first, last)`` of the steps it shows
@@ -63,7 +64,9 @@ class StepGaps:
             run_id, step_id = header_step(cdr)
         except (struct.error, IndexError):
             self.unreadable[topic] = self.unreadable.get(topic, 0) + 1
+            self.newest_run[topic] = None
             return None
+        self.newest_run[topic] = run_id
         runs = self.topics.setdefault(topic, {})
         r = runs.get(run_id)
         if r is None:

@@ -57,7 +57,6 @@ from __future__ import annotations
 
 import json
 import re
-import struct
 import time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -68,7 +67,7 @@ from std_msgs.msg import String, UInt64
 
 from tmgwr_agent.bag import definitions
 from tmgwr_agent.bag import qos as bag_qos
-from tmgwr_agent.bag.gaps import StepGaps, header_step
+from tmgwr_agent.bag.gaps import StepGaps
 from tmgwr_agent.bag.writer import COMPRESSIONS, BagWriter, TopicInfo
 from tmgwr_common import topics
 from tmgwr_common.node import LATCHED_QOS, NODE_OPTIONS, declare_parameters, run
@@ -257,14 +256,11 @@ class Recorder(Node):
         self.get_logger().info(f"matched a publisher on every expected topic "
                                f"({len(self.early)}): said so on {self.ready_topic}")
 
-    def _say_run(self, data: bytes) -> None:
-        """Once every ring topic recorded has a message of this message's run: publish the
-        run id on ``recorder_run`` (latched) and log it."""
-        try:
-            run_id, _step = header_step(data)
-        except (struct.error, IndexError):
-            return                        # counted as unreadable by the gap check
-        if run_id in self.runs_said or not all(
+    def _say_run(self, run_id: int | None) -> None:
+        """Once every ring topic recorded has a message of ``run_id`` (the run the gap
+        check read from the newest message; None: unreadable): publish it on
+        ``recorder_run`` (latched) and log it."""
+        if run_id is None or run_id in self.runs_said or not all(
                 run_id in self.gaps.topics.get(t, ()) for t in self.ring_topics):
             return
         self.runs_said.add(run_id)
@@ -351,8 +347,8 @@ class Recorder(Node):
                 gap = self.gaps.add(topic, data)
                 if gap is not None:
                     self._warn_gap(topic, *gap)
-            if on_ring:
-                self._say_run(data)
+            if on_ring:                                     # a ring topic's gaps are counted
+                self._say_run(self.gaps.newest_run[topic])
             try:
                 write(topic, data, msg_info["received_timestamp"],
                       msg_info["source_timestamp"], msg_info["publication_sequence_number"])
