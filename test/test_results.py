@@ -1,7 +1,8 @@
 """Results kept as data (tmgwr_agent.experiments.results, ``./tmgwr results``).
 
 * Every results table between ``<!-- results:NAME -->`` markers in README.md and docs/ is
-  what its JSON under results/ gives: regenerated in memory and compared.
+  what its JSON under results/ gives: regenerated in memory and compared; every figure of
+  docs/figures/ names the result it was drawn from, and that is the result its file holds.
 * Every committed results file carries its provenance (command, commit, cores, load).
 * ``record`` runs a real experiment and keeps its JSON with that provenance.
 * The documentation builds with ``mkdocs build --strict`` (CI also runs ``make docs``).
@@ -52,6 +53,33 @@ def test_the_comparison_fails_on_a_changed_figure(tmp_path):
     results.render(tmp_path, figures=False)
     assert results.stale_tables(tmp_path) == []
     assert f"oracle {doc['result']['oracle_steps']}" in (tmp_path / "README.md").read_text()
+
+
+def test_every_figure_is_drawn_from_its_json_as_it_is():
+    stale = results.stale_figures(ROOT)
+    assert not stale, ("figures differ from results/*.json (run ./tmgwr results):\n"
+                       + "\n".join(stale))
+
+
+def test_a_figure_drawn_from_another_result_or_left_over_is_named(tmp_path):
+    (tmp_path / "results").mkdir()
+    for name in ("env_change_a", "goal_change"):
+        shutil.copy(ROOT / "results" / f"{name}.json", tmp_path / "results")
+    figures = tmp_path / results.FIGURES_DIR
+    assert results.stale_figures(tmp_path) == [
+        "docs/figures/env_change_a.png: missing", "docs/figures/goal_change.png: missing"]
+    results.render(tmp_path)
+    assert results.stale_figures(tmp_path) == []
+    doc = json.loads((tmp_path / "results" / "env_change_a.json").read_text())
+    doc["result"]["oracle_steps"] += 1
+    (tmp_path / "results" / "env_change_a.json").write_text(json.dumps(doc))
+    (tmp_path / "results" / "goal_change.json").unlink()
+    assert results.stale_figures(tmp_path) == [
+        "docs/figures/env_change_a.png: not drawn from results/env_change_a.json as it is",
+        "docs/figures/goal_change.png: no results file draws it"]
+    results.render(tmp_path)
+    (figures / "goal_change.png").unlink()
+    assert results.stale_figures(tmp_path) == []
 
 
 def test_an_unknown_marker_or_a_missing_file_is_named(tmp_path):

@@ -32,6 +32,13 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 
+def _save(fig, path: str | Path, source: str | None) -> None:
+    """Write the PNG; ``source`` (what it was drawn from) goes in its ``Source`` text chunk,
+    which ``./tmgwr results --check`` reads back."""
+    fig.savefig(path, dpi=120, metadata={"Source": source} if source else None)
+    plt.close(fig)
+
+
 def _mean_std(s):
     """(mean, std, failed trials) of a STAT; NaN mean when every trial failed."""
     failed = (s or {}).get("failed", 0)
@@ -68,7 +75,7 @@ def _grouped(ax, groups, series, title, ylabel, log=False):
     ax.legend(fontsize=7)
 
 
-def plot_goal_change(result: dict, path: str | Path) -> None:
+def plot_goal_change(result: dict, path: str | Path, source: str | None = None) -> None:
     agents = result["agents"]
     first = next(iter(agents.values()))["transitions"]
     groups = [f"{t['from']}→{t['to']}" for t in first]
@@ -81,11 +88,10 @@ def plot_goal_change(result: dict, path: str | Path) -> None:
     fig.suptitle(f"Goal change ({result['episodes']} episodes per goal, "
                  f"{result['trials']} trials) -- Tables 3-5")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _save(fig, path, source)
 
 
-def plot_env_change(result: dict, path: str | Path) -> None:
+def plot_env_change(result: dict, path: str | Path, source: str | None = None) -> None:
     """Mean steps per agent as bars, every trial as a dot (log scale: the spread can be
     wide), failed trials counted above the bar, the oracle bound as a dashed line."""
     agents = result["agents"]
@@ -112,11 +118,10 @@ def plot_env_change(result: dict, path: str | Path) -> None:
                  f"({result['trials']} trials; bar = mean, dots = trials) -- Table 6 / Fig. 5")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _save(fig, path, source)
 
 
-def plot_sample_complexity(result: dict, path: str | Path) -> None:
+def plot_sample_complexity(result: dict, path: str | Path, source: str | None = None) -> None:
     agents = result["agents"]
     goals = result["goals"]
     every = result.get("every", 5)
@@ -137,11 +142,10 @@ def plot_sample_complexity(result: dict, path: str | Path) -> None:
         ax.axis("off")
     fig.suptitle(f"Sample complexity ({result['trials']} trials) -- Fig. 6")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _save(fig, path, source)
 
 
-def plot_timing(result: dict, path: str | Path) -> None:
+def plot_timing(result: dict, path: str | Path, source: str | None = None) -> None:
     agents = result["agents"]
     keys = (("train_s", "training"), ("goal_adapt_s",
                                       f"goal {result['goals'][0]}→{result['goals'][1]}"),
@@ -151,8 +155,7 @@ def plot_timing(result: dict, path: str | Path) -> None:
     _grouped(ax, [label for _, label in keys], series,
              f"CPU seconds ({result['trials']} trials) -- Fig. 7", "CPU s", log=True)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _save(fig, path, source)
 
 
 def plain_log_y(ax) -> None:
@@ -166,7 +169,7 @@ def plain_log_y(ax) -> None:
         ax.yaxis.set_minor_formatter(plain)
 
 
-def plot_suite(result: dict, path: str | Path) -> None:
+def plot_suite(result: dict, path: str | Path, source: str | None = None) -> None:
     """One panel per family (the families of the suite JSON, see :mod:`.suite_runner`)."""
     s = result["suite"]
     fams = [f for f, d in s["families"].items() if d["mazes"]]
@@ -221,15 +224,14 @@ def plot_suite(result: dict, path: str | Path) -> None:
             else f"goal-change, {result['episodes']} episodes per goal")
     fig.suptitle(f"Suite {s['spec']} (seed {s['seed']}): {what}", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _save(fig, path, source)
 
 
 PLOTS = {"goal-change": plot_goal_change, "env-change": plot_env_change,
          "sample-complexity": plot_sample_complexity, "timing": plot_timing}
 
 
-def plot_delays(result: dict, path: str | Path) -> None:
+def plot_delays(result: dict, path: str | Path, source: str | None = None) -> None:
     """One panel per event delay K (:func:`.env_change.delay_views`): on a suite, per agent
     the per-maze values of the ``overall`` summary (oracle ratio after a block, episodes
     to optimal after an opening); on one maze, every trial's steps after the event."""
@@ -269,15 +271,14 @@ def plot_delays(result: dict, path: str | Path) -> None:
     fig.suptitle(f"env-change, {where}, {result['trials']} trials: the event K learning "
                  f"episodes after convergence", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _save(fig, path, source)
 
 
-def plot(result: dict, path: str | Path) -> None:
+def plot(result: dict, path: str | Path, source: str | None = None) -> None:
     if "delays" in result:
-        plot_delays(result, path)
+        plot_delays(result, path, source)
         return
     if "suite" in result:
-        plot_suite(result, path)
+        plot_suite(result, path, source)
         return
-    PLOTS[result["scenario"]](result, path)
+    PLOTS[result["scenario"]](result, path, source)

@@ -15,7 +15,9 @@ Every measured figure the README and the documentation show comes from a JSON fi
   and draws each file's figure to ``docs/figures/NAME.png`` with
   :func:`tmgwr_agent.experiments.plots.plot`.
 * ``./tmgwr results --check`` rewrites nothing and exits 1 naming every table that
-  differs from what its JSON gives (test/test_results.py runs the same comparison).
+  differs from what its JSON gives, and every figure not drawn from its JSON as it is now
+  (each PNG's ``Source`` text names the file and a digest of its result; a figure no file
+  draws any more counts too). test/test_results.py runs the same check.
 
 A table names the trial count of its runs, so a reader knows how much each cell rests on.
 """
@@ -23,6 +25,7 @@ A table names the trial count of its runs, so a reader knows how much each cell 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import re
@@ -598,14 +601,50 @@ def render(root: Path = ROOT, figures: bool = True) -> list[Path]:
             changed.append(path)
     if figures:
         from tmgwr_agent.experiments.plots import plot
-        out = root / FIGURES_DIR
-        out.mkdir(parents=True, exist_ok=True)
-        for f in sorted((root / "results").glob("*.json")):
-            doc = load(f.stem, root)
-            if "scenario" in doc["result"]:
-                plot(doc["result"], out / f"{f.stem}.png")
-                changed.append(out / f"{f.stem}.png")
+        (root / FIGURES_DIR).mkdir(parents=True, exist_ok=True)
+        for name, result in figure_results(root):
+            png = root / FIGURES_DIR / f"{name}.png"
+            plot(result, png, figure_source(name, result))
+            changed.append(png)
     return changed
+
+
+def figure_results(root: Path = ROOT) -> list[tuple[str, dict]]:
+    """``(NAME, result)`` of every results file that has a figure (an experiment's)."""
+    docs = [(f.stem, load(f.stem, root)["result"])
+            for f in sorted((root / "results").glob("*.json"))]
+    return [(name, result) for name, result in docs if "scenario" in result]
+
+
+def figure_source(name: str, result: dict) -> str:
+    """What a figure is drawn from: its results file and a digest of the ``result`` in it
+    (written into the PNG, so ``--check`` can tell whether a figure shows what its file
+    holds now)."""
+    digest = hashlib.sha256(json.dumps(result, sort_keys=True).encode()).hexdigest()
+    return f"results/{name}.json sha256:{digest}"
+
+
+def stale_figures(root: Path = ROOT) -> list[str]:
+    """``docs/figures/NAME.png: why`` for every figure missing, drawn from another result
+    than its file holds now, or left over from a results file that is gone."""
+    from PIL import Image
+
+    stale, drawn = [], set()
+    for name, result in figure_results(root):
+        rel = f"{FIGURES_DIR}/{name}.png"
+        drawn.add(rel)
+        if not (root / rel).is_file():
+            stale.append(f"{rel}: missing")
+            continue
+        with Image.open(root / rel) as png:
+            source = png.text.get("Source")
+        if source != figure_source(name, result):
+            stale.append(f"{rel}: not drawn from results/{name}.json as it is")
+    for png in sorted((root / FIGURES_DIR).glob("*.png")):
+        rel = f"{FIGURES_DIR}/{png.name}"
+        if rel not in drawn:
+            stale.append(f"{rel}: no results file draws it")
+    return stale
 
 
 # ---------------------------------------------------------------- command line
@@ -617,7 +656,8 @@ def register(subparsers) -> None:
                     "<!-- results:NAME --> markers) and the figures in docs/figures/ from "
                     "results/*.json; `record` makes such a file by running a command.")
     p.add_argument("--check", action="store_true",
-                   help="change nothing; exit 1 naming every table that differs from its JSON")
+                   help="change nothing; exit 1 naming every table or figure that differs "
+                        "from its JSON")
     p.add_argument("--no-figures", action="store_true", help="tables only")
     p.set_defaults(func=cmd_results)
     sub = p.add_subparsers(dest="results_command", metavar="SUBCOMMAND")
@@ -640,9 +680,10 @@ def register(subparsers) -> None:
 def cmd_results(args: argparse.Namespace) -> int:
     try:
         if args.check:
-            stale = stale_tables()
+            stale = [f"table {t}" for t in stale_tables()]
+            stale += [f"figure {f}" for f in stale_figures()]
             for s in stale:
-                print(f"tmgwr results: stale table {s}", file=sys.stderr)
+                print(f"tmgwr results: stale {s}", file=sys.stderr)
             return 1 if stale else 0
         for path in render(figures=not args.no_figures):
             print(f"wrote {path.relative_to(ROOT)}")
