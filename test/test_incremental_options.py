@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from tmgwr_agent.core import kernels
+from tmgwr_agent.core.unknown import NO_BELIEF
 
 P, K = 4, 4
 STEPS = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])   # the lattice moves
@@ -86,7 +87,7 @@ class World:
                               self.delta, 1.0, V_STAR, GAMMA, self.tried, self.bump_t,
                               self.closed_t, self.bump_e, self.succ, 60, 40.0, 12, 3.0, 0.5,
                               rho_new, stuck, grid, origin, self.V, self.sel, self.chain,
-                              U, rho, osucc, onb, ong)
+                              U, rho, osucc, onb, ong, *NO_BELIEF, np.ones(P, dtype=bool))
 
     def full(self, rho_new, stuck):
         cap = len(self.w)

@@ -760,7 +760,8 @@ kernels.option_values(w, out, np.ones(2, dtype=bool), 2, np.array([0]), np.array
                       np.zeros((4, 2)), 0.1, 10.0, 0.97, tried, bump_t, closed_t, bump_e,
                       succ, 10, 2.0, 9, 3.0, 1.0, 1.0, False, grid, origin, np.zeros(3),
                       np.ones((2, 4), dtype=bool), np.zeros((2, 4), dtype=bool), U, rho,
-                      osucc, onb, np.zeros((2, 4, 4)))
+                      osucc, onb, np.zeros((2, 4, 4)), np.full((0, 0), -1), np.zeros(2),
+                      np.ones(4, dtype=bool))
 print(rho[0, RIGHT], osucc[0, RIGHT])
 """
 

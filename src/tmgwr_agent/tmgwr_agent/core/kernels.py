@@ -1343,6 +1343,96 @@ def cell_grid(w, alive, n, L):
 
 
 @njit(cache=True)
+def belief_steps(w, alive, n, tried, bump_t, closed, delta, lattice, L, goal):
+    """The free-space belief's steps to the goal (unknown.py, *the free-space belief after a
+    break*): ``dist[r, c]`` = the fewest lattice moves (the primitives of ``lattice``, as
+    whole cells) from cell (r, c) (side L, from ``origin``) to the goal sensation's cell
+    over the cells not believed closed; -1 where no such way exists, -2 a cell believed
+    closed: the cell of a node in ``closed`` (its cell closed), or a cell a remembered wall
+    (a lattice primitive's pair whose last try bumped) predicts and no live node lies in.
+    The cells are those of the box the live nodes and the goal span and the ring of cells
+    just beyond it. 2-D only; other dimensions get an empty table (the options keep their
+    L1 value)."""
+    origin = np.zeros(2)
+    empty = np.full((0, 0), -1, dtype=np.int64)
+    if w.shape[1] != 2 or n == 0:
+        return empty, origin
+    lo = goal[:2].copy()
+    hi = goal[:2].copy()
+    for i in range(n):
+        if alive[i]:
+            for k in range(2):
+                lo[k] = min(lo[k], w[i, k])
+                hi[k] = max(hi[k], w[i, k])
+    origin[:] = lo - L
+    rows = int(np.floor((hi[0] - origin[0]) / L + 0.5)) + 2
+    cols = int(np.floor((hi[1] - origin[1]) / L + 0.5)) + 2
+    dist = np.full((rows, cols), -1, dtype=np.int64)
+    for i in range(n):
+        if not alive[i]:
+            continue
+        for a in range(tried.shape[1]):
+            if lattice[a] and tried[i, a] and bump_t[i, a] >= 0:
+                r = int(np.floor((w[i, 0] + delta[a, 0] - origin[0]) / L + 0.5))
+                c = int(np.floor((w[i, 1] + delta[a, 1] - origin[1]) / L + 0.5))
+                if 0 <= r < rows and 0 <= c < cols:
+                    dist[r, c] = -2
+    for i in range(n):
+        if alive[i]:
+            r = int(np.floor((w[i, 0] - origin[0]) / L + 0.5))
+            c = int(np.floor((w[i, 1] - origin[1]) / L + 0.5))
+            dist[r, c] = -2 if closed[i] else -1
+    # the moves as whole cells (reverse search from the goal: a predecessor is y - move)
+    dr = np.empty(tried.shape[1], dtype=np.int64)
+    dc = np.empty(tried.shape[1], dtype=np.int64)
+    for a in range(tried.shape[1]):
+        dr[a] = int(np.floor(delta[a, 0] / L + 0.5))
+        dc[a] = int(np.floor(delta[a, 1] / L + 0.5))
+    gr = int(np.floor((goal[0] - origin[0]) / L + 0.5))
+    gc = int(np.floor((goal[1] - origin[1]) / L + 0.5))
+    queue = np.empty(rows * cols, dtype=np.int64)
+    dist[gr, gc] = 0
+    queue[0] = gr * cols + gc
+    head, tail = 0, 1
+    while head < tail:
+        r, c = divmod(queue[head], cols)
+        head += 1
+        for a in range(tried.shape[1]):
+            if not lattice[a] or (dr[a] == 0 and dc[a] == 0):
+                continue
+            pr, pc = r - dr[a], c - dc[a]
+            if 0 <= pr < rows and 0 <= pc < cols and dist[pr, pc] == -1:
+                dist[pr, pc] = dist[r, c] + 1
+                queue[tail] = pr * cols + pc
+                tail += 1
+    return dist, origin
+
+
+@njit(cache=True)
+def belief_h(dist, origin, L, x, delta, lattice):
+    """Steps from position x to the goal in the belief of :func:`belief_steps`: its cell's
+    distance; for a cell believed closed (an option supposes it open), one more than its
+    best neighbour's; -1 when the belief knows no way; -3 when x lies beyond the table."""
+    r = int(np.floor((x[0] - origin[0]) / L + 0.5))
+    c = int(np.floor((x[1] - origin[1]) / L + 0.5))
+    if r < 0 or c < 0 or r >= dist.shape[0] or c >= dist.shape[1]:
+        return -3
+    d = dist[r, c]
+    if d != -2:
+        return d
+    best = -1
+    for a in range(delta.shape[0]):
+        if not lattice[a]:
+            continue
+        nr = r + int(np.floor(delta[a, 0] / L + 0.5))
+        nc = c + int(np.floor(delta[a, 1] / L + 0.5))
+        if 0 <= nr < dist.shape[0] and 0 <= nc < dist.shape[1] and dist[nr, nc] >= 0:
+            if best < 0 or dist[nr, nc] + 1 < best:
+                best = dist[nr, nc] + 1
+    return best
+
+
+@njit(cache=True)
 def in_extent(grid, origin, L, x):
     """Whether position x lies within the known extent of the world: the rows and
     columns of :func:`cell_grid` that its nodes span (not its one-cell margin)."""
@@ -1527,7 +1617,8 @@ def _linked(out, i, j):
 @njit(cache=True)
 def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, bump_t,
                   closed_t, bump_e, succ, clock, horizon, episode, trust, rho_max, rho_new,
-                  stuck, grid, origin, V, sel, chain, U, rho, osucc, onb, ong):
+                  stuck, grid, origin, V, sel, chain, U, rho, osucc, onb, ong,
+                  bdist, borigin, lattice):
     """The options of the value of the unknown (motivation.py, Eq. 5') of the nodes
     ``rows`` (none for dead slots; rows >= n are skipped), per node i and primitive a:
     ``rho[i, a]`` = ``rho_new`` for a primitive never taken from i (the chance a move opens,
@@ -1548,8 +1639,12 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
     a]``): the known nodes next to it, or next to a cell of a run of unknown cells from it,
     ``k`` cells along (straight on or sideways: a wall that opens opens along its run,
     :func:`wall_exits`); no exit: no option. ``stuck``: the optimistic U, as for unknown
-    space. ``V``: the last solve's potentials (they pick the exits). (One loop over the rows
-    and pairs: a call per row cost more than its work.)"""
+    space. ``V``: the last solve's potentials (they pick the exits). ``bdist`` (with
+    ``borigin``; empty: none): the free-space belief after a break (:func:`belief_steps`),
+    which, for a ``lattice`` primitive, replaces the L1 count ``h`` by the belief's steps
+    (:func:`belief_h`; no way: U = 0) and drops an option that is not a remembered wall
+    chosen for a re-test when its cell is no nearer the goal than its node's, by the
+    belief. (One loop over the rows and pairs: a call per row cost more than its work.)"""
     x = np.empty(w.shape[1])
     for i in rows:
         if i >= n:
@@ -1598,6 +1693,15 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
                 onb[i, a, b] = -1
                 ong[i, a, b] = 0.0
             u = v_star * gamma ** (d / L)
+            if bdist.shape[0] > 0 and lattice[a]:
+                h = belief_h(bdist, borigin, L, x, delta, lattice)
+                h_i = belief_h(bdist, borigin, L, w[i], delta, lattice)
+                if h_i >= 0 and not wall and (h < 0 or h >= h_i):
+                    r = 0.0         # off every shortest believed way from i
+                elif h == -1:
+                    u = 0.0
+                elif h >= 0:
+                    u = v_star * gamma ** h
             if r > 0.0 and wall:
                 # a remembered wall: if it opened, the cell leads on to known nodes
                 j = -2

@@ -100,7 +100,7 @@ import numpy as np
 from tmgwr_agent.core import kernels
 from tmgwr_agent.core.frame import Frame
 from tmgwr_agent.core.sensorimotor_map import Links, SensorimotorMap
-from tmgwr_agent.core.unknown import GOAL_R, UNKNOWN, OptionRules, OutcomeMemory, grown
+from tmgwr_agent.core.unknown import GOAL_R, NO_BELIEF, UNKNOWN, OptionRules, OutcomeMemory, grown
 from tmgwr_common.params import Config, param
 
 #: Potentials below this are 0: gamma**d for d > 10,000 steps.
@@ -326,6 +326,7 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         self._v0_fresh = False
         self._v0_zero = True
         self._options_key: tuple = ()
+        self._belief = NO_BELIEF          # the free-space belief after a break (unknown.py)
         self._opt_log, self._opt_pos, self._opt_L = None, -1, 0.0   # of the last key change
         self._dirty: set[int] = set()    # rows whose outcome memory changed since update
         self._alive_version, self._alive = -1, 0

@@ -191,6 +191,27 @@ successor, an *option*, in the max of Eq. 5::
   known extent for the same reason, :func:`kernels.wall_exits`). Without it the maze's
   outer wall, valued as unknown space as near the goal as any inner wall, was re-tested
   cell by cell before the opening.
+* *The free-space belief after a break* (the belief of a free-space planner, D* Lite's:
+  unknown space is free, what bumped is closed; Koenig & Likhachev 2002). The L1 count
+  ``h`` of an option's cell passes through every wall the agent knows of. While the route
+  is known that matters little (an option pays only where it beats the route); once it
+  broke (``broken``) the options lead the agent, and the L1 count ranked a cell of the
+  world's outer wall as near the goal as a cell of the wall that holds the way round: after
+  a block in the generated blocking family the agent tested the outer wall and swept the
+  inner one back and forth. After a break, then, ``h`` is the fewest lattice moves from the
+  option's cell to the goal's over the cells not believed closed
+  (:func:`kernels.belief_steps`): believed closed are the cells that closed (above) and
+  the cells remembered walls predict where no node lies; every other cell of the box the
+  places and the goal span, and of the ring just beyond it, is believed open. The walls
+  the agent knows lie in that ring at most; beyond it nothing was ever sensed and the goal
+  is not there, so, as for the walls above, a way out there is the untried moves' to find
+  as the box grows. A remembered wall, supposed open by its option, is one move more than
+  its best neighbour; a cell with no believed way is worth nothing. An option whose cell is
+  no nearer the goal by the belief than its own node's is dropped (not a re-test chosen
+  at the episode's start: those are valued by their exits): it lies on no shortest
+  believed way, and a free-space planner tries only the moves of its shortest believed
+  path. When the node itself has no believed way (every way it knows of is closed), its
+  options stay, valued by the belief.
 * *The goal when the route broke*: an episode ends at the goal, so the agent never moves
   from a goal node, and its potential in Eq. 5' is ``R_g`` plus what its own untried
   moves promise (about 10 here, against the ``V* = 17`` the unknown is scaled to: a goal
@@ -251,6 +272,9 @@ from tmgwr_agent.core import kernels
 from tmgwr_agent.core.frame import LearntFrame, SensorFrame
 from tmgwr_agent.core.outcome import Outcome
 from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
+
+#: No free-space belief (before a break, or without a lattice primitive): an empty table.
+NO_BELIEF = (np.full((0, 0), -1, dtype=np.int64), np.zeros(2))
 
 #: A node with R_i = sim(i, g) at least this represents the goal (a source of the
 #: reachability test; never absorbing).
@@ -733,6 +757,9 @@ class OptionRules:
                 if self._options_key[1:] == key[1:] and key[0][1] == self._options_key[0][1]:
                     rows = self._changed_option_rows(m, n, F, *was, stuck)
             self._options_key = key
+            self._belief = kernels.belief_steps(
+                F.w, m.alive, n, self.tried, self.bump_t, self.closed_cells(n), F.delta,
+                self.lattice, F.L, F.goal) if self.broken and self.lattice.any() else NO_BELIEF
             if rows is None:
                 self.rho_new = self.open_prior(m, n)
                 rows = np.arange(n)
@@ -748,12 +775,14 @@ class OptionRules:
         self._dirty.clear()
         self._opt_rows = rows if self._opt_rows is None or len(rows) == n else \
             union_rows(self._opt_rows, rows)
+        bdist, borigin = self._belief
         kernels.option_values(F.w, m.out, m.alive, n, rows, F.goal, F.delta,
                               F.L, self.v_star, self.gamma, self.tried, self.bump_t,
                               self.closed_t, self.bump_e, self.succ, clock, T, self.episode,
                               self.stale_horizon, rho_max, self.rho_new, stuck, self._grid,
                               self._origin, self.V, self.sel, self.chain,
-                              self.U, self.rho, self.osucc, self.onb, self.ong)
+                              self.U, self.rho, self.osucc, self.onb, self.ong,
+                              bdist, borigin, self.lattice)
         if not self.lattice.all():
             self._unplaced_options(m, rows[rows < n], np.flatnonzero(~self.lattice),
                                    rho_max if stuck else 0.0, clock, T)
@@ -769,12 +798,13 @@ class OptionRules:
         clock, T = self.stuck_clock(nodes)
         spent = not stuck and self.budget_spent(nodes)
         rho_max = self.wall_prior() if stuck else 0.0 if spent else self.stale_prior
-        # a break re-values the moves off the lattice (_unplaced_options reads ``broken``),
-        # and so does each pair found shut since (its place shuts others: _shut_places,
+        # a break re-values the options (the free-space belief; off the lattice
+        # _unplaced_options reads ``broken``), and so does each pair found shut since (a
+        # wall more in the belief; off the lattice its place shuts others: _shut_places,
         # when some primitive only turns; without one such a refresh is in vain, and
         # cheaper than finding the turns, which refits their forward models, every step)
         off = self.broken and not self.lattice.all()
-        shut = int(np.count_nonzero(self.bump_t[:n] >= self.break_t)) if off else -1
+        shut = int(np.count_nonzero(self.bump_t[:n] >= self.break_t)) if self.broken else -1
         key = ((m.version, self.frame.version), clock if stuck else self.episode, n, stuck,
                spent, rho_max, off, shut)
         return key, clock, T, rho_max
