@@ -53,6 +53,8 @@ def warm_up(max_steps: int = 3000) -> list[str]:
         if agent.winner >= 0:
             links = agent.motivation.links_of(agent.map, agent.winner)
             kernels.best_links(links.targets, links.E, agent.motivation.V)
+    # the free-space belief, read after a route broke (never in this static maze)
+    agent.motivation.free_space_belief(agent.map, agent.map.n)
     # the map's node index, built from INDEX_MIN slots on (larger than this maze's map)
     from tmgwr_agent.core.node_index import NodeIndex
     NodeIndex().build(agent.map)

@@ -757,9 +757,8 @@ class OptionRules:
                 if self._options_key[1:] == key[1:] and key[0][1] == self._options_key[0][1]:
                     rows = self._changed_option_rows(m, n, F, *was, stuck)
             self._options_key = key
-            self._belief = kernels.belief_steps(
-                F.w, m.alive, n, self.tried, self.bump_t, self.closed_cells(n), F.delta,
-                self.lattice, F.L, F.goal) if self.broken and self.lattice.any() else NO_BELIEF
+            self._belief = self.free_space_belief(m, n) \
+                if self.broken and self.lattice.any() else NO_BELIEF
             if rows is None:
                 self.rho_new = self.open_prior(m, n)
                 rows = np.arange(n)
@@ -788,6 +787,14 @@ class OptionRules:
                                    rho_max if stuck else 0.0, clock, T)
         if self.bounds is not None:
             self.outside_options(m, n)
+
+    def free_space_belief(self, m: SensorimotorMap, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """The free-space belief's steps to the goal and its table's origin
+        (:func:`kernels.belief_steps`; the module docstring), in the frame of the last
+        refresh."""
+        F = self._F
+        return kernels.belief_steps(F.w, m.alive, n, self.tried, self.bump_t,
+                                    self.closed_cells(n), F.delta, self.lattice, F.L, F.goal)
 
     def options_key(self, m: SensorimotorMap, n: int, stuck: bool
                     ) -> tuple[tuple, int, float, float]:
