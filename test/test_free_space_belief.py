@@ -113,3 +113,14 @@ def test_after_the_block_the_agent_never_tests_the_outer_wall(unknown, seed):
     world.fire_event("a")
     reached, outer = episode()
     assert reached and outer == []
+
+
+@pytest.mark.parametrize("delta", [np.array([[-0.87, 0.5], [0.87, -0.5], [-0.5, -0.87],
+                                             [0.5, 0.87]]),                 # rotated 30
+                                   ACTION_VECTORS * np.array([1.0, 2.0])])  # scaled 1:2
+def test_no_belief_unless_every_move_is_one_cell_along_an_axis(delta):
+    w = np.array([[0.0, 0.0], [1.0, 0.0]])
+    dist, _ = kernels.belief_steps(w, np.ones(2, dtype=bool), 2, np.ones((2, 4), bool),
+                                   np.full((2, 4), -1), np.zeros(2, bool), delta,
+                                   np.ones(4, bool), 1.0, np.array([1.0, 0.0]))
+    assert dist.shape == (0, 0)

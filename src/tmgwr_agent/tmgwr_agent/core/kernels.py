@@ -1351,12 +1351,25 @@ def belief_steps(w, alive, n, tried, bump_t, closed, delta, lattice, L, goal):
     closed: the cell of a node in ``closed`` (its cell closed), or a cell a remembered wall
     (a lattice primitive's pair whose last try bumped) predicts and no live node lies in.
     The cells are those of the box the live nodes and the goal span and the ring of cells
-    just beyond it. 2-D only; other dimensions get an empty table (the options keep their
-    L1 value)."""
+    just beyond it. An empty table (the options keep their L1 value) in other dimensions,
+    and unless every lattice primitive moves one cell along an axis (within a quarter
+    cell): the cells of another basis (a grid model on rotated or rescaled axes) are not
+    the places the moves join."""
     origin = np.zeros(2)
     empty = np.full((0, 0), -1, dtype=np.int64)
     if w.shape[1] != 2 or n == 0:
         return empty, origin
+    # the moves as whole cells: one cell along an axis each (or none), else no belief
+    dr = np.zeros(tried.shape[1], dtype=np.int64)
+    dc = np.zeros(tried.shape[1], dtype=np.int64)
+    for a in range(tried.shape[1]):
+        if not lattice[a]:
+            continue
+        dr[a] = int(np.floor(delta[a, 0] / L + 0.5))
+        dc[a] = int(np.floor(delta[a, 1] / L + 0.5))
+        if abs(dr[a]) + abs(dc[a]) > 1 or abs(delta[a, 0] / L - dr[a]) > 0.25 \
+                or abs(delta[a, 1] / L - dc[a]) > 0.25:
+            return empty, origin            # (0, 0): a primitive that never moved
     lo = goal[:2].copy()
     hi = goal[:2].copy()
     for i in range(n):
@@ -1382,12 +1395,7 @@ def belief_steps(w, alive, n, tried, bump_t, closed, delta, lattice, L, goal):
             r = int(np.floor((w[i, 0] - origin[0]) / L + 0.5))
             c = int(np.floor((w[i, 1] - origin[1]) / L + 0.5))
             dist[r, c] = -2 if closed[i] else -1
-    # the moves as whole cells (reverse search from the goal: a predecessor is y - move)
-    dr = np.empty(tried.shape[1], dtype=np.int64)
-    dc = np.empty(tried.shape[1], dtype=np.int64)
-    for a in range(tried.shape[1]):
-        dr[a] = int(np.floor(delta[a, 0] / L + 0.5))
-        dc[a] = int(np.floor(delta[a, 1] / L + 0.5))
+    # breadth first from the goal (a predecessor of cell y is y less a move)
     gr = int(np.floor((goal[0] - origin[0]) / L + 0.5))
     gc = int(np.floor((goal[1] - origin[1]) / L + 0.5))
     queue = np.empty(rows * cols, dtype=np.int64)
@@ -1398,7 +1406,7 @@ def belief_steps(w, alive, n, tried, bump_t, closed, delta, lattice, L, goal):
         r, c = divmod(queue[head], cols)
         head += 1
         for a in range(tried.shape[1]):
-            if not lattice[a] or (dr[a] == 0 and dc[a] == 0):
+            if dr[a] == 0 and dc[a] == 0:
                 continue
             pr, pc = r - dr[a], c - dc[a]
             if 0 <= pr < rows and 0 <= pc < cols and dist[pr, pc] == -1:
