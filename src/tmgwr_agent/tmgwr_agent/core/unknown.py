@@ -211,7 +211,9 @@ successor, an *option*, in the max of Eq. 5::
   at the episode's start: those are valued by their exits): it lies on no shortest
   believed way, and a free-space planner tries only the moves of its shortest believed
   path. When the node itself has no believed way (every way it knows of is closed), its
-  options stay, valued by the belief.
+  options stay, valued by the belief. Only while every lattice primitive moves one cell
+  along an axis and its sensed moves scatter within a quarter cell
+  (:meth:`OptionRules.free_space_belief`): else the cells are not the places.
 * *The goal when the route broke*: an episode ends at the goal, so the agent never moves
   from a goal node, and its potential in Eq. 5' is ``R_g`` plus what its own untried
   moves promise (about 10 here, against the ``V* = 17`` the unknown is scaled to: a goal
@@ -788,10 +790,20 @@ class OptionRules:
         if self.bounds is not None:
             self.outside_options(m, n)
 
+    #: The belief's cells hold the places only while each move's sensed displacements
+    #: scatter at most this share of its length (a quarter cell on a lattice).
+    BELIEF_SPREAD = 0.25
+
     def free_space_belief(self, m: SensorimotorMap, n: int) -> tuple[np.ndarray, np.ndarray]:
         """The free-space belief's steps to the goal and its table's origin
         (:func:`kernels.belief_steps`; the module docstring), in the frame of the last
-        refresh."""
+        refresh; none (:data:`NO_BELIEF`) while a lattice primitive's moves scatter more
+        than :attr:`BELIEF_SPREAD` of its length: rounded to cells, scattered places put
+        the walls they bumped into in the wrong cells, and a wrong closed cell stays."""
+        length = np.sqrt(np.einsum("ij,ij->i", self.delta, self.delta))
+        if (self.lattice & (self.moves > 0)
+                & (self.spread() > self.BELIEF_SPREAD * length)).any():
+            return NO_BELIEF
         F = self._F
         return kernels.belief_steps(F.w, m.alive, n, self.tried, self.bump_t,
                                     self.closed_cells(n), F.delta, self.lattice, F.L, F.goal)
