@@ -124,3 +124,24 @@ def test_no_belief_unless_every_move_is_one_cell_along_an_axis(delta):
                                    np.full((2, 4), -1), np.zeros(2, bool), delta,
                                    np.ones(4, bool), 1.0, np.array([1.0, 0.0]))
     assert dist.shape == (0, 0)
+
+
+@pytest.mark.parametrize("noise, table", [(0.0, True), (0.3, False)])
+def test_no_belief_while_the_sensed_moves_scatter_beyond_a_quarter_cell(noise, table):
+    """Rounded to cells, scattered places put the walls they bumped into in wrong cells."""
+    maze = Maze.from_text(BLOCKING)
+    agent = TMGWRAgent(maze_senses(), np.random.default_rng(0))
+    world = GridWorld(maze, "G", sensor_noise=noise, seed=0)
+    agent.set_goal(world.goal, world.goal_observation())
+    obs, info = world.reset()
+    agent.begin_episode(obs, info["cell"])
+    for _ in range(300):
+        obs, _, term, trunc, info = world.step(agent.act())
+        agent.observe(obs, info)
+        if term or trunc:
+            break
+    mo = agent.motivation
+    length = np.linalg.norm(mo.delta, axis=1)
+    assert mo.moves.min() > 0 and (mo.spread() / length).max() > 0.25 or table
+    dist, _ = mo.free_space_belief(agent.map, agent.map.n)
+    assert (dist.size > 0) == table
