@@ -115,33 +115,30 @@ def test_after_the_block_the_agent_never_tests_the_outer_wall(unknown, seed):
     assert reached and outer == []
 
 
-@pytest.mark.parametrize("delta", [np.array([[-0.87, 0.5], [0.87, -0.5], [-0.5, -0.87],
-                                             [0.5, 0.87]]),                 # rotated 30
-                                   ACTION_VECTORS * np.array([1.0, 2.0])])  # scaled 1:2
-def test_no_belief_unless_every_move_is_one_cell_along_an_axis(delta):
-    w = np.array([[0.0, 0.0], [1.0, 0.0]])
-    dist, _ = kernels.belief_steps(w, np.ones(2, dtype=bool), 2, np.ones((2, 4), bool),
-                                   np.full((2, 4), -1), np.zeros(2, bool), delta,
-                                   np.ones(4, bool), 1.0, np.array([1.0, 0.0]))
-    assert dist.shape == (0, 0)
-
-
-@pytest.mark.parametrize("noise, table", [(0.0, True), (0.3, False)])
-def test_no_belief_while_the_sensed_moves_scatter_beyond_a_quarter_cell(noise, table):
-    """Rounded to cells, scattered places put the walls they bumped into in wrong cells."""
+@pytest.mark.parametrize("agent, sensor, hold", [
+    ("tmgwr", "identity", True), ("tmgwr:grid", "identity", True),
+    ("tmgwr", "rotate=30", True),            # the learnt frame's axes are the moves
+    ("tmgwr:grid", "rotate=30", False),      # the sensor's axes: a move joins diagonals
+    ("tmgwr:grid", "scale=1:2", False),      # two cells a move on one axis
+    ("tmgwr", "noise=0.3", False)])          # the places scatter across cells
+def test_the_cells_hold_the_places_only_where_each_move_is_one_cell_along_an_axis(
+        agent, sensor, hold):
+    from tmgwr_agent.experiments.agent_factory import make_agent
+    from tmgwr_agent.experiments.runner import Caps, make_world
     maze = Maze.from_text(BLOCKING)
-    agent = TMGWRAgent(maze_senses(), np.random.default_rng(0))
-    world = GridWorld(maze, "G", sensor_noise=noise, seed=0)
-    agent.set_goal(world.goal, world.goal_observation())
-    obs, info = world.reset()
-    agent.begin_episode(obs, info["cell"])
-    for _ in range(300):
-        obs, _, term, trunc, info = world.step(agent.act())
-        agent.observe(obs, info)
-        if term or trunc:
+    world = make_world(maze, "G", Caps.for_maze(maze), sensor, np.random.SeedSequence(0))
+    ag = make_agent(agent, maze, np.random.default_rng(0), None, sensed=not world.identity,
+                    senses=world.senses)
+    ag.set_goal(world.goal, world.goal_observation())
+    for _ in range(5):                       # until every primitive has moved
+        obs, info = world.reset()
+        ag.begin_episode(obs, None)
+        for _ in range(300):
+            obs, _, term, trunc, info = world.step(ag.act())
+            ag.observe(obs, info)
+            if term or trunc:
+                break
+        if ag.motivation.moves.min() > 0:
             break
-    mo = agent.motivation
-    length = np.linalg.norm(mo.delta, axis=1)
-    assert mo.moves.min() > 0 and (mo.spread() / length).max() > 0.25 or table
-    dist, _ = mo.free_space_belief(agent.map, agent.map.n)
-    assert (dist.size > 0) == table
+    assert ag.motivation.moves.min() > 0 and ag.motivation.cells_hold() == hold
+

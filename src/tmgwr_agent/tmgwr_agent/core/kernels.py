@@ -1351,25 +1351,21 @@ def belief_steps(w, alive, n, tried, bump_t, closed, delta, lattice, L, goal):
     closed: the cell of a node in ``closed`` (its cell closed), or a cell a remembered wall
     (a lattice primitive's pair whose last try bumped) predicts and no live node lies in.
     The cells are those of the box the live nodes and the goal span and the ring of cells
-    just beyond it. An empty table (the options keep their L1 value) in other dimensions,
-    and unless every lattice primitive moves one cell along an axis (within a quarter
-    cell): the cells of another basis (a grid model on rotated or rescaled axes) are not
-    the places the moves join."""
+    just beyond it; each lattice primitive's move, rounded to whole cells, is one step of
+    the search (the caller checks that the cells hold the places:
+    ``OptionRules.cells_hold``). An empty table (the options keep their L1 value) in other
+    dimensions."""
     origin = np.zeros(2)
     empty = np.full((0, 0), -1, dtype=np.int64)
     if w.shape[1] != 2 or n == 0:
         return empty, origin
-    # the moves as whole cells: one cell along an axis each (or none), else no belief
+    # the moves as whole cells ((0, 0): a primitive that never moved)
     dr = np.zeros(tried.shape[1], dtype=np.int64)
     dc = np.zeros(tried.shape[1], dtype=np.int64)
     for a in range(tried.shape[1]):
-        if not lattice[a]:
-            continue
-        dr[a] = int(np.floor(delta[a, 0] / L + 0.5))
-        dc[a] = int(np.floor(delta[a, 1] / L + 0.5))
-        if abs(dr[a]) + abs(dc[a]) > 1 or abs(delta[a, 0] / L - dr[a]) > 0.25 \
-                or abs(delta[a, 1] / L - dc[a]) > 0.25:
-            return empty, origin            # (0, 0): a primitive that never moved
+        if lattice[a]:
+            dr[a] = int(np.floor(delta[a, 0] / L + 0.5))
+            dc[a] = int(np.floor(delta[a, 1] / L + 0.5))
     lo = goal[:2].copy()
     hi = goal[:2].copy()
     for i in range(n):

@@ -211,9 +211,9 @@ successor, an *option*, in the max of Eq. 5::
   at the episode's start: those are valued by their exits): it lies on no shortest
   believed way, and a free-space planner tries only the moves of its shortest believed
   path. When the node itself has no believed way (every way it knows of is closed), its
-  options stay, valued by the belief. Only while every lattice primitive moves one cell
-  along an axis and its sensed moves scatter within a quarter cell
-  (:meth:`OptionRules.free_space_belief`): else the cells are not the places.
+  options stay, valued by the belief. Only while the cells hold the places
+  (:meth:`OptionRules.cells_hold`: every lattice primitive moves one cell along an axis
+  and its sensed moves scatter within a quarter cell).
 * *The goal when the route broke*: an episode ends at the goal, so the agent never moves
   from a goal node, and its potential in Eq. 5' is ``R_g`` plus what its own untried
   moves promise (about 10 here, against the ``V* = 17`` the unknown is scaled to: a goal
@@ -759,8 +759,7 @@ class OptionRules:
                 if self._options_key[1:] == key[1:] and key[0][1] == self._options_key[0][1]:
                     rows = self._changed_option_rows(m, n, F, *was, stuck)
             self._options_key = key
-            self._belief = self.free_space_belief(m, n) \
-                if self.broken and self.lattice.any() else NO_BELIEF
+            self._belief = self.free_space_belief(m, n) if key[-1] else NO_BELIEF
             if rows is None:
                 self.rho_new = self.open_prior(m, n)
                 rows = np.arange(n)
@@ -790,20 +789,33 @@ class OptionRules:
         if self.bounds is not None:
             self.outside_options(m, n)
 
-    #: The belief's cells hold the places only while each move's sensed displacements
-    #: scatter at most this share of its length (a quarter cell on a lattice).
-    BELIEF_SPREAD = 0.25
+    #: How far (a share of a cell) a move may lie off one cell along an axis, and its
+    #: sensed moves scatter, for the belief's cells to hold the places.
+    CELL_SLACK = 0.25
+
+    def cells_hold(self) -> bool:
+        """Whether the free-space belief's cells are the places the moves join: every
+        lattice primitive that moved moves one cell along an axis of the frame, within
+        :attr:`CELL_SLACK` of a cell, and its sensed moves scatter within that share of
+        its length. Not so for a grid model on rotated or rescaled sensor axes (a move
+        joins cells that are not neighbours), nor under sensor noise (rounded to cells,
+        scattered places put the walls they bumped into in the wrong cells, and a wrong
+        closed cell stays)."""
+        F = self._F
+        moved = self.lattice & (self.moves > 0)
+        if F is None or not moved.any() or F.delta.shape[1] != 2:
+            return False
+        d = F.delta[moved] / F.L
+        cell = np.floor(d + 0.5)
+        length = np.sqrt(np.einsum("ij,ij->i", self.delta, self.delta))[moved]
+        return bool((np.abs(cell).sum(axis=1) == 1).all()
+                    and (np.abs(d - cell) <= self.CELL_SLACK).all()
+                    and (self.spread()[moved] <= self.CELL_SLACK * length).all())
 
     def free_space_belief(self, m: SensorimotorMap, n: int) -> tuple[np.ndarray, np.ndarray]:
         """The free-space belief's steps to the goal and its table's origin
         (:func:`kernels.belief_steps`; the module docstring), in the frame of the last
-        refresh; none (:data:`NO_BELIEF`) while a lattice primitive's moves scatter more
-        than :attr:`BELIEF_SPREAD` of its length: rounded to cells, scattered places put
-        the walls they bumped into in the wrong cells, and a wrong closed cell stays."""
-        length = np.sqrt(np.einsum("ij,ij->i", self.delta, self.delta))
-        if (self.lattice & (self.moves > 0)
-                & (self.spread() > self.BELIEF_SPREAD * length)).any():
-            return NO_BELIEF
+        refresh."""
         F = self._F
         return kernels.belief_steps(F.w, m.alive, n, self.tried, self.bump_t,
                                     self.closed_cells(n), F.delta, self.lattice, F.L, F.goal)
@@ -817,15 +829,17 @@ class OptionRules:
         clock, T = self.stuck_clock(nodes)
         spent = not stuck and self.budget_spent(nodes)
         rho_max = self.wall_prior() if stuck else 0.0 if spent else self.stale_prior
-        # a break re-values the options (the free-space belief; off the lattice
-        # _unplaced_options reads ``broken``), and so does each pair found shut since (a
-        # wall more in the belief; off the lattice its place shuts others: _shut_places,
-        # when some primitive only turns; without one such a refresh is in vain, and
-        # cheaper than finding the turns, which refits their forward models, every step)
+        # a break re-values the moves off the lattice (_unplaced_options reads ``broken``)
+        # and, where the cells hold the places, the others (the free-space belief); so
+        # does each pair found shut since (a wall more in the belief; off the lattice its
+        # place shuts others: _shut_places, when some primitive only turns; without one
+        # such a refresh is in vain, and cheaper than finding the turns, which refits
+        # their forward models, every step)
         off = self.broken and not self.lattice.all()
-        shut = int(np.count_nonzero(self.bump_t[:n] >= self.break_t)) if self.broken else -1
+        belief = self.broken and self.cells_hold()
+        shut = int(np.count_nonzero(self.bump_t[:n] >= self.break_t)) if off or belief else -1
         key = ((m.version, self.frame.version), clock if stuck else self.episode, n, stuck,
-               spent, rho_max, off, shut)
+               spent, rho_max, off, shut, belief)
         return key, clock, T, rho_max
 
     def outside_options(self, m: SensorimotorMap, n: int) -> None:
