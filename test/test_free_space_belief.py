@@ -120,7 +120,7 @@ def test_after_the_block_the_agent_never_tests_the_outer_wall(unknown, seed):
     ("tmgwr", "rotate=30", True),            # the learnt frame's axes are the moves
     ("tmgwr:grid", "rotate=30", False),      # the sensor's axes: a move joins diagonals
     ("tmgwr:grid", "scale=1:2", False),      # two cells a move on one axis
-    ("tmgwr", "noise=0.3", False)])          # the places scatter across cells
+    ("tmgwr", "noise=0.1", False)])          # the places scatter
 def test_the_cells_hold_the_places_only_where_each_move_is_one_cell_along_an_axis(
         agent, sensor, hold):
     from tmgwr_agent.experiments.agent_factory import make_agent

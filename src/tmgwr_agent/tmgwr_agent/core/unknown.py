@@ -212,8 +212,8 @@ successor, an *option*, in the max of Eq. 5::
   believed way, and a free-space planner tries only the moves of its shortest believed
   path. When the node itself has no believed way (every way it knows of is closed), its
   options stay, valued by the belief. Only while the cells hold the places
-  (:meth:`OptionRules.cells_hold`: every lattice primitive moves one cell along an axis
-  and its sensed moves scatter within a quarter cell).
+  (:meth:`OptionRules.cells_hold`: every lattice primitive moves one cell along an axis,
+  and its sensed moves hardly scatter: no sensor noise).
 * *The goal when the route broke*: an episode ends at the goal, so the agent never moves
   from a goal node, and its potential in Eq. 5' is ``R_g`` plus what its own untried
   moves promise (about 10 here, against the ``V* = 17`` the unknown is scaled to: a goal
@@ -789,18 +789,24 @@ class OptionRules:
         if self.bounds is not None:
             self.outside_options(m, n)
 
-    #: How far (a share of a cell) a move may lie off one cell along an axis, and its
-    #: sensed moves scatter, for the belief's cells to hold the places.
+    #: How far (a share of a cell) a move may lie off one cell along an axis for the
+    #: belief's cells to hold the places.
     CELL_SLACK = 0.25
+    #: How far its sensed moves may scatter (a share of its length): sensing without
+    #: noise, so that no place is misread. Under sensor noise of a fifth of a cell the
+    #: spread sat at about a quarter of a step, and with the belief some trials looped
+    #: between walls they had just tested (a misread place puts its wall in the wrong
+    #: cell, and the wrong closed cell stays).
+    CELL_SCATTER = 0.05
 
     def cells_hold(self) -> bool:
         """Whether the free-space belief's cells are the places the moves join: every
         lattice primitive that moved moves one cell along an axis of the frame, within
-        :attr:`CELL_SLACK` of a cell, and its sensed moves scatter within that share of
-        its length. Not so for a grid model on rotated or rescaled sensor axes (a move
-        joins cells that are not neighbours), nor under sensor noise (rounded to cells,
-        scattered places put the walls they bumped into in the wrong cells, and a wrong
-        closed cell stays)."""
+        :attr:`CELL_SLACK` of a cell, and its sensed moves scatter within
+        :attr:`CELL_SCATTER` of its length. Not so for a grid model on rotated or
+        rescaled sensor axes (a move joins cells that are not neighbours), nor under
+        sensor noise (rounded to cells, scattered places put the walls they bumped into
+        in the wrong cells)."""
         F = self._F
         moved = self.lattice & (self.moves > 0)
         if F is None or not moved.any() or F.delta.shape[1] != 2:
@@ -810,7 +816,7 @@ class OptionRules:
         length = np.sqrt(np.einsum("ij,ij->i", self.delta, self.delta))[moved]
         return bool((np.abs(cell).sum(axis=1) == 1).all()
                     and (np.abs(d - cell) <= self.CELL_SLACK).all()
-                    and (self.spread()[moved] <= self.CELL_SLACK * length).all())
+                    and (self.spread()[moved] <= self.CELL_SCATTER * length).all())
 
     def free_space_belief(self, m: SensorimotorMap, n: int) -> tuple[np.ndarray, np.ndarray]:
         """The free-space belief's steps to the goal and its table's origin
