@@ -1700,7 +1700,7 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
             if bdist.shape[0] > 0 and lattice[a]:
                 h = belief_h(bdist, borigin, L, x, delta, lattice)
                 h_i = belief_h(bdist, borigin, L, w[i], delta, lattice)
-                if h_i >= 0 and not wall and (h < 0 or h >= h_i):
+                if h_i >= 0 and not wall and (h == -1 or h >= h_i):
                     r = 0.0         # off every shortest believed way from i
                 elif h == -1:
                     u = 0.0

@@ -793,10 +793,9 @@ class OptionRules:
     #: belief's cells to hold the places.
     CELL_SLACK = 0.25
     #: How far its sensed moves may scatter (a share of its length): sensing without
-    #: noise, so that no place is misread. Under sensor noise of a fifth of a cell the
-    #: spread sat at about a quarter of a step, and with the belief some trials looped
-    #: between walls they had just tested (a misread place puts its wall in the wrong
-    #: cell, and the wrong closed cell stays).
+    #: noise (then the spread is 0), so that no place is misread. Under sensor noise a
+    #: misread place puts its wall in the wrong cell and the wrong closed cell stays:
+    #: with the belief some noisy trials looped between walls they had just tested.
     CELL_SCATTER = 0.05
 
     def cells_hold(self) -> bool:
