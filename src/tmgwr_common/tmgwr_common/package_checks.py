@@ -24,6 +24,7 @@ PYTHON_KEYS = {
     "numpy": {"python3-numpy"},
     "yaml": {"python3-yaml"},
     "matplotlib": {"python3-matplotlib"},
+    "PIL": {"python3-pil"},
     "tqdm": {"python3-tqdm"},
     "numba": {"python3-numba"},
     "pytest": {"python3-pytest"},
