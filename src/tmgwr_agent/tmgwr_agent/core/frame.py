@@ -189,14 +189,14 @@ class LearntFrame:
 
     @classmethod
     def consistent(cls, delta: np.ndarray, moves: np.ndarray,
-                   spread: np.ndarray | None) -> np.ndarray:
-        """Per primitive: its displacements are consistent, ``spread <= CONSISTENT
-        |delta|``, or it never moved (the module docstring); every one without
-        ``spread``."""
+                   spread: np.ndarray | None, share: float | None = None) -> np.ndarray:
+        """Per primitive: its displacements are consistent, ``spread <= share |delta|``
+        (``share`` default :attr:`CONSISTENT`), or it never moved (the module docstring);
+        every one without ``spread``."""
         if spread is None:
             return np.ones(len(delta), dtype=bool)
         length = np.sqrt(np.einsum("ij,ij->i", delta, delta))
-        return (moves == 0) | (spread <= cls.CONSISTENT * length)
+        return (moves == 0) | (spread <= (cls.CONSISTENT if share is None else share) * length)
 
     def lattice(self, n_primitives: int) -> np.ndarray:
         """The primitives found consistent at the last :meth:`refresh` (every one

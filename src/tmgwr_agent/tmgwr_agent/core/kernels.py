@@ -1659,6 +1659,8 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
                 U[i, a] = 0.0
                 osucc[i, a] = -1
             continue
+        # the node's own steps to the goal in the free-space belief (-3: no belief)
+        h_i = belief_h(bdist, borigin, L, w[i], delta, lattice) if bdist.shape[0] > 0 else -3
         for a in range(U.shape[1]):
             j = -1
             wall = False
@@ -1699,7 +1701,6 @@ def option_values(w, out, alive, n, rows, goal, delta, L, v_star, gamma, tried, 
             u = v_star * gamma ** (d / L)
             if bdist.shape[0] > 0 and lattice[a]:
                 h = belief_h(bdist, borigin, L, x, delta, lattice)
-                h_i = belief_h(bdist, borigin, L, w[i], delta, lattice)
                 if h_i >= 0 and not wall and (h == -1 or h >= h_i):
                     r = 0.0         # off every shortest believed way from i
                 elif h == -1:

@@ -275,7 +275,8 @@ from tmgwr_agent.core.frame import LearntFrame, SensorFrame
 from tmgwr_agent.core.outcome import Outcome
 from tmgwr_agent.core.sensorimotor_map import SensorimotorMap
 
-#: No free-space belief (before a break, or without a lattice primitive): an empty table.
+#: No free-space belief (before a break, or where the cells do not hold the places:
+#: ``OptionRules.cells_hold``): an empty table.
 NO_BELIEF = (np.full((0, 0), -1, dtype=np.int64), np.zeros(2))
 
 #: A node with R_i = sim(i, g) at least this represents the goal (a source of the
@@ -812,10 +813,10 @@ class OptionRules:
             return False
         d = F.delta[moved] / F.L
         cell = np.floor(d + 0.5)
-        length = np.sqrt(np.einsum("ij,ij->i", self.delta, self.delta))[moved]
         return bool((np.abs(cell).sum(axis=1) == 1).all()
                     and (np.abs(d - cell) <= self.CELL_SLACK).all()
-                    and (self.spread()[moved] <= self.CELL_SCATTER * length).all())
+                    and LearntFrame.consistent(self.delta, self.moves, self.spread(),
+                                               self.CELL_SCATTER)[moved].all())
 
     def free_space_belief(self, m: SensorimotorMap, n: int) -> tuple[np.ndarray, np.ndarray]:
         """The free-space belief's steps to the goal and its table's origin
