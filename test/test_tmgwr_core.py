@@ -458,6 +458,51 @@ def test_stale_walls_wait_when_the_episode_re_test_budget_is_used_up():
     assert none.rho[0, RIGHT] == 0.0
 
 
+
+def test_learnt_re_test_rate_thins_out_while_the_world_stays_by_hand():
+    """``retest_rate`` learnt: the budget is ``stale_budget`` x route x p, p = 1 - (1 -
+    q)^t the chance the world changed while a stale wall waited (t = ``stale_horizon`` =
+    3 episodes here: ``stale_rank`` off, no ranking reads the longest wait), q = (k + 1)
+    / (e + 2) over the e episodes so far, k of them with a change seen. Five episodes and
+    no change: q = 1/7, p = 1 - (6/7)^3 = 0.370; with ``stale_budget`` 0.6 and the
+    route's 3.87 steps the allowance is 0.86: no re-test, carried whole to the next
+    episode (q = 1/8, p = 0.330: 0.86 + 0.77 = 1.63, one re-test). A wall known closed
+    that opens is a change seen, and raises q for the episodes after. Fixed, the same
+    budget gives ceil(0.6 x 3.87) = 3 re-tests every episode. Ranked, the longest wait
+    of a stale wall sets t: bumped in episode 1, 5 episodes before (p = 1 - (6/7)^5)."""
+    m = path_map(U_CELLS, [a for _, a, _ in U_MOVES])
+    mo = known_estimator(m, U_MOVES, (0, 2), 5, stale_horizon=3.0, stale_rank=False,
+                         stale_prior=0.5, stale_budget=0.6, retest_rate="learnt")
+    fixed = known_estimator(m, U_MOVES, (0, 2), 5, stale_horizon=3.0, stale_rank=False,
+                            stale_prior=0.5, stale_budget=0.6)
+    for est in (mo, fixed):
+        st = est.state_dict()
+        for i, a in ((0, RIGHT), (2, UP)):
+            st["bump_t"][i, a], st["bump_e"][i, a] = 10, 1
+        est.load_state_dict(st)
+        est.update(m)
+    assert fixed.retest_budget(m.n) == 3 and fixed.rho[0, RIGHT] == 0.5
+    p = 1 - (1 - 1 / 7) ** 3
+    assert mo.episode == 6 and mo.q_change == pytest.approx(1 / 7) and mo.waited == 3
+    assert mo.retest_budget(m.n) == 0 and mo.rho[0, RIGHT] == 0.0 == mo.rho[2, UP]
+    assert mo.carry + 0.6 * mo.route * p == pytest.approx(0.6 * mo.route * p)
+    mo.record(-1, 0, False, EPISODE_START, m.w)
+    mo.update(m)
+    assert mo.carry == pytest.approx(0.6 * mo.route * p)
+    assert mo.q_change == pytest.approx(1 / 8)
+    assert mo.retest_budget(m.n) == 1 and mo.rho[0, RIGHT] == 0.5 == mo.rho[2, UP]
+    mo.record(2, 4, False, Outcome(action=UP, bumped=False), m.w)   # the wall opened
+    mo.record(-1, 0, False, EPISODE_START, m.w)
+    assert mo.changes == 1 and mo.q_change == pytest.approx(2 / 9)
+    ranked = known_estimator(m, U_MOVES, (0, 2), 5, stale_horizon=3.0, stale_budget=0.6,
+                             retest_rate="learnt")
+    st = ranked.state_dict()
+    st["bump_t"][0, RIGHT], st["bump_e"][0, RIGHT] = 10, 1
+    ranked.load_state_dict(st)
+    ranked.update(m)
+    assert ranked.waited == 5 and ranked.retest_budget(m.n) == 1
+    assert ranked._allowance == pytest.approx(0.6 * ranked.route * (1 - (6 / 7) ** 5))
+
 # An L into the goal through cell X: 0 (0, 0) down 1 (1, 0) right 2 (1, 1) up 3 (0, 1) = X
 # right 4 (0, 2), the goal; 'right' from node 0 once led to X too (a move, no link).
 L_CELLS = [(0, 0), (1, 0), (1, 1), (0, 1), (0, 2)]

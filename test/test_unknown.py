@@ -17,7 +17,8 @@ PRIMITIVES = np.array([[0, 1], [0, -1], [-1, 0], [1, 0]], float)
 #: The outcome memory's checkpoint keys (MotivationEstimator.state_dict before the move).
 KEYS = {"tried", "bump_t", "closed_t", "bump_e", "succ", "closed_e", "goal_seen", "clock",
         "delta", "delta_sq", "moves", "episode", "route", "retests", "wall_tests",
-        "wall_opened", "route_due", "sel", "chain", "goals_told", "break_t"}
+        "wall_opened", "route_due", "sel", "chain", "goals_told", "break_t",
+        "changes", "changed", "q_change", "waited", "carry", "allowance"}
 
 
 @pytest.mark.parametrize("name, frame, options", [("none", SensorFrame, False),

@@ -147,9 +147,14 @@ class MotivationConfig(Config):
                                  "it goes stale (0: walls never go stale unless stuck)",
                                  low=0.0, high=1e6)
     stale_budget: float = param(0.1, "Eq. 5': re-tests of stale walls per episode, at most "
-                                "this share of the known route's steps rounded up (at least "
-                                "1; 0: none)",
+                                "this share of the known route's steps (rounded up, at "
+                                "least 1, with retest_rate 'fixed'; 0: none)",
                                 low=0.0, high=1.0)
+    retest_rate: str = param("fixed", "Eq. 5': 'fixed' re-tests stale_budget's share every "
+                             "episode; 'learnt' scales it by the chance the world changed "
+                             "within stale_horizon episodes, from the episodes in which "
+                             "the agent saw it change (unknown.py)",
+                             choices=("fixed", "learnt"))
     stale_rank: bool = param(True, "Eq. 5': an episode offers as re-tests only the stale "
                              "walls that would save the most steps on the known route, "
                              "as many as its re-test budget (false: every stale wall, the "
@@ -275,6 +280,7 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         self._F: Frame | None = None  # the frame's coordinates of the last _prepare
         self.stale_prior, self.stale_horizon = config.stale_prior, config.stale_horizon
         self.stale_budget = config.stale_budget
+        self.retest_rate = config.retest_rate
         self.stale_rank = config.stale_rank
         self.untried_rho = config.untried_rho
         self.rho_new = 1.0            # rho of an untried primitive (open_prior)
@@ -306,6 +312,12 @@ class MotivationEstimator(OutcomeMemory, OptionRules):
         self.retests = 0              # stale walls re-tested this episode (not stuck)
         self.wall_tests = 0           # actions at a pair known closed, ever
         self.wall_opened = 0          # of those, the ones that moved
+        self.changes = 0              # episodes in which the world was seen to change
+        self._changed = False         # this one: a wall known closed opened, or a break
+        self.q_change = 0.5           # the chance it changes in an episode (Laplace)
+        self.waited = 1.0             # the longest a stale wall has waited, this episode
+        self.carry = 0.0              # re-test allowance carried from the last episode
+        self._allowance = 0.0         # this episode's re-test allowance, last computed
         self.broken = False           # a move made before bumped this episode
         self.break_t = -1             # the clock of the last such bump, ever
         self._route_due = False       # the route is read off V0 at the episode's first solve

@@ -108,7 +108,23 @@ successor, an *option*, in the max of Eq. 5::
   rounded up (at least one; ``stale_budget`` 0.1, the share of steps the paper's agent
   spends on its random walk at Eq. 7's floor), ``d`` the steps of the known route from
   the episode's start, read off the potentials of Eq. 5 without options there
-  (``V0(start) = gamma^d V0(g)``; before a route is known, the number of nodes). At the
+  (``V0(start) = gamma^d V0(g)``; before a route is known, the number of nodes). That
+  is a tax on every episode, paid for a wall that may never open: with ``retest_rate``
+  ``learnt`` (agent ``tmgwr:settle``) the agent learns how often its world changes and
+  pays it in proportion. ``B = stale_budget d p``, ``p = 1 - (1 - q)^t`` the chance the
+  world changed while the stale wall that has waited longest (``t`` episodes since its
+  last bump; ``T = stale_horizon`` before the re-tests are ranked) waited, ``q`` the
+  chance it changes in an episode by Laplace's rule over the episodes so far, ``(k + 1)
+  / (e + 2)``, ``k`` of them in which it was seen to change (a wall known closed opened,
+  or the known route broke), fixed as the episode begins; whole re-tests only, the
+  fraction and what an episode left unused (up to one re-test) carrying over
+  (:meth:`OptionRules.retest_budget`). In a world that stays, the re-tests thin out as
+  ``q`` falls and a learnt route's episodes approach its length; a change seen raises
+  ``q`` and the re-tests with it. A wall waits at most until ``p`` buys its test, so
+  none waits for ever (with ``t = T`` a wall off the route, dear to test, waited behind
+  the cheap ones beside it, and after a long unchanging spell some openings were never
+  found). Fixed is the default: at the same ``stale_budget`` the thinned re-tests find
+  an opening after an unchanging spell later. At the
   episode's first solve every stale wall gets what it would save if it opened, ``s = d -
   (d_S(i) + 1 + k + 1 + d_G(q))`` steps on the known route (``d_S``, ``d_G``: link steps
   from the start and to the goal over the links the outcome memory does not contradict;
@@ -378,6 +394,11 @@ class OutcomeMemory:
         if outcome.episode_start:
             self._route_due = True
             self.episode += 1
+            self.carry = min(1.0, max(0.0, self._allowance - self.retests))
+            self.changes += self._changed
+            self._changed = False
+            self.q_change = laplace(self.changes, self.episode - 1)
+            self.waited = max(1.0, self.stale_horizon)
             self.retests = 0
             self.broken = False
             self.sel[:] = True                # until the route is read (plan_episode)
@@ -401,11 +422,13 @@ class OutcomeMemory:
             self.wall_tests += 1
             self.wall_opened += not outcome.bumped
             self.retests += not self._stuck
+            self._changed |= not outcome.bumped        # a wall known closed opened
         a = outcome.action
         # a move made before bumps now: the known route broke, the cell it led to closed
         broke = bool(outcome.bumped and 0 <= node and self.bump_t[node, a] < 0
                      and self.succ[node, a] >= 0)
         self.broken |= broke
+        self._changed |= broke
         if broke:
             self.break_t = self.clock
             self._close_cell(node, a, w)
@@ -495,6 +518,9 @@ class OutcomeMemory:
                 "moves": self.moves.copy(), "episode": int(self.episode),
                 "route": float(self.route), "retests": int(self.retests),
                 "wall_tests": int(self.wall_tests), "wall_opened": int(self.wall_opened),
+                "changes": int(self.changes), "changed": int(self._changed),
+                "q_change": float(self.q_change), "waited": float(self.waited),
+                "carry": float(self.carry), "allowance": float(self._allowance),
                 "break_t": int(self.break_t),
                 "route_due": int(self._route_due), "sel": self.sel.copy(),
                 "chain": self.chain.copy()}
@@ -524,6 +550,13 @@ class OutcomeMemory:
         self.retests = int(d.get("retests", 0))
         self.wall_tests = int(d.get("wall_tests", 0))      # older checkpoints: no re-test
         self.wall_opened = int(d.get("wall_opened", 0))
+        # absent from older checkpoints: no change seen yet
+        self.changes = int(d.get("changes", 0))
+        self._changed = bool(d.get("changed", 0))
+        self.q_change = float(d.get("q_change", 0.5))
+        self.waited = float(d.get("waited", max(1.0, self.stale_horizon)))
+        self.carry = float(d.get("carry", 0.0))
+        self._allowance = float(d.get("allowance", 0.0))
         self.break_t = int(d.get("break_t", -1))          # older checkpoints: no break
         self._route_due = bool(d.get("route_due", 0))
         self.sel = grown(np.array(d["sel"], dtype=bool), len(self.succ), True) \
@@ -670,14 +703,26 @@ class OptionRules:
         tick = max(1, nodes // 8)
         return self.clock - self.clock % tick, float(nodes)
 
+    def retest_budget(self, n: int) -> int:
+        """This episode's re-tests of stale walls, from ``d``, the steps of the known route
+        from its start (the number of nodes before a route is known). ``retest_rate``
+        fixed: ``stale_budget d`` rounded up, at least one. Learnt: ``stale_budget d p``,
+        ``p = 1 - (1 - q_change)^waited`` the chance the world changed while the stale
+        wall that has waited longest waited, plus what the last episode left unused
+        (``carry``, at most one re-test), rounded down (the route read off the potentials
+        is a float: 4 steps may read 3.9999999); the fraction carries over."""
+        d = self.route or n
+        if self.retest_rate == "fixed":
+            return math.ceil(max(1.0, self.stale_budget * d))
+        p = 1.0 - (1.0 - self.q_change) ** self.waited        # it changed since
+        self._allowance = self.carry + self.stale_budget * d * p
+        return math.floor(self._allowance + 1e-6)
+
     def budget_spent(self, n: int) -> bool:
-        """This episode's re-tests of stale walls are used up: at most ``stale_budget``
-        times the steps of the known route from the episode's start (the number of nodes
-        before a route is known), rounded up, and at least one, unless ``stale_budget`` is
-        0. (Rounded down instead, fewer openings were found within 10 episodes and no
-        block was won more.)"""
+        """This episode's re-tests of stale walls are used up (:meth:`retest_budget`), or
+        ``stale_budget`` is 0, or the route broke."""
         return self.stale_budget <= 0.0 or self.broken or \
-            self.retests >= max(1.0, self.stale_budget * (self.route or n))
+            self.retests >= self.retest_budget(n)
 
     def _read_route(self, m: SensorimotorMap, n: int) -> None:
         """At an episode's first solve: the steps ``d`` of the known route from where it
@@ -730,8 +775,10 @@ class OptionRules:
                                   self.stale_horizon, ds, dg, route,
                                   np.full((n, self.n_primitives, self.n_primitives), -1, np.int64),
                                   np.zeros((n, self.n_primitives, self.n_primitives)), ri, ra, rs)
-        budget = math.ceil(max(1.0, self.stale_budget * (self.route or n)))
         ri, ra, rs = ri[:c], ra[:c], rs[:c]
+        if c:                               # the longest a stale wall has waited
+            self.waited = float(np.max(self.episode - self.bump_e[ri, ra]))
+        budget = self.retest_budget(n)
         cost = np.maximum(ds[ri] + 1 + dg[ri] - route, 1)   # steps lost if it stays shut
         key = (self.episode - self.bump_e[ri, ra]) * rs / cost
         order = np.lexsort((ds[ri], -key))[:budget]        # the most first, then nearest

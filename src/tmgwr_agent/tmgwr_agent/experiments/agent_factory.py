@@ -7,7 +7,9 @@ of the unknown on the sensor's axes (``unknown`` grid: it is told the sensation 
 cell's coordinates; plain ``tmgwr`` learns its frame, core/frame.py); ``none`` gives what
 the map does not know no value (Eq. 5 as printed, our other additions kept: the learnt
 frame assumes primitives that displace the sensation alike everywhere, which MiniGrid's
-turn / forward do not); ``paper`` turns our
+turn / forward do not); ``settle`` learns how often the world changes and re-tests its
+walls in proportion (``retest_rate`` learnt: fewer steps an episode in a world that
+stays, openings found later); ``paper`` turns our
 additions off (``absorbing_terminals``; ``unknown`` none and ``try_untried``, the options
 of Eq. 5' and Eq. 6; ``goal_search``; ``walk_while_novel``; ``merge``, one node a
 place: the agent of Eq. 1-7 as
@@ -45,6 +47,7 @@ TMGWR_OPTIONS = {
     "credit": {"link_rule": "credit"},
     "grid": {"unknown": "grid"},
     "none": {"unknown": "none"},
+    "settle": {"retest_rate": "learnt"},
     "paper": {"absorbing_terminals": False, "unknown": "none", "goal_search": False,
               "try_untried": False, "walk_while_novel": False, "eps_min": 0.1,
               "merge": False},
