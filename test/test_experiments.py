@@ -207,6 +207,10 @@ def test_agent_options_combine():
     default = make_agent("tmgwr", Maze.from_text(SMALL), np.random.default_rng(0))
     assert default.selector.try_untried and default.motivation.absorbing_terminals
     assert default.selector.policy.hold is not None
+    assert default.motivation.retest_rate == "fixed"
+    settle = make_agent("tmgwr:settle+grid", Maze.from_text(SMALL), np.random.default_rng(0))
+    assert settle.motivation.retest_rate == "learnt"
+    assert settle.motivation.config.unknown == "grid"
 
 
 # ------------------------------------------------------------------ errors
