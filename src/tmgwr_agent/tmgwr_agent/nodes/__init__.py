@@ -52,6 +52,6 @@ declares, stops the node at start (exit code 2) naming the parameter. ``TMGWR_EX
 (``events`` default, or ``single``) picks the executor.
 """
 
-# First, before any node module imports numba: in a node's own process this installs the
-# stop request of tmgwr_common.node (a Ctrl-C while the node still starts is a clean stop).
-import tmgwr_common.node  # noqa: E402, F401
+# First, before any node module imports numpy, rclpy or numba: in a node's own process this
+# installs its stop request (a Ctrl-C while the node still starts is a clean stop).
+import tmgwr_common.stop  # noqa: E402, F401
