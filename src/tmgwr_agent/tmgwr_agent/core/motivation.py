@@ -152,8 +152,8 @@ class MotivationConfig(Config):
                                 low=0.0, high=1.0)
     retest_rate: str = param("fixed", "Eq. 5': 'fixed' re-tests stale_budget's share every "
                              "episode; 'learnt' scales it by the chance the world changed "
-                             "within stale_horizon episodes, from the episodes in which "
-                             "the agent saw it change (unknown.py)",
+                             "while the longest-waiting stale wall waited, from the "
+                             "episodes in which the agent saw it change (unknown.py)",
                              choices=("fixed", "learnt"))
     stale_rank: bool = param(True, "Eq. 5': an episode offers as re-tests only the stale "
                              "walls that would save the most steps on the known route, "
